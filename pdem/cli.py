@@ -1,0 +1,102 @@
+"""Command line: ``pdem run SCENE.yaml``, ``pdem info FILE.h5``.
+
+The only module that names ``MPI.COMM_WORLD``; everything else receives the communicator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="pdem", description="Parallel distinct element method "
+                                "for 3D polyhedral blocks. Run under mpiexec for parallel runs.")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run a scene file")
+    r.add_argument("scene", help="scene file (YAML); see docs/scene-file.md")
+    r.add_argument("--output", "-o", help="override output.file")
+    end = r.add_mutually_exclusive_group()
+    end.add_argument("--time", type=float, help="model time to run instead of solve.*")
+    end.add_argument("--steps", type=int, help="steps to run instead of solve.*")
+    r.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
+    c = sub.add_parser("check", help="validate a scene file and report its blocks")
+    c.add_argument("scene")
+    i = sub.add_parser("info", help="summarise a pdem output file")
+    i.add_argument("file")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "info":
+        return _info(args)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    from mpi4py import MPI
+
+    from .errors import UserError
+    from .parallel.mpi import install_abort_hook, setup_logging
+
+    comm = MPI.COMM_WORLD
+    log = setup_logging(comm)
+    install_abort_hook(comm)
+    try:
+        if args.command == "check":
+            return _check(args, comm, log)
+        return _run(args, comm, log)
+    except UserError as exc:
+        # every rank validates the same input, so every rank reaches here: no hang
+        if comm.rank == 0:
+            print(f"pdem: {exc}", file=sys.stderr)
+        return 1
+
+
+def _run(args, comm, log) -> int:
+    import logging
+
+    from .config import load_scene
+    from .solver import Solver
+
+    scene = load_scene(args.scene)
+    if args.output:
+        scene = scene.model_copy(update={"output": scene.output.model_copy(
+            update={"file": args.output})})
+    if args.quiet:
+        log.setLevel(logging.WARNING)
+    solver = Solver(scene, comm)
+    try:
+        solver.run(time=args.time, steps=args.steps)
+    finally:
+        solver.close()
+    if comm.rank == 0:
+        log.info("wrote %s (+ %s)", scene.output.file,
+                 os.path.splitext(scene.output.file)[0] + ".xdmf")
+    return 0
+
+
+def _check(args, comm, log) -> int:
+    from .config import load_scene
+    from .solver import Solver
+
+    scene = load_scene(args.scene)
+    solver = Solver(scene, comm, output=False)
+    log.info("%s: valid; %d blocks, %d initial contacts, dt=%.4g s, ctol=%.4g m",
+             args.scene, solver.blocks.n, solver.contacts.n, solver.dt, solver.ctol)
+    return 0
+
+
+def _info(args) -> int:
+    from .io.info import summarise
+
+    try:
+        print(summarise(args.file))
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"pdem info: {args.file}: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

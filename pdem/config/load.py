@@ -1,0 +1,149 @@
+"""Scene loading: YAML text -> validated ``Scene``, with errors naming key path and line."""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from ..errors import UserError
+from .schema import Scene
+
+
+class ConfigError(UserError, ValueError):
+    """A scene file that cannot be used; ``str()`` is the message shown to the user."""
+
+    def __init__(self, messages: list[str], source: str = "scene"):
+        self.messages = messages
+        self.source = source
+        super().__init__(f"{source}: invalid scene\n" + "\n".join(f"  - {m}" for m in messages))
+
+
+def _line_index(text: str) -> dict[tuple, int]:
+    """Map each key path (tuple of keys/indices) to the 1-based YAML line it starts on."""
+    lines: dict[tuple, int] = {}
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError:
+        return lines
+
+    def walk(node, path):
+        lines.setdefault(path, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                key = k.value
+                lines[(*path, key)] = k.start_mark.line + 1
+                walk(v, (*path, key))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, v in enumerate(node.value):
+                walk(v, (*path, i))
+
+    if root is not None:
+        walk(root, ())
+    return lines
+
+
+def _format_path(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The pydantic model class that owns the mapping at ``loc`` (for did-you-mean)."""
+    model: Any = Scene
+    for part in loc:
+        if isinstance(part, int) or model is None:
+            continue
+        field = model.model_fields.get(part) if hasattr(model, "model_fields") else None
+        if field is None:
+            return None
+        model = _unwrap(field.annotation)
+    return model if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+def _unwrap(annotation):
+    """First BaseModel class inside Optional[...], list[...], dict[str, ...]."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()) or ():
+        found = _unwrap(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _clean_loc(loc: tuple) -> tuple:
+    # pydantic inserts union-member tags ('float', "literal['auto']", 'function-before[...]')
+    # into locations; users never wrote them.
+    return tuple(
+        p for p in loc if isinstance(p, int) or not any(c in str(p) for c in "[]'(")
+    )
+
+
+def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
+    out: list[str] = []
+    seen: set[str] = set()
+    for e in err.errors():
+        loc = _clean_loc(tuple(e["loc"]))
+        where = _format_path(loc)
+        line = lines.get(loc) or lines.get(loc[:-1]) if loc else None
+        if e["type"] == "extra_forbidden":
+            model = _model_at(loc[:-1])
+            hint = ""
+            if model is not None:
+                close = difflib.get_close_matches(str(loc[-1]), list(model.model_fields), n=1)
+                if close:
+                    hint = f"; did you mean {close[0]!r}?"
+                else:
+                    hint = "; allowed: " + ", ".join(model.model_fields)
+            msg = f"{where}: unknown key{hint}"
+        else:
+            text = e["msg"]
+            if text.startswith("Value error, "):
+                text = text[len("Value error, ") :]
+            got = e.get("input")
+            shown = "" if isinstance(got, dict | list) or e["type"] == "missing" else f" (got {got!r})"
+            msg = f"{where}: {text}{shown}" if "\n" not in text else text
+        if line and "\n" not in msg:
+            msg += f"  [line {line}]"
+        if msg not in seen:
+            seen.add(msg)
+            out.append(msg)
+    return out
+
+
+def parse_scene(text: str, source: str = "scene") -> Scene:
+    """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError([f"not valid YAML: {exc}"], source) from None
+    if not isinstance(data, dict):
+        raise ConfigError(["the scene must be a mapping of keys (name, blocks, solve, ...)"], source)
+    try:
+        return Scene.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(_messages(exc, _line_index(text)), source) from None
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate the scene file at ``path``."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError([f"cannot read: {exc.strerror}"], str(path)) from None
+    return parse_scene(text, str(path))
+
+
+def dump_scene(scene: Scene) -> str:
+    """The resolved scene (every default filled in) as YAML, stored in outputs/checkpoints."""
+    return yaml.safe_dump(scene.model_dump(mode="json"), sort_keys=False)

@@ -1,0 +1,285 @@
+"""The scene file's schema: frozen pydantic models with every default filled in."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    NonNegativeFloat,
+    PositiveFloat,
+    PositiveInt,
+    field_validator,
+    model_validator,
+)
+
+Vec3 = tuple[float, float, float]
+
+
+class Strict(BaseModel):
+    """Base of every scene model: unknown keys are errors, instances are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @model_validator(mode="after")
+    def _finite(self):
+        # YAML accepts .nan and .inf; no physical input of ours is meant to be either.
+        for name, value in self:
+            values = value if isinstance(value, tuple) else (value,)
+            for v in values:
+                if isinstance(v, float) and not math.isfinite(v) and name != "dilation_limit":
+                    raise ValueError(f"{name}: must be finite (got {v})")
+        return self
+
+
+class Material(Strict):
+    density: PositiveFloat
+
+
+class Joint(Strict):
+    """Joint (contact) properties in 3DEC units: stiffness in Pa/m, strengths in Pa, angles in
+    degrees. ``dilation_limit`` is the shear displacement beyond which dilation stops (eq. 43
+    text); null means no limit."""
+
+    model: Literal["coulomb"] = "coulomb"
+    kn: PositiveFloat
+    ks: PositiveFloat
+    friction: Annotated[float, Field(ge=0.0, lt=90.0)] = 30.0
+    dilation: Annotated[float, Field(ge=0.0, lt=90.0)] = 0.0
+    cohesion: NonNegativeFloat = 0.0
+    tension: NonNegativeFloat = 0.0
+    dilation_limit: PositiveFloat | None = None
+
+
+class JointPair(Strict):
+    """Joint properties for contacts between a block of group ``groups[0]`` and one of
+    ``groups[1]`` (order irrelevant)."""
+
+    groups: tuple[str, str]
+    joint: str
+
+
+class BoxShape(Strict):
+    min: Vec3
+    max: Vec3
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for axis, (lo, hi) in enumerate(zip(self.min, self.max, strict=True)):
+            if not hi > lo:
+                raise ValueError(f"max[{axis}] must exceed min[{axis}] ({hi} <= {lo})")
+        return self
+
+
+class PolyhedronShape(Strict):
+    """Convex hull of ``vertices``; every vertex must be on the hull (no concave input)."""
+
+    vertices: list[Vec3] = Field(min_length=4)
+
+
+class PrismShape(Strict):
+    """A convex planar polygon ``base`` swept along ``extrude``."""
+
+    base: list[Vec3] = Field(min_length=3)
+    extrude: Vec3
+
+
+class PlanesShape(Strict):
+    """Intersection of half-spaces ``normal . x <= offset``: the way joint planes cut rock."""
+
+    normals: list[Vec3] = Field(min_length=4)
+    offsets: list[float] = Field(min_length=4)
+
+    @model_validator(mode="after")
+    def _same_length(self):
+        if len(self.normals) != len(self.offsets):
+            raise ValueError(
+                f"normals and offsets differ in length ({len(self.normals)} vs {len(self.offsets)})"
+            )
+        return self
+
+
+class ArrayOf(Strict):
+    """Copies of a box on a regular lattice: ``count[i]`` copies spaced ``spacing[i]``."""
+
+    box: BoxShape
+    count: tuple[PositiveInt, PositiveInt, PositiveInt]
+    spacing: Vec3
+
+
+class RandomPolyhedra(Strict):
+    """``count`` random convex polyhedra (hulls of ``vertices`` random points on a sphere of
+    diameter in ``size``), one per lattice site of ``region``, reproducible from ``seed``."""
+
+    count: PositiveInt
+    region: BoxShape
+    size: tuple[PositiveFloat, PositiveFloat]
+    vertices: Annotated[int, Field(ge=4, le=64)] = 10
+    seed: int = 0
+
+
+class Block(Strict):
+    """One block (or, for ``array``/``random``, a family named ``name[i]``)."""
+
+    name: str
+    box: BoxShape | None = None
+    polyhedron: PolyhedronShape | None = None
+    prism: PrismShape | None = None
+    planes: PlanesShape | None = None
+    array: ArrayOf | None = None
+    random: RandomPolyhedra | None = None
+    material: str
+    group: str = "default"
+    fixed: bool = False
+    velocity: Vec3 = (0.0, 0.0, 0.0)
+    angular_velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity_fixed: bool = False
+    force: Vec3 = (0.0, 0.0, 0.0)
+
+    @model_validator(mode="after")
+    def _one_shape(self):
+        given = [k for k in SHAPE_KEYS if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one shape of " + ", ".join(SHAPE_KEYS) + f" (got {given or 'none'})"
+            )
+        return self
+
+    @property
+    def shape_kind(self) -> str:
+        return next(k for k in SHAPE_KEYS if getattr(self, k) is not None)
+
+
+SHAPE_KEYS = ("box", "polyhedron", "prism", "planes", "array", "random")
+
+
+class Timestep(Strict):
+    """Automatic step ``frac * 2 sqrt(M_min / K_max)`` (eq. 87) unless ``dt`` is fixed."""
+
+    frac: Annotated[float, Field(gt=0.0, le=1.0)] = 0.1
+    dt: PositiveFloat | None = None
+
+
+DampingMode = Literal["none", "local", "combined", "adaptive", "viscous"]
+
+
+class Damping(Strict):
+    """``alpha``: local/combined coefficient (eq. 79, default 0.8), viscous constant in 1/s
+    (eq. 44), or the adaptive servo's starting constant. ``ratio``: adaptive target (eq. 77)."""
+
+    mode: DampingMode = "none"
+    alpha: NonNegativeFloat | None = None
+    ratio: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.5
+
+
+class Solve(Strict):
+    time: PositiveFloat | None = None
+    steps: PositiveInt | None = None
+    ratio: PositiveFloat | None = None
+    max_steps: PositiveInt | None = None
+    timestep: Timestep = Timestep()
+    damping: Damping = Damping()
+    mass_scaling: bool = False
+    inertia: Literal["full", "scalar"] = "full"
+    progress_every: NonNegativeFloat = 2.0
+
+    @field_validator("damping", mode="before")
+    @classmethod
+    def _damping_shorthand(cls, v):
+        return {"mode": v} if isinstance(v, str) else v
+
+    @model_validator(mode="after")
+    def _one_end(self):
+        ends = [k for k in ("time", "steps", "ratio") if getattr(self, k) is not None]
+        if len(ends) != 1:
+            raise ValueError(f"give exactly one of time, steps, ratio (got {ends or 'none'})")
+        return self
+
+
+class Contact(Strict):
+    """Accuracy/speed knobs of contact detection. ``ctol`` (CTOL, m): contacts exist while the
+    gap is at most ctol; ``auto`` = 2% of the smallest block's equivalent size. ``cell_size``:
+    cell-space cell edge, ``auto`` = the mean block envelope size (about one cell per block)."""
+
+    ctol: PositiveFloat | Literal["auto"] = "auto"
+    cell_size: PositiveFloat | Literal["auto"] = "auto"
+    detect_every: PositiveInt = 10
+    algorithm: Literal["cundall", "fast"] = "fast"
+    point_area: NonNegativeFloat = 0.01
+    overlap_tolerance: PositiveFloat | Literal["auto"] = "auto"
+
+
+class History(Strict):
+    """Record ``quantity`` of block ``block`` every ``every`` model seconds (or every step)."""
+
+    block: str
+    quantity: Literal["displacement", "velocity", "position", "angular_velocity"]
+    every: PositiveFloat | None = None
+
+
+class Output(Strict):
+    file: str = "pdem-out.h5"
+    every: PositiveFloat | None = None
+    every_steps: PositiveInt | None = None
+    histories: list[History] = []
+
+    @model_validator(mode="after")
+    def _one_interval(self):
+        if self.every is not None and self.every_steps is not None:
+            raise ValueError("give at most one of every, every_steps")
+        return self
+
+
+class Scene(Strict):
+    name: str = "pdem"
+    gravity: Vec3 = (0.0, 0.0, -9.81)
+    materials: dict[str, Material] = Field(min_length=1)
+    joints: dict[str, Joint] = Field(min_length=1)
+    joint_pairs: list[JointPair] = []
+    blocks: list[Block] = Field(min_length=1)
+    contact: Contact = Contact()
+    solve: Solve
+    output: Output = Output()
+
+    @model_validator(mode="after")
+    def _references(self):
+        """Names that must exist; each message names the referring key."""
+        errors: list[str] = []
+        names: dict[str, int] = {}
+        for i, b in enumerate(self.blocks):
+            if b.material not in self.materials:
+                errors.append(
+                    f"blocks[{i}].material: unknown material {b.material!r} "
+                    f"(defined: {', '.join(sorted(self.materials))})"
+                )
+            if b.name in names:
+                errors.append(f"blocks[{i}].name: {b.name!r} already names blocks[{names[b.name]}]")
+            names[b.name] = i
+        if "default" not in self.joints and not self.joint_pairs:
+            errors.append("joints: define a joint named 'default' (used by every contact)")
+        groups = {b.group for b in self.blocks}
+        for i, jp in enumerate(self.joint_pairs):
+            if jp.joint not in self.joints:
+                errors.append(f"joint_pairs[{i}].joint: unknown joint {jp.joint!r}")
+            for g in jp.groups:
+                if g not in groups:
+                    errors.append(
+                        f"joint_pairs[{i}].groups: no block has group {g!r} "
+                        f"(groups: {', '.join(sorted(groups))})"
+                    )
+        for i, h in enumerate(self.output.histories):
+            if h.block not in names and not _is_family_member(h.block, names):
+                errors.append(f"output.histories[{i}].block: unknown block {h.block!r}")
+        if errors:
+            raise ValueError("\n".join(errors))
+        return self
+
+
+def _is_family_member(name: str, names: dict[str, int]) -> bool:
+    """``stack[12]`` refers to the 13th block generated by the entry named ``stack``."""
+    if not name.endswith("]") or "[" not in name:
+        return False
+    return name[: name.index("[")] in names

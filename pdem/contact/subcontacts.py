@@ -1,0 +1,382 @@
+"""Sub-contacts: where two blocks touch on their common plane, with areas and overlaps.
+
+3DEC discretises the faces touching the common plane into sub-contacts (eqs. 24-25 text). pdem
+does it with the contact region itself: the vertices of each block within ``touch_tol`` of the
+common plane, projected on it, span a point, a segment or a convex polygon per block; the
+sub-contacts are the corners of the intersection of the two. A face-face contact therefore gets
+one sub-contact per corner of the common area, carrying a share of that area (a centroid fan,
+so the shares sum to the exact common area and 3DEC's halving for double-counted springs is not
+needed); vertex and edge contacts get points carrying ``point_area`` each. The overlap at each
+sub-contact is measured between the two blocks' own surfaces (plane fits through their touching
+vertices), so a tilted face carries a linearly varying load.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..jit import kernel
+
+EMPTY = 0
+POINT = 1
+SEGMENT = 2
+POLYGON = 3
+
+
+@kernel
+def plane_basis(n):
+    """Deterministic in-plane unit vectors (e1, e2) with e1 x e2 = n."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = a - (a[0] * n[0] + a[1] * n[1] + a[2] * n[2]) * n
+    e1 /= np.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    e2 = np.empty(3)
+    e2[0] = n[1] * e1[2] - n[2] * e1[1]
+    e2[1] = n[2] * e1[0] - n[0] * e1[2]
+    e2[2] = n[0] * e1[1] - n[1] * e1[0]
+    return e1, e2
+
+
+@kernel
+def _cross2(ox, oy, ax, ay, bx, by):
+    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
+
+
+@kernel
+def hull2d(pts, eps):
+    """Convex hull (Andrew's monotone chain) of 2D points, CCW, collinear points dropped.
+
+    Returns (hull (k,2), kind) with kind POINT, SEGMENT or POLYGON."""
+    m = pts.shape[0]
+    order = np.argsort(pts[:, 0] * 1.0 + pts[:, 1] * 1e-7)
+    # stable lexicographic order by (x, y)
+    for i in range(1, m):
+        j = i
+        while j > 0:
+            a = order[j - 1]
+            b = order[j]
+            if pts[a, 0] > pts[b, 0] or (pts[a, 0] == pts[b, 0] and pts[a, 1] > pts[b, 1]):
+                order[j - 1] = b
+                order[j] = a
+                j -= 1
+            else:
+                break
+    h = np.empty((2 * m + 1, 2))
+    k = 0
+    for ii in range(m):
+        i = order[ii]
+        while k >= 2 and _cross2(h[k - 2, 0], h[k - 2, 1], h[k - 1, 0], h[k - 1, 1],
+                                 pts[i, 0], pts[i, 1]) <= eps:
+            k -= 1
+        h[k, 0] = pts[i, 0]
+        h[k, 1] = pts[i, 1]
+        k += 1
+    lower = k + 1
+    for ii in range(m - 2, -1, -1):
+        i = order[ii]
+        while k >= lower and _cross2(h[k - 2, 0], h[k - 2, 1], h[k - 1, 0], h[k - 1, 1],
+                                     pts[i, 0], pts[i, 1]) <= eps:
+            k -= 1
+        h[k, 0] = pts[i, 0]
+        h[k, 1] = pts[i, 1]
+        k += 1
+    k = max(k - 1, 1)
+    out = h[:k].copy()
+    # collapse to a point/segment when the extent is negligible
+    span = 0.0
+    for i in range(k):
+        d = (out[i, 0] - out[0, 0]) ** 2 + (out[i, 1] - out[0, 1]) ** 2
+        if d > span:
+            span = d
+    if span <= eps:
+        return out[:1], POINT
+    if k <= 2:
+        return out[:2], SEGMENT
+    area2 = 0.0
+    for i in range(k):
+        j = (i + 1) % k
+        area2 += out[i, 0] * out[j, 1] - out[j, 0] * out[i, 1]
+    if area2 <= eps * np.sqrt(span):
+        # thin sliver: keep the two farthest points as a segment
+        bi = 0
+        bj = 1
+        best = -1.0
+        for i in range(k):
+            for j in range(i + 1, k):
+                d = (out[i, 0] - out[j, 0]) ** 2 + (out[i, 1] - out[j, 1]) ** 2
+                if d > best:
+                    best = d
+                    bi = i
+                    bj = j
+        seg = np.empty((2, 2))
+        seg[0] = out[bi]
+        seg[1] = out[bj]
+        return seg, SEGMENT
+    return out, POLYGON
+
+
+@kernel
+def height_fit(st, h):
+    """Coefficients (c0, cs, ct) of the least-squares plane h = c0 + cs s + ct t through the
+    touching vertices; degenerates to a line or a constant when they do not span a plane."""
+    m = st.shape[0]
+    ms = 0.0
+    mt = 0.0
+    mh = 0.0
+    for i in range(m):
+        ms += st[i, 0]
+        mt += st[i, 1]
+        mh += h[i]
+    ms /= m
+    mt /= m
+    mh /= m
+    sss = 0.0
+    stt = 0.0
+    sst = 0.0
+    ssh = 0.0
+    sth = 0.0
+    for i in range(m):
+        ds = st[i, 0] - ms
+        dt = st[i, 1] - mt
+        dh = h[i] - mh
+        sss += ds * ds
+        stt += dt * dt
+        sst += ds * dt
+        ssh += ds * dh
+        sth += dt * dh
+    det = sss * stt - sst * sst
+    scale = sss + stt
+    cs = 0.0
+    ct = 0.0
+    if scale > 0.0 and det > 1e-12 * scale * scale:
+        cs = (ssh * stt - sth * sst) / det
+        ct = (sth * sss - ssh * sst) / det
+    elif scale > 0.0:
+        # collinear: slope along the line only
+        cs = ssh / scale
+        ct = sth / scale
+    return mh - cs * ms - ct * mt, cs, ct
+
+
+@kernel
+def _clip_polygon(subject, clip):
+    """Sutherland-Hodgman: convex ``subject`` clipped by convex CCW ``clip``."""
+    cap = subject.shape[0] + clip.shape[0] + 2
+    cur = np.empty((cap, 2))
+    nxt = np.empty((cap, 2))
+    nc = subject.shape[0]
+    cur[:nc] = subject
+    m = clip.shape[0]
+    for e in range(m):
+        if nc == 0:
+            break
+        ax = clip[e, 0]
+        ay = clip[e, 1]
+        bx = clip[(e + 1) % m, 0]
+        by = clip[(e + 1) % m, 1]
+        nn = 0
+        for i in range(nc):
+            px = cur[i, 0]
+            py = cur[i, 1]
+            qx = cur[(i + 1) % nc, 0]
+            qy = cur[(i + 1) % nc, 1]
+            sp = _cross2(ax, ay, bx, by, px, py)
+            sq = _cross2(ax, ay, bx, by, qx, qy)
+            if sp >= 0.0:
+                nxt[nn, 0] = px
+                nxt[nn, 1] = py
+                nn += 1
+            if (sp >= 0.0) != (sq >= 0.0):
+                tt = sp / (sp - sq)
+                nxt[nn, 0] = px + tt * (qx - px)
+                nxt[nn, 1] = py + tt * (qy - py)
+                nn += 1
+        cur, nxt = nxt, cur
+        nc = nn
+    return cur[:nc].copy()
+
+
+@kernel
+def _clip_segment(seg, poly):
+    """Part of segment ``seg`` inside convex CCW polygon ``poly`` (Cyrus-Beck)."""
+    t0 = 0.0
+    t1 = 1.0
+    dx = seg[1, 0] - seg[0, 0]
+    dy = seg[1, 1] - seg[0, 1]
+    m = poly.shape[0]
+    for e in range(m):
+        ax = poly[e, 0]
+        ay = poly[e, 1]
+        bx = poly[(e + 1) % m, 0]
+        by = poly[(e + 1) % m, 1]
+        s0 = _cross2(ax, ay, bx, by, seg[0, 0], seg[0, 1])
+        ds = (bx - ax) * dy - (by - ay) * dx
+        if ds == 0.0:
+            if s0 < 0.0:
+                return np.empty((0, 2))
+            continue
+        t = -s0 / ds
+        if ds > 0.0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+    if t0 > t1:
+        return np.empty((0, 2))
+    out = np.empty((2, 2))
+    out[0, 0] = seg[0, 0] + t0 * dx
+    out[0, 1] = seg[0, 1] + t0 * dy
+    out[1, 0] = seg[0, 0] + t1 * dx
+    out[1, 1] = seg[0, 1] + t1 * dy
+    return out
+
+
+@kernel
+def _point_in_polygon(x, y, poly, tol):
+    m = poly.shape[0]
+    for e in range(m):
+        if _cross2(poly[e, 0], poly[e, 1], poly[(e + 1) % m, 0], poly[(e + 1) % m, 1], x, y) < -tol:
+            return False
+    return True
+
+
+@kernel
+def _segment_cross(s1, s2):
+    """Crossing point of two 2D segments (None-like empty array if they miss)."""
+    d1x = s1[1, 0] - s1[0, 0]
+    d1y = s1[1, 1] - s1[0, 1]
+    d2x = s2[1, 0] - s2[0, 0]
+    d2y = s2[1, 1] - s2[0, 1]
+    den = d1x * d2y - d1y * d2x
+    if den == 0.0:
+        return np.empty((0, 2))
+    ex = s2[0, 0] - s1[0, 0]
+    ey = s2[0, 1] - s1[0, 1]
+    t = (ex * d2y - ey * d2x) / den
+    u = (ex * d1y - ey * d1x) / den
+    if t < 0.0 or t > 1.0 or u < 0.0 or u > 1.0:
+        return np.empty((0, 2))
+    out = np.empty((1, 2))
+    out[0, 0] = s1[0, 0] + t * d1x
+    out[0, 1] = s1[0, 1] + t * d1y
+    return out
+
+
+@kernel
+def contact_region(va, vb, n, p, touch_tol):
+    """Touching region of blocks A (below the plane) and B (above) on the common plane.
+
+    Parameters
+    ----------
+    va, vb : (na, 3), (nb, 3) world vertices.
+    n, p : common-plane unit normal (A -> B) and reference point.
+    touch_tol : vertices within this distance of their block's extreme along n touch.
+
+    Returns
+    -------
+    pts : (k, 2) sub-contact points in plane coordinates (e1, e2) about ``p``.
+    overlap : (k,) surface overlap at each point (positive = interpenetration).
+    area : (k,) area carried by each point when the region is a polygon, else 0.
+    kind : EMPTY, POINT, SEGMENT or POLYGON (the region's dimension).
+    e1, e2 : the in-plane basis used.
+    counts : (2,) touching vertices of A and of B (contact type, Table 1).
+    """
+    e1, e2 = plane_basis(n)
+    na = va.shape[0]
+    nb = vb.shape[0]
+    ha = np.empty(na)
+    hb = np.empty(nb)
+    for i in range(na):
+        ha[i] = n[0] * (va[i, 0] - p[0]) + n[1] * (va[i, 1] - p[1]) + n[2] * (va[i, 2] - p[2])
+    for i in range(nb):
+        hb[i] = n[0] * (vb[i, 0] - p[0]) + n[1] * (vb[i, 1] - p[1]) + n[2] * (vb[i, 2] - p[2])
+    amax = ha.max()
+    bmin = hb.min()
+    ia = np.nonzero(ha >= amax - touch_tol)[0]
+    ib = np.nonzero(hb <= bmin + touch_tol)[0]
+    sta = np.empty((ia.size, 2))
+    stb = np.empty((ib.size, 2))
+    for k in range(ia.size):
+        d = va[ia[k]] - p
+        sta[k, 0] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
+        sta[k, 1] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
+    for k in range(ib.size):
+        d = vb[ib[k]] - p
+        stb[k, 0] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
+        stb[k, 1] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
+    counts = np.array([ia.size, ib.size])
+    # size scale for the 2D tolerances
+    scale = 0.0
+    for k in range(ia.size):
+        scale = max(scale, abs(sta[k, 0]) + abs(sta[k, 1]))
+    for k in range(ib.size):
+        scale = max(scale, abs(stb[k, 0]) + abs(stb[k, 1]))
+    scale = max(scale, touch_tol, 1e-300)
+    eps = 1e-12 * scale * scale
+    polya, kinda = hull2d(sta, eps)
+    polyb, kindb = hull2d(stb, eps)
+    ca0, cas, cat = height_fit(sta, ha[ia])
+    cb0, cbs, cbt = height_fit(stb, hb[ib])
+
+    if kinda == POLYGON and kindb == POLYGON:
+        pts = _clip_polygon(polya, polyb)
+        kind = POLYGON if pts.shape[0] >= 3 else EMPTY
+    elif kinda == POLYGON and kindb == SEGMENT:
+        pts = _clip_segment(polyb, polya)
+        kind = SEGMENT
+    elif kindb == POLYGON and kinda == SEGMENT:
+        pts = _clip_segment(polya, polyb)
+        kind = SEGMENT
+    elif kinda == SEGMENT and kindb == SEGMENT:
+        pts = _segment_cross(polya, polyb)
+        kind = POINT
+    elif kinda == POINT and kindb == POLYGON:
+        pts = polya if _point_in_polygon(polya[0, 0], polya[0, 1], polyb, 1e-9 * scale) \
+            else np.empty((0, 2))
+        kind = POINT
+    elif kindb == POINT and kinda == POLYGON:
+        pts = polyb if _point_in_polygon(polyb[0, 0], polyb[0, 1], polya, 1e-9 * scale) \
+            else np.empty((0, 2))
+        kind = POINT
+    else:
+        pts = np.empty((0, 2))
+        kind = EMPTY
+
+    # A polygon clip can come back with near-duplicate corners; a degenerate area is no polygon.
+    area = np.zeros(pts.shape[0])
+    if kind == POLYGON:
+        k = pts.shape[0]
+        cx = 0.0
+        cy = 0.0
+        for i in range(k):
+            cx += pts[i, 0]
+            cy += pts[i, 1]
+        cx /= k
+        cy /= k
+        total = 0.0
+        for i in range(k):
+            j = (i + 1) % k
+            tri = 0.5 * _cross2(cx, cy, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1])
+            area[i] += 0.5 * tri
+            area[j] += 0.5 * tri
+            total += tri
+        if total <= eps:
+            kind = EMPTY
+            pts = np.empty((0, 2))
+            area = np.zeros(0)
+    elif kind == SEGMENT and pts.shape[0] == 2:
+        if (pts[0, 0] - pts[1, 0]) ** 2 + (pts[0, 1] - pts[1, 1]) ** 2 <= eps:
+            pts = pts[:1].copy()
+            area = np.zeros(1)
+            kind = POINT
+    if pts.shape[0] == 0:
+        # Numerically empty intersection (blocks meet at a corner): one point at the reference
+        # point, loaded by the common-plane gap.
+        pts = np.zeros((1, 2))
+        area = np.zeros(1)
+        overlap = np.array([amax - bmin])
+        return pts, overlap, area, EMPTY, e1, e2, counts
+    overlap = np.empty(pts.shape[0])
+    for i in range(pts.shape[0]):
+        s = pts[i, 0]
+        t = pts[i, 1]
+        overlap[i] = (ca0 + cas * s + cat * t) - (cb0 + cbs * s + cbt * t)
+    return pts, overlap, area, kind, e1, e2, counts

@@ -1,0 +1,126 @@
+"""Critical timestep (eqs. 84-88) and mass scaling for static solves (eq. 89).
+
+Block stiffness
+---------------
+``stiffnesses[i]`` is the contact stiffness acting on block i: the sum over its sub-contacts
+of ``max(kn, ks) * area`` (3DEC's joint term of eq. 85 takes the larger of the normal and
+shear stiffness times the area).  :func:`block_stiffness` accumulates it from per-sub-contact
+values.
+
+Translational bound (eq. 87, as 3DEC states it)
+    ``dt_b = frac * 2 * sqrt(M_min / K_max)`` with ``M_min`` the smallest (inertial) block
+    mass and ``K_max`` the largest block stiffness, each over the free blocks.  This is more
+    conservative than ``min_i sqrt(m_i / K_i)``; ``frac`` (typically 0.1) covers a block being
+    squeezed by several neighbours.
+
+Rotational bound (pdem addition, when ``inertias`` and ``radii`` are given)
+    The rotational stiffness of block i is at most ``K_i r_i^2`` (all of its contact stiffness
+    at its bounding radius), so ``dt_r = frac * 2 * min_i sqrt(I_min,i / (K_i r_i^2))``, with
+    ``I_min,i`` the block's smallest principal moment.  For a cube ``I/r^2 = 2m/9``, so this
+    bound is about half the per-block translational one -- it matters for slender blocks and
+    is cheap insurance against rotational instability in the scalar-inertia-free integrator.
+
+    ``dt = min(dt_b, dt_r)`` (eq. 88 without the deformable-zone term).  Returns ``inf`` if no
+    free block has contact stiffness.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def block_stiffness(n: int, ia, ib, k_area) -> np.ndarray:
+    """Sum per-sub-contact stiffness ``k_area`` (= max(kn, ks) * area) onto both blocks.
+
+    ``ia``, ``ib`` are the block rows of each entry (same length as ``k_area``); a negative
+    row is ignored.  Deterministic (np.bincount sums in input order).
+    """
+    ia = np.asarray(ia, dtype=np.int64)
+    ib = np.asarray(ib, dtype=np.int64)
+    k = np.asarray(k_area, dtype=np.float64)
+    out = np.zeros(n)
+    for rows in (ia, ib):
+        ok = rows >= 0
+        out += np.bincount(rows[ok], weights=k[ok], minlength=n)
+    return out
+
+
+def _free(n: int, fixed) -> np.ndarray:
+    if fixed is None:
+        return np.ones(n, dtype=bool)
+    return ~np.asarray(fixed, dtype=bool)
+
+
+def auto_timestep(
+    masses,
+    stiffnesses,
+    frac: float = 0.1,
+    inertias=None,
+    radii=None,
+    fixed=None,
+    mass_scale=None,
+) -> float:
+    """Critical timestep per eq. (87) plus the rotational bound (module docstring).
+
+    masses (n,), stiffnesses (n,) block contact stiffness sums, inertias (n, 3) principal
+    moments, radii (n,) bounding radii, fixed (n,) flags of blocks to ignore, mass_scale (n,)
+    inertial scale factors (multiply masses and inertias).
+    """
+    m = np.asarray(masses, dtype=np.float64)
+    k = np.asarray(stiffnesses, dtype=np.float64)
+    n = len(m)
+    ms = np.ones(n) if mass_scale is None else np.asarray(mass_scale, dtype=np.float64)
+    free = _free(n, fixed)
+    if not free.any():
+        return np.inf
+    k_max = k[free].max()
+    if k_max <= 0.0:
+        return np.inf
+    m_min = (m * ms)[free].min()
+    dt = frac * 2.0 * np.sqrt(m_min / k_max)
+    if inertias is not None and radii is not None:
+        i_min = np.asarray(inertias, dtype=np.float64).min(axis=1) * ms
+        r = np.asarray(radii, dtype=np.float64)
+        kr = k * r * r
+        sel = free & (kr > 0.0)
+        if sel.any():
+            dt = min(dt, frac * 2.0 * float(np.sqrt((i_min[sel] / kr[sel]).min())))
+    return float(dt)
+
+
+def mass_scale_factors(
+    masses,
+    stiffnesses,
+    dt_target: float,
+    frac: float = 0.1,
+    inertias=None,
+    radii=None,
+    uniform: bool = False,
+) -> np.ndarray:
+    """Inertial mass-scale factors so every block is stable at ``dt_target`` (eq. 89).
+
+    Per block, the critical step ``frac * 2 * sqrt(s m / K)`` reaches ``dt_target`` for
+    ``s_t = K dt^2 / (4 frac^2 m)``; with inertias/radii the rotational bound likewise needs
+    ``s_r = K r^2 dt^2 / (4 frac^2 I_min)`` (mass and inertia share one factor).
+
+    ``uniform=False`` (default): ``s = max(1, s_t, s_r)`` -- only blocks too light for
+    ``dt_target`` are made heavier, so the physics of the rest is untouched.
+    ``uniform=True``: ``s = max(s_t, s_r)`` even when < 1, i.e. 3DEC's static-solve scaling
+    where every block gets the same critical step (and so the same natural frequency, which is
+    what makes damped relaxation converge fastest).  Blocks without stiffness get 1.
+
+    The per-block estimate uses the block's own K and mass; pass a frac that allows for
+    neighbours (0.1 as in eq. 87 is safe).  Apply with ``BlockStore.mscale``; gravity keeps the
+    true mass (see :mod:`pdem.dynamics.motion`).
+    """
+    m = np.asarray(masses, dtype=np.float64)
+    k = np.asarray(stiffnesses, dtype=np.float64)
+    c = dt_target * dt_target / (4.0 * frac * frac)
+    s = k * c / m
+    if inertias is not None and radii is not None:
+        i_min = np.asarray(inertias, dtype=np.float64).min(axis=1)
+        r = np.asarray(radii, dtype=np.float64)
+        s = np.maximum(s, k * r * r * c / i_min)
+    if uniform:
+        return np.where(k > 0.0, s, 1.0)
+    return np.maximum(s, 1.0)

@@ -1,0 +1,84 @@
+"""BlockStore: the struct of arrays holding every block a rank knows (owned or ghost)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+# Per-block arrays and their trailing shape/dtype. Geometry (ragged) is listed separately.
+BLOCK_FIELDS: dict[str, tuple[tuple[int, ...], type]] = {
+    "gid": ((), np.int64),
+    "owned": ((), np.uint8),
+    "x": ((3,), np.float64),  # centroid (world)
+    "q": ((4,), np.float64),  # orientation quaternion (w, x, y, z), body -> world
+    "v": ((3,), np.float64),  # velocity at t - dt/2
+    "w": ((3,), np.float64),  # angular velocity (world) at t - dt/2
+    "L": ((3,), np.float64),  # angular momentum (world) at t - dt/2
+    "mass": ((), np.float64),
+    "inertia": ((3,), np.float64),  # principal moments (body frame = principal axes)
+    "mscale": ((), np.float64),  # inertial mass scale (static solves), 1 otherwise
+    "fixed": ((), np.uint8),
+    "vfix": ((), np.uint8),  # velocity prescribed
+    "material": ((), np.int32),
+    "group": ((), np.int32),
+    "force": ((3,), np.float64),  # contact force sum of the current step
+    "moment": ((3,), np.float64),
+    "applied_force": ((3,), np.float64),
+    "prev_force": ((3,), np.float64),  # last step's unbalanced force (combined damping)
+    "prev_moment": ((3,), np.float64),
+    "u_acc": ((), np.float64),  # accumulated motion since the last remap (eq. 1)
+    "radius": ((), np.float64),  # largest centroid-to-vertex distance
+    "x0": ((3,), np.float64),  # centroid at start (for displacement histories)
+}
+
+
+@dataclass
+class BlockStore:
+    """Blocks as flat arrays; geometry is CSR in the body frame (see docs/architecture.md)."""
+
+    gid: np.ndarray
+    owned: np.ndarray
+    x: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    L: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    mscale: np.ndarray
+    fixed: np.ndarray
+    vfix: np.ndarray
+    material: np.ndarray
+    group: np.ndarray
+    force: np.ndarray
+    moment: np.ndarray
+    applied_force: np.ndarray
+    prev_force: np.ndarray
+    prev_moment: np.ndarray
+    u_acc: np.ndarray
+    radius: np.ndarray
+    x0: np.ndarray
+    # geometry (CSR)
+    vert_start: np.ndarray  # (n+1,) into verts_local / verts_world
+    verts_local: np.ndarray  # (V, 3) body frame
+    verts_world: np.ndarray  # (V, 3) refreshed from the pose
+    face_start: np.ndarray  # (n+1,) into faces
+    fvert_start: np.ndarray  # (F+1,) into face_verts
+    face_verts: np.ndarray  # global vertex rows, CCW from outside
+    normals_local: np.ndarray  # (F, 3)
+    offsets_local: np.ndarray  # (F,)
+    edge_start: np.ndarray  # (n+1,) into edges
+    edges: np.ndarray  # (E, 2) global vertex rows
+
+    @property
+    def n(self) -> int:
+        return len(self.gid)
+
+
+def empty_block_arrays(n: int) -> dict[str, np.ndarray]:
+    return {k: np.zeros((n, *shape), dtype=dt) for k, (shape, dt) in BLOCK_FIELDS.items()}
+
+
+def store_field_names() -> list[str]:
+    return [f.name for f in fields(BlockStore)]

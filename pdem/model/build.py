@@ -1,0 +1,207 @@
+"""Scene -> blocks: shapes from the scene file, mass properties, the BlockStore."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import ConfigError
+from ..config.schema import Block, BoxShape, Scene
+from ..geometry import (
+    ConvexPolyhedron,
+    GeometryError,
+    box,
+    check_convex,
+    from_planes,
+    from_vertices,
+    prism,
+)
+from .blocks import BlockStore, empty_block_arrays
+
+
+@dataclass
+class BlockSpec:
+    """One expanded block of the scene: its name, world-frame shape and scene entry."""
+
+    name: str
+    entry: int  # index in scene.blocks
+    shape: ConvexPolyhedron
+    spec: Block
+
+
+def quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of rotation matrix R (Shepperd's method), w >= 0."""
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * np.sqrt(1.0 + t)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s,
+                      (R[1, 0] - R[0, 1]) / s])
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+        q = np.empty(4)
+        q[0] = (R[k, j] - R[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + k] = (R[k, i] + R[i, k]) / s
+    if q[0] < 0:
+        q = -q
+    return q / np.linalg.norm(q)
+
+
+def _random_hull(rng, diameter, nverts):
+    for _ in range(100):
+        pts = rng.normal(size=(nverts, 3))
+        pts /= np.linalg.norm(pts, axis=1)[:, None]
+        pts *= 0.5 * diameter
+        try:
+            poly = from_vertices(pts)
+        except GeometryError:
+            continue
+        if poly.volume > 0.05 * diameter**3:  # reject slivers
+            return poly
+    raise GeometryError("could not generate a non-degenerate random polyhedron")
+
+
+def _lattice(region: BoxShape, count: int, cell: float):
+    lo = np.array(region.min)
+    span = np.array(region.max) - lo
+    dims = np.maximum(np.floor(span / cell).astype(int), 1)
+    if np.prod(dims) < count:
+        raise ValueError(
+            f"region holds only {int(np.prod(dims))} sites of size {cell:g}; count is {count}"
+        )
+    sites = []
+    for k in range(dims[2]):
+        for j in range(dims[1]):
+            for i in range(dims[0]):
+                sites.append(lo + (np.array([i, j, k]) + 0.5) * span / dims)
+    return sites[:count]
+
+
+def expand_blocks(scene: Scene) -> list[BlockSpec]:
+    """Every block of the scene in gid order, shapes in the world frame."""
+    out: list[BlockSpec] = []
+    errors: list[str] = []
+    for i, b in enumerate(scene.blocks):
+        where = f"blocks[{i}] ({b.name!r})"
+        try:
+            kind = b.shape_kind
+            if kind == "box":
+                out.append(BlockSpec(b.name, i, box(b.box.min, b.box.max), b))
+            elif kind == "polyhedron":
+                pts = np.asarray(b.polyhedron.vertices, float)
+                inside = check_convex(pts)
+                if len(inside):
+                    raise GeometryError(
+                        f"vertices {list(map(int, inside))} are not on the convex hull: the "
+                        "polyhedron is not convex (split a concave block into convex pieces)"
+                    )
+                out.append(BlockSpec(b.name, i, from_vertices(pts), b))
+            elif kind == "prism":
+                shape = prism(np.asarray(b.prism.base, float), np.asarray(b.prism.extrude, float))
+                out.append(BlockSpec(b.name, i, shape, b))
+            elif kind == "planes":
+                shape = from_planes(np.asarray(b.planes.normals, float),
+                                    np.asarray(b.planes.offsets, float))
+                out.append(BlockSpec(b.name, i, shape, b))
+            elif kind == "array":
+                a = b.array
+                base = box(a.box.min, a.box.max)
+                k = 0
+                for iz in range(a.count[2]):
+                    for iy in range(a.count[1]):
+                        for ix in range(a.count[0]):
+                            off = np.array([ix, iy, iz], float) * np.array(a.spacing)
+                            out.append(BlockSpec(f"{b.name}[{k}]", i,
+                                                 base.transformed(np.eye(3), off), b))
+                            k += 1
+            elif kind == "random":
+                r = b.random
+                rng = np.random.default_rng(r.seed)
+                for k, site in enumerate(_lattice(r.region, r.count, r.size[1])):
+                    d = rng.uniform(r.size[0], r.size[1])
+                    shape = _random_hull(rng, d, r.vertices)
+                    shape = shape.transformed(np.eye(3), site - shape.centroid)
+                    out.append(BlockSpec(f"{b.name}[{k}]", i, shape, b))
+        except (GeometryError, ValueError) as exc:
+            errors.append(f"{where}.{b.shape_kind}: {exc}")
+    if errors:
+        raise ConfigError(errors)
+    return out
+
+
+def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = None):
+    """BlockStore holding ``specs[rows]`` (all by default), body frame = principal axes."""
+    if rows is None:
+        rows = np.arange(len(specs))
+    n = len(rows)
+    arr = empty_block_arrays(n)
+    mats = list(scene.materials)
+    groups = sorted({b.group for b in scene.blocks})
+    vl, fn, fo, fv, fvs, ed = [], [], [], [], [0], []
+    vert_start = [0]
+    face_start = [0]
+    edge_start = [0]
+    for r, gid in enumerate(rows):
+        s = specs[gid]
+        body, centroid, R, moments = s.shape.principal_frame()
+        rho = scene.materials[s.spec.material].density
+        arr["gid"][r] = gid
+        arr["owned"][r] = 1
+        arr["x"][r] = centroid
+        arr["x0"][r] = centroid
+        arr["q"][r] = quat_from_matrix(R)
+        arr["mass"][r] = rho * s.shape.volume
+        arr["inertia"][r] = rho * moments
+        arr["mscale"][r] = 1.0
+        arr["fixed"][r] = s.spec.fixed
+        arr["vfix"][r] = s.spec.velocity_fixed
+        arr["material"][r] = mats.index(s.spec.material)
+        arr["group"][r] = groups.index(s.spec.group)
+        if not s.spec.fixed:
+            arr["v"][r] = s.spec.velocity
+            arr["w"][r] = s.spec.angular_velocity
+        arr["applied_force"][r] = s.spec.force
+        arr["radius"][r] = np.linalg.norm(body.vertices, axis=1).max()
+        v0 = vert_start[-1]
+        vl.append(body.vertices)
+        vert_start.append(v0 + body.n_vertices)
+        fn.append(body.normals)
+        fo.append(body.offsets)
+        for f in range(body.n_faces):
+            ids = body.face_verts[body.face_start[f]:body.face_start[f + 1]] + v0
+            fv.append(ids)
+            fvs.append(fvs[-1] + len(ids))
+        face_start.append(face_start[-1] + body.n_faces)
+        ed.append(body.edges + v0)
+        edge_start.append(edge_start[-1] + len(body.edges))
+    # world angular momentum from the initial angular velocity: L = R diag(I) R^T w
+    for r in range(n):
+        Rm = _quat_matrix(arr["q"][r])
+        arr["L"][r] = Rm @ (arr["inertia"][r] * (Rm.T @ arr["w"][r]))
+    verts_local = np.concatenate(vl) if vl else np.zeros((0, 3))
+    return BlockStore(
+        **arr,
+        vert_start=np.array(vert_start, np.int64),
+        verts_local=verts_local,
+        verts_world=np.zeros_like(verts_local),
+        face_start=np.array(face_start, np.int64),
+        fvert_start=np.array(fvs, np.int64),
+        face_verts=np.concatenate(fv).astype(np.int64) if fv else np.zeros(0, np.int64),
+        normals_local=np.concatenate(fn) if fn else np.zeros((0, 3)),
+        offsets_local=np.concatenate(fo) if fo else np.zeros(0),
+        edge_start=np.array(edge_start, np.int64),
+        edges=np.concatenate(ed).astype(np.int64) if ed else np.zeros((0, 2), np.int64),
+    ), groups
+
+
+def _quat_matrix(q):
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])

@@ -1,0 +1,84 @@
+"""The one MPI module: start-up, abort-on-error, rank-aware logging, small reductions.
+
+Library code receives ``comm`` explicitly; only ``pdem.cli`` names ``MPI.COMM_WORLD``.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import traceback
+
+import numpy as np
+
+
+class RankFilter(logging.Filter):
+    def __init__(self, rank: int, size: int):
+        super().__init__()
+        self.tag = f"{rank}/{size}"
+
+    def filter(self, record):
+        record.rank = self.tag
+        return True
+
+
+def setup_logging(comm, level=logging.INFO) -> logging.Logger:
+    """Log lines carry ``rank/size``; ranks other than 0 only show warnings and errors."""
+    log = logging.getLogger("pdem")
+    log.handlers.clear()
+    handler = logging.StreamHandler(sys.stdout if comm.rank == 0 else sys.stderr)
+    handler.addFilter(RankFilter(comm.rank, comm.size))
+    handler.setFormatter(logging.Formatter("[pdem %(rank)s] %(message)s"))
+    log.addHandler(handler)
+    log.setLevel(level if comm.rank == 0 else logging.WARNING)
+    log.propagate = False
+    return log
+
+
+def install_abort_hook(comm) -> None:
+    """An uncaught exception on any rank prints its message and aborts every rank.
+
+    Without this, one rank's error leaves the others waiting forever in a collective.
+    """
+    if comm.size == 1:
+        return
+    previous = sys.excepthook
+
+    def hook(kind, value, tb):
+        from .. import errors
+
+        if isinstance(value, errors.UserError):
+            sys.stderr.write(f"pdem: error on rank {comm.rank}: {value}\n")
+        else:
+            sys.stderr.write(f"pdem: internal error on rank {comm.rank}:\n")
+            traceback.print_exception(kind, value, tb)
+        sys.stderr.flush()
+        try:
+            comm.Abort(1)
+        finally:
+            previous(kind, value, tb)
+
+    sys.excepthook = hook
+
+
+def allreduce_max(comm, value: float) -> float:
+    from mpi4py import MPI
+
+    return comm.allreduce(float(value), op=MPI.MAX)
+
+
+def allreduce_min(comm, value: float) -> float:
+    from mpi4py import MPI
+
+    return comm.allreduce(float(value), op=MPI.MIN)
+
+
+def any_rank(comm, flag: bool) -> bool:
+    from mpi4py import MPI
+
+    return bool(comm.allreduce(bool(flag), op=MPI.LOR))
+
+
+def gid_ranges(n_blocks: int, size: int) -> np.ndarray:
+    """Contiguous, balanced gid ranges per rank: rank r owns [r0[r], r0[r+1])."""
+    return np.linspace(0, n_blocks, size + 1).round().astype(np.int64)
