@@ -100,8 +100,8 @@ class Solver:
                                                     np.zeros(len(pi), np.int32))
         res = refresh_contacts(
             b.x, self.R, b.vert_start, b.verts_world, b.face_start, b.normals_local,
-            b.edge_start, b.edges, np.ones(b.n), probe.ia, probe.ib, probe.normal.copy(),
-            probe.point.copy(), probe.gap.copy(), probe.ctype.copy(), probe.warm.copy(),
+            b.edge_start, b.edges, np.ones(b.n), probe.ia, probe.ib, probe.normal,
+            probe.point, probe.gap, probe.ctype, probe.warm,
             np.zeros(probe.n + 1, np.int64), *[probe.sub[k] for k in
                                               ("sc_pa", "sc_area", "sc_un", "sc_fs", "sc_us",
                                                "sc_dil",

@@ -93,7 +93,7 @@ def expand_blocks(scene: Scene) -> list[BlockSpec]:
                 out.append(BlockSpec(b.name, i, box(b.box.min, b.box.max), b))
             elif kind == "polyhedron":
                 pts = np.asarray(b.polyhedron.vertices, float)
-                inside = check_convex(pts)
+                inside = check_convex(pts, boundary=True)
                 if len(inside):
                     raise GeometryError(
                         f"vertices {list(map(int, inside))} are not on the convex hull: the "

@@ -1,0 +1,304 @@
+"""``ConvexPolyhedron``: the immutable geometry record of one convex block."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from pdem.geometry.errors import GeometryError
+from pdem.geometry.mass import fan_triangles, mass_properties
+from pdem.geometry.topology import build_half_edges
+
+
+def _readonly(a: np.ndarray, dtype) -> np.ndarray:
+    # Always copy: never freeze (or alias) an array the caller still owns.
+    out = np.array(a, dtype=dtype, order="C", copy=True)
+    out.flags.writeable = False
+    return out
+
+
+def newell_normal(points: np.ndarray) -> np.ndarray:
+    """Area vector of a planar polygon (Newell's method): ``2 * area * unit normal``.
+
+    Parameters
+    ----------
+    points : (k, 3) float64
+        Polygon vertices in order.
+
+    Returns
+    -------
+    (3,) float64
+        Sum of ``p_i x p_{i+1}`` taken about the polygon's mean (for round-off).
+    """
+    p = points - points.mean(axis=0)
+    return np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+
+
+def _face_area_vectors(v: np.ndarray, face_start: np.ndarray, face_verts: np.ndarray):
+    """``2 * area * unit normal`` of every face, from its triangle fan (vectorised Newell)."""
+    tri = fan_triangles(face_start, face_verts)
+    a = v[tri[:, 0]]
+    cr = np.cross(v[tri[:, 1]] - a, v[tri[:, 2]] - a)
+    face_of_tri = np.repeat(np.arange(len(face_start) - 1), np.diff(face_start) - 2)
+    out = np.zeros((len(face_start) - 1, 3))
+    np.add.at(out, face_of_tri, cr)
+    return out
+
+
+def _is_rotation(R: np.ndarray, tol: float = 1e-9) -> bool:
+    return bool(np.allclose(R @ R.T, np.eye(3), atol=tol) and np.linalg.det(R) > 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class ConvexPolyhedron:
+    """A closed convex polyhedron with planar polygon faces and half-edge connectivity.
+
+    Build instances with :meth:`from_faces` or the builders in :mod:`pdem.geometry.builders`;
+    the derived fields (normals, edges, half-edges, mass properties) are filled in there.
+    Arrays are read-only.
+
+    Attributes
+    ----------
+    vertices : (nv, 3) float64
+        Vertex coordinates.
+    face_start : (nf+1,) int64
+        CSR offsets into ``face_verts``.
+    face_verts : (sum,) int64
+        Vertex ids of each face, counter-clockwise seen from outside (right-hand rule gives
+        the outward normal). Half-edge ``h`` leaves ``face_verts[h]``.
+    normals : (nf, 3) float64
+        Unit outward face normals.
+    offsets : (nf,) float64
+        Plane offsets, ``normals[f] . x = offsets[f]`` on face ``f``; inside is ``<=``.
+    edges : (ne, 2) int64
+        Unique edges ``(i, j)`` with ``i < j``, sorted lexicographically.
+    he_origin, he_twin, he_next, he_face : (sum,) int64
+        Half-edge start vertex, opposite half-edge, next half-edge around the same face, face.
+    vert_he : (nv,) int64
+        One outgoing half-edge per vertex; ``he_next[he_twin[h]]`` is the next outgoing
+        half-edge around the vertex, so faces/edges at a vertex cost O(degree).
+    volume : float
+        Enclosed volume.
+    centroid : (3,) float64
+        Centre of volume.
+    inertia : (3, 3) float64
+        Inertia tensor about the centroid per unit density (multiply by density for mass
+        moments).
+    """
+
+    vertices: np.ndarray
+    face_start: np.ndarray
+    face_verts: np.ndarray
+    normals: np.ndarray
+    offsets: np.ndarray
+    edges: np.ndarray
+    he_origin: np.ndarray
+    he_twin: np.ndarray
+    he_next: np.ndarray
+    he_face: np.ndarray
+    vert_he: np.ndarray
+    volume: float
+    centroid: np.ndarray
+    inertia: np.ndarray
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_faces(
+        cls,
+        vertices: np.ndarray,
+        faces: list[np.ndarray] | list[list[int]],
+        normals: np.ndarray | None = None,
+        offsets: np.ndarray | None = None,
+    ) -> ConvexPolyhedron:
+        """Build from vertices and face polygons, computing every derived field.
+
+        Parameters
+        ----------
+        vertices : (nv, 3) array_like
+            Vertex coordinates; every vertex must be used by some face.
+        faces : sequence of int sequences
+            Each face's vertex ids, counter-clockwise seen from outside.
+        normals, offsets : optional
+            Known exact face planes (e.g. the cutting planes a block came from). By default
+            the normal is the normalised Newell area vector and the offset the mean of
+            ``n . x`` over the face's vertices.
+
+        Returns
+        -------
+        ConvexPolyhedron
+
+        Raises
+        ------
+        GeometryError
+            If the faces are not a closed, outward-oriented manifold or the volume is not
+            positive. Convexity itself is not re-checked here (the hull guarantees it).
+        """
+        v = np.asarray(vertices, dtype=np.float64)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise GeometryError(f"vertices must have shape (nv, 3), got {v.shape}")
+        if not np.all(np.isfinite(v)):
+            raise GeometryError("vertices contain NaN or inf")
+        counts = np.array([len(f) for f in faces], dtype=np.int64)
+        face_start = np.zeros(len(faces) + 1, dtype=np.int64)
+        np.cumsum(counts, out=face_start[1:])
+        face_verts = (
+            np.concatenate([np.asarray(f, dtype=np.int64) for f in faces])
+            if faces
+            else np.empty(0, dtype=np.int64)
+        )
+        if face_verts.size and (face_verts.min() < 0 or face_verts.max() >= len(v)):
+            raise GeometryError("face vertex id out of range")
+        he = build_half_edges(len(v), face_start, face_verts)
+        if normals is None:
+            n = _face_area_vectors(v, face_start, face_verts)
+            norm = np.linalg.norm(n, axis=1)
+            if np.any(norm == 0.0):
+                raise GeometryError("a face has zero area")
+            n = n / norm[:, None]
+        else:
+            n = np.asarray(normals, dtype=np.float64)
+        if offsets is None:
+            # Mean of n . x over each face's vertices (an average absorbs round-off).
+            face_of = np.repeat(np.arange(len(faces)), np.diff(face_start))
+            d = np.bincount(
+                face_of, np.einsum("ij,ij->i", v[face_verts], n[face_of]), len(faces)
+            ) / np.diff(face_start)
+        else:
+            d = np.asarray(offsets, dtype=np.float64)
+        volume, centroid, inertia = mass_properties(v, face_start, face_verts)
+        if not volume > 0.0:
+            raise GeometryError(
+                f"polyhedron volume is {volume:g}; faces must be counter-clockwise from outside"
+            )
+        return cls(
+            vertices=_readonly(v, np.float64),
+            face_start=_readonly(face_start, np.int64),
+            face_verts=_readonly(face_verts, np.int64),
+            normals=_readonly(n, np.float64),
+            offsets=_readonly(d, np.float64),
+            edges=_readonly(he.edges, np.int64),
+            he_origin=_readonly(he.origin, np.int64),
+            he_twin=_readonly(he.twin, np.int64),
+            he_next=_readonly(he.next, np.int64),
+            he_face=_readonly(he.face, np.int64),
+            vert_he=_readonly(he.vert_he, np.int64),
+            volume=volume,
+            centroid=_readonly(centroid, np.float64),
+            inertia=_readonly(inertia, np.float64),
+        )
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices."""
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        """Number of faces."""
+        return len(self.face_start) - 1
+
+    @property
+    def n_edges(self) -> int:
+        """Number of (undirected) edges."""
+        return len(self.edges)
+
+    # ------------------------------------------------------------------ queries
+    def face_vertex_ids(self, f: int) -> np.ndarray:
+        """Vertex ids of face ``f``, counter-clockwise seen from outside."""
+        return self.face_verts[self.face_start[f] : self.face_start[f + 1]]
+
+    def face_polygon(self, f: int) -> np.ndarray:
+        """Vertex coordinates ``(k, 3)`` of face ``f``, counter-clockwise seen from outside."""
+        return self.vertices[self.face_vertex_ids(f)]
+
+    def face_area(self, f: int) -> float:
+        """Area of face ``f``."""
+        return 0.5 * float(np.linalg.norm(newell_normal(self.face_polygon(f))))
+
+    def vertex_half_edges(self, v: int) -> np.ndarray:
+        """Outgoing half-edges of vertex ``v``, walking clockwise seen from outside."""
+        h0 = int(self.vert_he[v])
+        out = [h0]
+        h = int(self.he_next[self.he_twin[h0]])
+        while h != h0:
+            out.append(h)
+            h = int(self.he_next[self.he_twin[h]])
+        return np.array(out, dtype=np.int64)
+
+    def vertex_faces(self, v: int) -> np.ndarray:
+        """Faces incident to vertex ``v`` (O(degree), by walking half-edges)."""
+        return self.he_face[self.vertex_half_edges(v)]
+
+    def vertex_neighbors(self, v: int) -> np.ndarray:
+        """Vertices joined to ``v`` by an edge (O(degree))."""
+        return self.he_origin[self.he_next[self.vertex_half_edges(v)]]
+
+    def radius(self) -> float:
+        """Largest distance from the centroid to a vertex."""
+        return float(np.sqrt(((self.vertices - self.centroid) ** 2).sum(axis=1).max()))
+
+    # ------------------------------------------------------------------ transforms
+    def transformed(self, R: np.ndarray, t: np.ndarray) -> ConvexPolyhedron:
+        """Rigidly move the polyhedron: ``x' = R x + t``.
+
+        Parameters
+        ----------
+        R : (3, 3) array_like
+            Proper rotation matrix (orthonormal, det = +1). Reflections are rejected because
+            they would turn the faces inside out.
+        t : (3,) array_like
+            Translation.
+
+        Returns
+        -------
+        ConvexPolyhedron
+            New polyhedron; topology shared, normals rotated, inertia ``R I R^T``.
+        """
+        R = np.asarray(R, dtype=np.float64)
+        t = np.asarray(t, dtype=np.float64).reshape(3)
+        if R.shape != (3, 3) or not _is_rotation(R):
+            raise GeometryError("R must be a proper rotation matrix (orthonormal, det = +1)")
+        n = self.normals @ R.T
+        c = R @ self.centroid + t
+        return dataclasses.replace(
+            self,
+            vertices=_readonly(self.vertices @ R.T + t, np.float64),
+            normals=_readonly(n, np.float64),
+            offsets=_readonly(self.offsets + n @ t, np.float64),
+            centroid=_readonly(c, np.float64),
+            inertia=_readonly(R @ self.inertia @ R.T, np.float64),
+        )
+
+    def principal_frame(self) -> tuple[ConvexPolyhedron, np.ndarray, np.ndarray, np.ndarray]:
+        """Express the polyhedron in its principal body frame.
+
+        Returns
+        -------
+        body : ConvexPolyhedron
+            The polyhedron with origin at the centroid and axes along the principal axes;
+            its ``centroid`` is exactly zero and its ``inertia`` exactly ``diag(moments)``.
+        centroid : (3,) float64
+            World position of the body origin.
+        R : (3, 3) float64
+            Proper rotation (det = +1) whose columns are the principal axes in world
+            coordinates: ``world = R @ body + centroid``.
+        moments : (3,) float64
+            Principal moments per unit density, ascending.
+        """
+        moments, R = np.linalg.eigh(self.inertia)
+        if np.linalg.det(R) < 0.0:
+            R[:, 2] = -R[:, 2]  # eigenvectors are defined up to sign: pick a right-handed frame
+        c = np.array(self.centroid)
+        n = self.normals @ R
+        body = dataclasses.replace(
+            self,
+            vertices=_readonly((self.vertices - c) @ R, np.float64),
+            normals=_readonly(n, np.float64),
+            offsets=_readonly(self.offsets - self.normals @ c, np.float64),
+            centroid=_readonly(np.zeros(3), np.float64),
+            inertia=_readonly(np.diag(moments), np.float64),
+        )
+        return body, c, R, moments

@@ -1,0 +1,87 @@
+"""Scene-file validation: good scenes resolve with defaults, bad ones name key and line."""
+
+from pathlib import Path
+
+import pytest
+
+from pdem.config import ConfigError, dump_scene, load_scene, parse_scene
+
+ROOT = Path(__file__).resolve().parents[2]
+
+GOOD = """
+name: t
+materials: {rock: {density: 2000.0}}
+joints: {default: {kn: 1.0e9, ks: 1.0e9}}
+blocks:
+  - {name: base, box: {min: [-1, -1, -1], max: [1, 1, 0]}, material: rock, fixed: true}
+  - {name: cube, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock}
+solve: {steps: 10}
+"""
+
+
+def errors_of(text):
+    with pytest.raises(ConfigError) as info:
+        parse_scene(text, "s.yaml")
+    return info.value.messages
+
+
+def test_defaults_filled_and_round_trip():
+    scene = parse_scene(GOOD)
+    assert scene.gravity == (0.0, 0.0, -9.81)
+    assert scene.joints["default"].friction == 30.0
+    assert scene.solve.damping.mode == "none"
+    assert scene.contact.detect_every == 10
+    again = parse_scene(dump_scene(scene))
+    assert again == scene
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "configs").glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_configs_validate(path):
+    load_scene(path)
+
+
+def test_unknown_key_suggests_and_gives_line():
+    msgs = errors_of(GOOD.replace("fixed: true", "fixd: true"))
+    assert msgs == ["blocks[0].fixd: unknown key; did you mean 'fixed'?  [line 6]"]
+
+
+def test_negative_density_names_key_and_value():
+    (msg,) = errors_of(GOOD.replace("density: 2000.0", "density: -2600"))
+    assert msg.startswith("materials.rock.density:") and "-2600" in msg and "[line 3]" in msg
+
+
+def test_wrong_type():
+    (msg,) = errors_of(GOOD.replace("steps: 10", "steps: many"))
+    assert msg.startswith("solve.steps:") and "'many'" in msg
+
+
+def test_unknown_material_and_duplicate_name():
+    text = GOOD.replace("material: rock}\nsolve", "material: granite}\nsolve").replace(
+        "name: cube", "name: base")
+    (msg,) = errors_of(text)
+    assert "blocks[1].material: unknown material 'granite'" in msg
+    assert "blocks[1].name: 'base' already names blocks[0]" in msg
+
+
+def test_one_shape_and_one_end_condition():
+    msgs = errors_of(GOOD.replace("box: {min: [0, 0, 0]", "polyhedron: {vertices: [[0,0,0]]}, "
+                                  "box: {min: [0, 0, 0]").replace("steps: 10", "steps: 10, time: 1"))
+    text = "\n".join(msgs)
+    assert "blocks[1]" in text and "exactly one shape" in text or "vertices" in text
+    assert "give exactly one of time, steps, ratio" in text
+
+
+def test_missing_file_and_not_a_mapping(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_scene(tmp_path / "nope.yaml")
+    with pytest.raises(ConfigError, match="mapping"):
+        parse_scene("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        parse_scene("a: [1,\n")
+
+
+def test_joint_pairs_reference_checks():
+    text = GOOD + "joint_pairs: [{groups: [default, nope], joint: weak}]\n"
+    (msg,) = errors_of(text)
+    assert "joint_pairs[0].joint: unknown joint 'weak'" in msg
+    assert "joint_pairs[0].groups: no block has group 'nope'" in msg

@@ -1,0 +1,76 @@
+"""Contact region on the common plane: polygon clipping, areas, overlaps, degenerate cases."""
+
+import numpy as np
+import pytest
+
+from pdem.contact.subcontacts import POINT, POLYGON, SEGMENT, contact_region
+
+N = np.array([0.0, 0.0, 1.0])
+P = np.zeros(3)
+
+
+def box_verts(lo, hi):
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def world(pts, e1, e2):
+    return pts[:, :1] * e1 + pts[:, 1:] * e2
+
+
+def test_face_face_partial_overlap_area_and_corners():
+    """A 2x2 floor and a unit cube shifted half off its edge: common area 0.5 x 1."""
+    va = box_verts([-1, -1, -1], [1, 1, 0])
+    vb = box_verts([0.5, -0.5, -1e-4], [1.5, 0.5, 1 - 1e-4])
+    pts, ovl, area, kind, e1, e2, counts = contact_region(va, vb, N, P, 1e-3)
+    assert kind == POLYGON
+    assert tuple(counts) == (4, 4)
+    assert area.sum() == pytest.approx(0.5, rel=1e-12)
+    corners = world(pts, e1, e2)
+    assert sorted(map(tuple, np.round(corners[:, :2], 12))) == [
+        (0.5, -0.5), (0.5, 0.5), (1.0, -0.5), (1.0, 0.5)]
+    np.testing.assert_allclose(ovl, 1e-4, rtol=1e-9)
+
+
+def test_tilted_face_gives_linear_overlap():
+    """B's bottom face tilted about y: overlap varies linearly along x."""
+    va = box_verts([-1, -1, -1], [1, 1, 0])
+    slope = 1e-4
+    vb = box_verts([-0.5, -0.5, 0], [0.5, 0.5, 1])
+    vb[:, 2] += slope * vb[:, 0] - 1e-4  # overlap 1e-4 at x=0, 0 at x=+1
+    pts, ovl, area, kind, e1, e2, _ = contact_region(va, vb, N, P, 1e-3)
+    x = world(pts, e1, e2)[:, 0]
+    np.testing.assert_allclose(ovl, 1e-4 - slope * x, atol=1e-15)
+    assert area.sum() == pytest.approx(1.0)
+
+
+def test_edge_on_face_is_a_segment():
+    """A cube rotated 45 deg about x rests on an edge: two sub-contacts at the edge ends."""
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    R = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    vb = box_verts([-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]) @ R.T
+    vb[:, 2] -= vb[:, 2].min() + 2e-5
+    va = box_verts([-2, -2, -1], [2, 2, 0])
+    pts, ovl, area, kind, e1, e2, counts = contact_region(va, vb, N, P, 1e-3)
+    assert kind == SEGMENT and tuple(counts) == (4, 2)
+    np.testing.assert_allclose(sorted(world(pts, e1, e2)[:, 0]), [-0.5, 0.5], atol=1e-12)
+    np.testing.assert_allclose(ovl, 2e-5, rtol=1e-9)
+
+
+def test_vertex_on_face_is_a_point():
+    apex = np.array([[0.1, 0.2, -3e-5], [1, 0, 1], [-1, 0, 1], [0, 1, 1]])
+    va = box_verts([-2, -2, -1], [2, 2, 0])
+    pts, ovl, _, kind, e1, e2, counts = contact_region(va, apex, N, P, 1e-3)
+    assert kind == POINT and tuple(counts) == (4, 1)
+    np.testing.assert_allclose(world(pts, e1, e2)[0, :2], [0.1, 0.2], atol=1e-12)
+    assert ovl[0] == pytest.approx(3e-5, rel=1e-9)
+
+
+def test_crossing_edges_meet_at_one_point():
+    """Edge-edge: two crossed wedges' ridges; the crossing carries the gap as overlap."""
+    va = np.array([[-1, 0, 0.0], [1, 0, 0.0], [-1, -1, -1], [1, -1, -1], [-1, 1, -1], [1, 1, -1]])
+    vb = np.array([[0, -1, -1e-5], [0, 1, -1e-5], [-1, -1, 1], [-1, 1, 1], [1, -1, 1], [1, 1, 1]])
+    pts, ovl, _, kind, e1, e2, counts = contact_region(va, vb, N, P, 1e-3)
+    assert kind == POINT and tuple(counts) == (2, 2)
+    np.testing.assert_allclose(world(pts, e1, e2)[0, :2], [0, 0], atol=1e-12)
+    assert ovl[0] == pytest.approx(1e-5, rel=1e-9)
