@@ -30,6 +30,7 @@ from .errors import SimulationError, UserError
 from .model.build import block_store, expand_blocks
 from .model.contacts import ContactStore
 from .parallel.mpi import gid_ranges
+from .timers import Timers
 
 log = logging.getLogger("pdem")
 
@@ -47,6 +48,7 @@ class Solver:
     def __init__(self, scene: Scene, comm, *, output: bool = True):
         self.scene = scene
         self.comm = comm
+        self.timers = Timers()
         self.specs = expand_blocks(scene)
         self.blocks, self.group_names = block_store(scene, self.specs)
         b = self.blocks
@@ -74,6 +76,8 @@ class Solver:
         self._check_initial_overlaps(cs)
         self._setup_damping()
         self._setup_timestep()
+        self.refresh_tol = cs.refresh_tolerance * self.ctol
+        self.u_geo = np.zeros(b.n)  # motion since the last periodic geometry update
         self.dx = np.zeros((b.n, 3))
         self.dtheta = np.zeros((b.n, 3))
         self.stats = motion.new_stats()
@@ -207,13 +211,23 @@ class Solver:
         self.contacts = self.contacts.with_new_pairs(ia, ib, ga, gb, joint)
         return self.contacts.n - before
 
-    def refresh(self, all_contacts: bool):
-        """Geometry update of contacts (all, or only those not yet detected)."""
+    def refresh(self, all_contacts: bool, periodic: bool = False):
+        """Geometry update of contacts: all, or those not yet detected plus (periodically) those
+        whose blocks moved more than ``refresh_tol`` since their last update. Like 3DEC's
+        "no time wasted on relatively inactive blocks": a resting contact keeps its plane and
+        sub-contacts (its overlaps still follow the motion every step)."""
         b = self.blocks
         c = self.contacts
+        if periodic:
+            c.moved[:] += self.u_geo[c.ia] + self.u_geo[c.ib]
+            self.u_geo[:] = 0.0
         if c.n == 0:
             return
-        todo = np.ones(c.n, np.uint8) if all_contacts else (c.warm == 0).astype(np.uint8)
+        todo = (c.warm == 0) | all_contacts
+        if periodic:
+            todo |= c.moved > self.refresh_tol
+        c.moved[todo] = 0.0
+        todo = todo.astype(np.uint8)
         res = refresh_contacts(
             b.x, self.R, b.vert_start, b.verts_world, b.face_start, b.normals_local,
             b.edge_start, b.edges, self.point_area, c.ia, c.ib, c.normal, c.point, c.gap,
@@ -246,25 +260,33 @@ class Solver:
     def advance(self):
         """One calculation cycle."""
         b = self.blocks
+        tm = self.timers
         self.stats[:] = 0.0
-        motion.integrate(b.x, b.q, b.v, b.w, b.L, b.mass, b.inertia, b.fixed, b.vfix,
-                         self.total_force(), b.moment, self.gravity, self.dt, self.damping_mode,
-                         self.alpha, self.scalar_inertia, b.mscale, b.prev_force,
-                         b.prev_moment, self.dx, self.dtheta, self.stats)
-        self.step += 1
-        self.time += self.dt
-        self._check_finite()
-        rotation_matrices(b.q, self.R)
-        self.compute_forces(self.dt)
-        # eq. 1 (bounded by the centroid motion plus rotation times the block radius)
-        b.u_acc += np.sqrt((self.dx**2).sum(1)) + np.sqrt((self.dtheta**2).sum(1)) * b.radius
-        active = b.u_acc > REMAP_FRACTION * self.ctol
-        periodic = self.step % self.detect_every == 0
-        if active.any() or periodic:
-            update_verts_world(b.x, self.R, b.vert_start, b.verts_local, b.verts_world)
-            created = self.search(active) if active.any() else 0
+        with tm.phase("motion"):
+            motion.integrate(b.x, b.q, b.v, b.w, b.L, b.mass, b.inertia, b.fixed, b.vfix,
+                             self.total_force(), b.moment, self.gravity, self.dt,
+                             self.damping_mode, self.alpha, self.scalar_inertia, b.mscale,
+                             b.prev_force, b.prev_moment, self.dx, self.dtheta, self.stats)
+            self.step += 1
+            self.time += self.dt
+            self._check_finite()
+            rotation_matrices(b.q, self.R)
+        with tm.phase("forces"):
+            self.compute_forces(self.dt)
+        with tm.phase("search"):
+            # eq. 1 (bounded by the centroid motion plus rotation times the block radius)
+            moved = np.sqrt((self.dx**2).sum(1)) + np.sqrt((self.dtheta**2).sum(1)) * b.radius
+            b.u_acc += moved
+            self.u_geo += moved
+            active = b.u_acc > REMAP_FRACTION * self.ctol
+            periodic = self.step % self.detect_every == 0
+            created = 0
+            if active.any() or periodic:
+                update_verts_world(b.x, self.R, b.vert_start, b.verts_local, b.verts_world)
+                created = self.search(active) if active.any() else 0
+        with tm.phase("contacts"):
             if periodic:
-                self.refresh(all_contacts=True)
+                self.refresh(all_contacts=False, periodic=True)
             elif created:
                 self.refresh(all_contacts=False)
         if self.damping_mode == motion.ADAPTIVE and self.step % 10 == 0:

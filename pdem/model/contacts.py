@@ -17,6 +17,7 @@ CONTACT_FIELDS: dict[str, tuple[tuple[int, ...], type]] = {
     "gap": ((), np.float64),
     "ctype": ((), np.int32),  # contact type code (Table 1)
     "warm": ((), np.uint8),  # common plane known (warm start)
+    "moved": ((), np.float64),  # motion of the two blocks since the last geometry update
 }
 
 SUB_FIELDS: dict[str, tuple[tuple[int, ...], type]] = {
