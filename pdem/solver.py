@@ -104,7 +104,7 @@ class Solver:
                                                     np.zeros(len(pi), np.int32))
         res = refresh_contacts(
             b.x, self.R, b.vert_start, b.verts_world, b.face_start, b.normals_local,
-            b.edge_start, b.edges, np.ones(b.n), probe.ia, probe.ib, probe.normal,
+            b.edir_start, b.edirs_local, np.ones(b.n), probe.ia, probe.ib, probe.normal,
             probe.point, probe.gap, probe.ctype, probe.warm,
             np.zeros(probe.n + 1, np.int64), *[probe.sub[k] for k in
                                               ("sc_pa", "sc_area", "sc_un", "sc_fs", "sc_us",
@@ -230,7 +230,7 @@ class Solver:
         todo = todo.astype(np.uint8)
         res = refresh_contacts(
             b.x, self.R, b.vert_start, b.verts_world, b.face_start, b.normals_local,
-            b.edge_start, b.edges, self.point_area, c.ia, c.ib, c.normal, c.point, c.gap,
+            b.edir_start, b.edirs_local, self.point_area, c.ia, c.ib, c.normal, c.point, c.gap,
             c.ctype, c.warm, c.sc_start, c.sc_pa, c.sc_area, c.sc_un, c.sc_fs, c.sc_us, c.sc_dil,
             c.sc_state, todo, self.ctol, TOUCH_FRACTION, self.algorithm, self._snap_tol())
         keep, start, pa, area, un, fs, us, dil, state = res
@@ -342,8 +342,8 @@ class Solver:
             out.file, self.comm, block_names=[s.name for s in self.specs],
             body_vertices=[sh.vertices for sh in shapes], body_faces=faces,
             scene_yaml=dump_scene(self.scene),
-            attrs={"pdem_version": __version__, "n_ranks": self.comm.size,
-                   "scene_name": self.scene.name, "dt": self.dt, "ctol": self.ctol})
+            attrs={"pdem_version": __version__, "scene_name": self.scene.name, "dt": self.dt,
+                   "ctol": self.ctol})
         self.histories = []
         names = {s.name: i for i, s in enumerate(self.specs)}
         for h in out.histories:

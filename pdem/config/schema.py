@@ -208,7 +208,7 @@ class Contact(Strict):
     cell_size: PositiveFloat | Literal["auto"] = "auto"
     detect_every: PositiveInt = 10
     refresh_tolerance: NonNegativeFloat = 0.01
-    algorithm: Literal["cundall", "fast"] = "fast"
+    algorithm: Literal["fast", "cundall"] = "fast"
     point_area: NonNegativeFloat = 0.01
     overlap_tolerance: PositiveFloat | Literal["auto"] = "auto"
 

@@ -39,6 +39,7 @@ def update_verts_world(x, R, vert_start, verts_local, verts_world):
 
 @kernel
 def _world_normals(R, b, face_start, normals_local):
+    """Rows face_start[b]..face_start[b+1] of body-frame vectors, rotated to the world."""
     f0 = face_start[b]
     f1 = face_start[b + 1]
     out = np.empty((f1 - f0, 3))
@@ -50,19 +51,8 @@ def _world_normals(R, b, face_start, normals_local):
 
 
 @kernel
-def _edge_dirs(b, edge_start, edges, verts_world):
-    e0 = edge_start[b]
-    e1 = edge_start[b + 1]
-    out = np.empty((e1 - e0, 3))
-    for e in range(e0, e1):
-        for k in range(3):
-            out[e - e0, k] = verts_world[edges[e, 1], k] - verts_world[edges[e, 0], k]
-    return out
-
-
-@kernel
-def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, edge_start,
-               edges, n_in, p_in, warm, ctol, algorithm, snap_tol):
+def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, edir_start,
+               edirs, n_in, p_in, warm, ctol, algorithm, snap_tol):
     """Common plane of blocks a, b: (n, p, gap). Cundall's iteration (eqs. 5-10) or the fast
     common plane (DDA §3), warm-started from an existing contact's plane for Cundall."""
     va = verts_world[vert_start[a]:vert_start[a + 1]]
@@ -72,8 +62,8 @@ def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, e
             va, vb, x[a], x[b],
             _world_normals(R, a, face_start, normals_local),
             _world_normals(R, b, face_start, normals_local),
-            _edge_dirs(a, edge_start, edges, verts_world),
-            _edge_dirs(b, edge_start, edges, verts_world), n_in, p_in, warm, ctol)
+            _world_normals(R, a, edir_start, edirs),
+            _world_normals(R, b, edir_start, edirs), n_in, p_in, warm, ctol)
     else:
         n, p, gap, _, _, _ = common_plane(va, vb, x[a], x[b], n_in, p_in, warm, ctol, K_MAX,
                                           K_MIN, snap_tol)
@@ -81,7 +71,7 @@ def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, e
 
 
 @kernel
-def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, edge_start, edges,
+def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, edir_start, edirs,
                      point_area, c_ia, c_ib, c_normal, c_point, c_gap, c_ctype, c_warm,
                      old_start, old_pa, old_area, old_un, old_fs, old_us, old_dil, old_state,
                      todo, ctol, touch_frac, algorithm, snap_tol):
@@ -130,7 +120,7 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
             pos += k
             continue
         n, p, gap = find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local,
-                               edge_start, edges, c_normal[c], c_point[c], c_warm[c] == 1, ctol,
+                               edir_start, edirs, c_normal[c], c_point[c], c_warm[c] == 1, ctol,
                                algorithm, snap_tol)
         if gap > ctol:
             continue

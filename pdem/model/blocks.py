@@ -70,6 +70,8 @@ class BlockStore:
     offsets_local: np.ndarray  # (F,)
     edge_start: np.ndarray  # (n+1,) into edges
     edges: np.ndarray  # (E, 2) global vertex rows
+    edir_start: np.ndarray  # (n+1,) into edirs_local
+    edirs_local: np.ndarray  # unique edge directions (body frame), for the fast common plane
 
     @property
     def n(self) -> int:

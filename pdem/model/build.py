@@ -145,6 +145,8 @@ def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = 
     vert_start = [0]
     face_start = [0]
     edge_start = [0]
+    edir_start = [0]
+    edirs = []
     for r, gid in enumerate(rows):
         s = specs[gid]
         body, centroid, R, moments = s.shape.principal_frame()
@@ -178,6 +180,9 @@ def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = 
         face_start.append(face_start[-1] + body.n_faces)
         ed.append(body.edges + v0)
         edge_start.append(edge_start[-1] + len(body.edges))
+        dirs = unique_directions(body.vertices[body.edges[:, 1]] - body.vertices[body.edges[:, 0]])
+        edirs.append(dirs)
+        edir_start.append(edir_start[-1] + len(dirs))
     # world angular momentum from the initial angular velocity: L = R diag(I) R^T w
     for r in range(n):
         Rm = _quat_matrix(arr["q"][r])
@@ -195,7 +200,20 @@ def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = 
         offsets_local=np.concatenate(fo) if fo else np.zeros(0),
         edge_start=np.array(edge_start, np.int64),
         edges=np.concatenate(ed).astype(np.int64) if ed else np.zeros((0, 2), np.int64),
+        edir_start=np.array(edir_start, np.int64),
+        edirs_local=np.concatenate(edirs) if edirs else np.zeros((0, 3)),
     ), groups
+
+
+def unique_directions(vectors: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """Unit directions of ``vectors`` with parallel ones (either sense) merged: the fast common
+    plane's cost grows with the product of the two blocks' edge-direction counts."""
+    d = vectors / np.linalg.norm(vectors, axis=1)[:, None]
+    out: list[np.ndarray] = []
+    for v in d:
+        if not any(abs(abs(float(v @ u)) - 1.0) < tol for u in out):
+            out.append(v)
+    return np.array(out).reshape(-1, 3)
 
 
 def _quat_matrix(q):

@@ -1,0 +1,121 @@
+"""``pdem info FILE.h5``: a human-readable summary of a pdem output file."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+__all__ = ["summarise"]
+
+_TABLE_MAX = 20
+_KNOWN_ATTRS = ("pdem_format", "format_version", "scene")
+
+
+def _text(value) -> str:
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray):
+        return np.array2string(value, separator=", ", threshold=8)
+    return str(value)
+
+
+def _scene_name(scene: str) -> str | None:
+    try:
+        import yaml
+
+        data = yaml.safe_load(scene)
+    except Exception:  # a summary must not fail on an odd scene string
+        return None
+    return str(data["name"]) if isinstance(data, dict) and "name" in data else None
+
+
+def _g(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def summarise(path: str | os.PathLike) -> str:
+    """Summary of a pdem output file, as printed by ``pdem info``.
+
+    Raises ``FileNotFoundError`` if ``path`` does not exist and ``ValueError`` if it is not
+    an HDF5 file written by pdem.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    if not h5py.is_hdf5(path):
+        raise ValueError(f"{path}: not an HDF5 file")
+    with h5py.File(path, "r") as f:
+        fmt = f.attrs.get("pdem_format")
+        if fmt is None:
+            raise ValueError(f"{path}: not a pdem file (no 'pdem_format' attribute)")
+        fmt = _text(fmt)
+        lines = [f"file:        {path} (pdem {fmt}, format {_text(f.attrs.get('format_version'))})"]
+        for key in sorted(k for k in f.attrs if k not in _KNOWN_ATTRS):
+            lines.append(f"{key + ':':<13}{_text(f.attrs[key])}")
+        if "scene" in f.attrs:
+            name = _scene_name(_text(f.attrs["scene"]))
+            lines.append(f"scene:       {name if name is not None else '(unnamed)'}")
+        if fmt != "output":
+            lines.append(f"contents:    {', '.join(sorted(f))}")
+            return "\n".join(lines)
+        lines += _output_summary(f)
+    return "\n".join(lines)
+
+
+def _output_summary(f: h5py.File) -> list[str]:
+    names = f["blocks/name"].asstr()[()]
+    n = len(names)
+    time, step = f["time"][()], f["step"][()]
+    n_snap = len(time)
+    lines = [f"blocks:      {n}"]
+    if "surface/connectivity" in f:
+        lines.append(
+            f"surface:     {f['surface/points'].shape[1]} vertices, "
+            f"{f['surface/connectivity'].shape[0]} triangles"
+        )
+    if n_snap == 0:
+        lines.append("snapshots:   0")
+    else:
+        lines.append(
+            f"snapshots:   {n_snap}  (steps {step[0]} .. {step[-1]}, "
+            f"time {_g(time[0])} .. {_g(time[-1])} s)"
+        )
+    hist = f.get("histories")
+    if hist is not None and len(hist):
+        items = []
+        for h in sorted(hist):
+            v = hist[h]["value"]
+            items.append(f"{h} ({v.shape[0]} rows x {v.shape[1]})")
+        lines.append(f"histories:   {', '.join(items)}")
+    else:
+        lines.append("histories:   none")
+    if n_snap == 0:
+        return lines
+    c0, c1 = f["blocks/centroid"][0], f["blocks/centroid"][n_snap - 1]
+    speed = np.linalg.norm(f["blocks/velocity"][n_snap - 1], axis=1)
+    disp = np.linalg.norm(c1 - c0, axis=1)
+    if n <= _TABLE_MAX:
+        width = max(4, *(len(s) for s in names))
+        lines.append(f"final snapshot (t = {_g(time[-1])} s):")
+        lines.append(
+            f"  {'name':<{width}}  {'x':>12} {'y':>12} {'z':>12}  {'speed':>11}  {'displ.':>11}"
+        )
+        for j in range(n):
+            x, y, z = c1[j]
+            lines.append(
+                f"  {names[j]:<{width}}  {x:12.6g} {y:12.6g} {z:12.6g}  {speed[j]:11.4g}"
+                f"  {disp[j]:11.4g}"
+            )
+    else:
+        lines.append(
+            f"displacement (first to last snapshot): mean {_g(disp.mean())} m, "
+            f"max {_g(disp.max())} m ({names[int(disp.argmax())]})"
+        )
+        lines.append(
+            f"speed (last snapshot): mean {_g(speed.mean())} m/s, "
+            f"max {_g(speed.max())} m/s ({names[int(speed.argmax())]})"
+        )
+    return lines

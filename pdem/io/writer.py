@@ -1,0 +1,501 @@
+"""Run output: one HDF5 file per run, written collectively (mpio) or gathered on rank 0."""
+
+from __future__ import annotations
+
+import logging
+import os
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from h5py import h5fd, h5p, h5s, h5t
+from mpi4py import MPI
+
+from .xdmf import write_xdmf
+
+__all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+_ROW_COLS = 13  # centroid 3 + quaternion 4 + velocity 3 + angular velocity 3
+_CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
+
+
+def _h5py_has_mpi() -> bool:
+    return bool(h5py.get_config().mpi)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(n, 3, 3)`` of unit quaternions ``(n, 4)`` ``(w, x, y, z)``.
+
+    Element-wise arithmetic only (no BLAS), so a block's matrix does not depend on how many
+    blocks are converted together: the output is bitwise independent of the rank count.
+    """
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    R = np.empty((len(q), 3, 3))
+    R[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[:, 0, 1] = 2.0 * (x * y - w * z)
+    R[:, 0, 2] = 2.0 * (x * z + w * y)
+    R[:, 1, 0] = 2.0 * (x * y + w * z)
+    R[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[:, 1, 2] = 2.0 * (y * z - w * x)
+    R[:, 2, 0] = 2.0 * (x * z - w * y)
+    R[:, 2, 1] = 2.0 * (y * z + w * x)
+    R[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
+
+
+def _share(rank: int, size: int, n: int) -> tuple[int, int]:
+    """Contiguous share ``[lo, hi)`` of ``n`` rows for ``rank``."""
+    return rank * n // size, (rank + 1) * n // size
+
+
+def _fan_triangulate(
+    body_faces: Sequence[Sequence[Sequence[int]]], nv: np.ndarray, vstart: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Fan-triangulate every face: global connectivity ``(n_tri, 3)`` and block of each.
+
+    Face ``(v0, v1, ..., vk)`` gives ``(v0, v1, v2), (v0, v2, v3), ...``: counter-clockwise
+    faces give counter-clockwise triangles, so normals still point out of the block.
+    """
+    face_len = np.array([len(f) for faces in body_faces for f in faces], dtype=np.int64)
+    face_block = np.repeat(np.arange(len(body_faces)), [len(faces) for faces in body_faces])
+    flat = np.fromiter(
+        (i for faces in body_faces for f in faces for i in f), np.int64, int(face_len.sum())
+    )
+    vert_block = np.repeat(face_block, face_len)
+    bad = face_len < 3
+    bad_v = (flat < 0) | (flat >= nv[vert_block])
+    if bad.any() or bad_v.any():
+        bad |= np.bincount(np.repeat(np.arange(len(face_len)), face_len), bad_v, len(bad)) > 0
+        f = int(np.flatnonzero(bad)[0])
+        b = int(face_block[f])
+        k = f - int(np.searchsorted(face_block, b))
+        raise ValueError(
+            f"body_faces[{b}][{k}] = {list(body_faces[b][k])}: need >= 3 vertex ids < {nv[b]}"
+        )
+    flat = flat + vstart[vert_block]
+    fstart = _starts(face_len)
+    n_fan = face_len - 2
+    tri_face = np.repeat(np.arange(len(face_len)), n_fan)
+    j = np.arange(len(tri_face)) - np.repeat(_starts(n_fan), n_fan)
+    first = fstart[tri_face]
+    conn = np.stack([flat[first], flat[first + 1 + j], flat[first + 2 + j]], axis=1)
+    return conn.reshape(-1, 3), face_block[tri_face].astype(np.int64)
+
+
+def _starts(counts: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+
+
+class OutputWriter:
+    """The HDF5 output of one run; every method is collective over ``comm``.
+
+    Parameters
+    ----------
+    path
+        The ``.h5`` file (overwritten). The XDMF sidecar is ``path`` with suffix ``.xdmf``.
+    comm
+        mpi4py communicator of the ranks that run the model.
+    block_names, body_vertices, body_faces
+        Per block in gid order, identical on every rank: name, vertices ``(nv, 3)`` in the
+        body frame (origin at the centroid), faces as counter-clockwise vertex-id lists.
+    scene_yaml
+        The resolved scene, stored as the root attribute ``scene``.
+    attrs
+        Extra root attributes (``pdem_version``, ``run_id``, ``n_ranks``, ...), identical on
+        every rank; str, int, float or small arrays.
+    parallel
+        ``True``: write with the ``mpio`` driver (error if h5py lacks MPI); ``False``: gather
+        the rows on rank 0, which writes alone; ``None``: ``mpio`` if h5py has MPI, else the
+        fallback with a warning.
+    xdmf
+        Refresh the XDMF sidecar (rank 0) after every snapshot and on close.
+
+    Notes
+    -----
+    The file layout depends only on the scene, never on the rank count. In parallel mode
+    every snapshot's rows are first redistributed (one ``Alltoallv``) so that rank ``r`` holds
+    a contiguous gid range; every rank then writes one hyperslab per dataset with collective
+    I/O, a rank with an empty range taking part with an empty selection.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        comm: MPI.Comm,
+        *,
+        block_names: Sequence[str],
+        body_vertices: Sequence[np.ndarray],
+        body_faces: Sequence[Sequence[Sequence[int]]],
+        scene_yaml: str,
+        attrs: dict[str, Any] | None = None,
+        parallel: bool | None = None,
+        xdmf: bool = True,
+    ) -> None:
+        self.path = Path(path)
+        self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
+        self.comm = comm
+        rank, size = comm.rank, comm.size
+        has_mpi = _h5py_has_mpi()
+        if parallel is None:
+            parallel = has_mpi
+            if not has_mpi and rank == 0:
+                warnings.warn(
+                    "h5py was built without MPI: output is gathered on rank 0, which writes "
+                    "it alone (install h5py with HDF5_MPI=ON for parallel output)",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+        elif parallel and not has_mpi:
+            raise RuntimeError("OutputWriter(parallel=True): h5py was built without MPI")
+        self.parallel = bool(parallel)
+        self._io = self.parallel or rank == 0  # does this rank touch the file?
+
+        n = len(block_names)
+        if n == 0:
+            raise ValueError("OutputWriter: the scene has no blocks")
+        if len(body_vertices) != n or len(body_faces) != n:
+            raise ValueError(
+                f"OutputWriter: {n} block names, {len(body_vertices)} vertex arrays, "
+                f"{len(body_faces)} face lists"
+            )
+        verts = [np.asarray(v, dtype=np.float64) for v in body_vertices]
+        for b, v in enumerate(verts):
+            if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+                raise ValueError(f"body_vertices[{b}]: shape {v.shape}, expected (nv, 3)")
+        nv = np.array([len(v) for v in verts], dtype=np.int64)
+        self._vstart = np.concatenate([[0], np.cumsum(nv)])
+        conn, tri_block = _fan_triangulate(body_faces, nv, self._vstart)
+        self.n_blocks, self.n_points, self.n_tri = n, int(self._vstart[-1]), len(conn)
+        self.n_snap = 0
+        self._times: list[float] = []
+        self._hist_rows: dict[str, int] = {}
+        self._hist_cols: dict[str, int] = {}
+
+        # Rank r assembles and writes gids [bounds[r], bounds[r+1]); in the fallback, rank 0
+        # holds them all.
+        if self.parallel:
+            self._bounds = np.array([_share(r, size, n)[0] for r in range(size)] + [n])
+        else:
+            self._bounds = np.array([0] + [n] * size)
+        self._lo, self._hi = int(self._bounds[rank]), int(self._bounds[rank + 1])
+        lo, hi = self._lo, self._hi
+        self._vlo, self._vhi = int(self._vstart[lo]), int(self._vstart[hi])
+        if hi > lo:
+            self._my_verts = np.concatenate(verts[lo:hi])
+        else:
+            self._my_verts = np.zeros((0, 3))
+        self._my_vblock = np.repeat(np.arange(hi - lo), nv[lo:hi])
+
+        self._f: h5py.File | None = None
+        self._closed = False
+        self._dxpl = None
+        if not self._io:
+            return
+        # Format v108 at least: dense attribute storage, so a large scene fits in an attribute.
+        if self.parallel:
+            self._f = h5py.File(
+                self.path, "w", driver="mpio", comm=comm, libver=("v108", "latest")
+            )
+            self._dxpl = h5p.create(h5p.DATASET_XFER)
+            self._dxpl.set_dxpl_mpio(h5fd.MPIO_COLLECTIVE)
+        else:
+            self._f = h5py.File(self.path, "w", libver=("v108", "latest"))
+        f = self._f
+        f.attrs["pdem_format"] = "output"
+        f.attrs["format_version"] = FORMAT_VERSION
+        for key, value in (attrs or {}).items():
+            f.attrs[key] = value
+        f.attrs["scene"] = scene_yaml
+
+        def series(name: str, tail: tuple[int, ...], dtype, chunk0: int = 1):
+            rows = tail[:1]
+            chunk = (chunk0, *(min(max(r, 1), _CHUNK_ROWS) for r in rows), *tail[1:])
+            return f.create_dataset(
+                name, (0, *tail), maxshape=(None, *tail), chunks=chunk, dtype=dtype
+            )
+
+        self._t = series("time", (), np.float64, 1024)
+        self._t.attrs["units"] = "s"
+        self._step = series("step", (), np.int64, 1024)
+        g = f.create_group("blocks")
+        encoded = [str(s).encode("utf-8") for s in block_names]
+        name_t = h5py.string_dtype("utf-8", max(1, max(len(s) for s in encoded)))
+        self._write_static(g.create_dataset("name", (n,), dtype=name_t), np.array(encoded))
+        self._write_static(g.create_dataset("gid", (n,), dtype=np.int64), np.arange(n))
+        self._series = {
+            "centroid": series("blocks/centroid", (n, 3), np.float64),
+            "orientation": series("blocks/orientation", (n, 4), np.float64),
+            "velocity": series("blocks/velocity", (n, 3), np.float64),
+            "angular_velocity": series("blocks/angular_velocity", (n, 3), np.float64),
+        }
+        for key, units in (
+            ("centroid", "m"),
+            ("orientation", "1 (unit quaternion w, x, y, z; body to world)"),
+            ("velocity", "m/s"),
+            ("angular_velocity", "rad/s"),
+        ):
+            self._series[key].attrs["units"] = units
+        s = f.create_group("surface")
+        self._write_static(s.create_dataset("connectivity", (self.n_tri, 3), np.int64), conn)
+        self._write_static(s.create_dataset("block_id", (self.n_tri,), np.int64), tri_block)
+        self._points = series("surface/points", (self.n_points, 3), np.float64)
+        self._points.attrs["units"] = "m"
+        f.create_group("histories")
+
+    # ------------------------------------------------------------------ low-level writes
+    def _write(self, dset: h5py.Dataset, start: tuple[int, ...], data: np.ndarray | None):
+        """Write ``data`` at ``start`` (collective in parallel mode; ``None``: take part only)."""
+        mtype = h5t.py_create(dset.dtype)
+        fspace = dset.id.get_space()
+        if data is None or data.size == 0:
+            fspace.select_none()
+            mspace = h5s.create_simple((1,))
+            mspace.select_none()
+            buf = np.zeros(1, dtype=dset.dtype)
+        else:
+            buf = np.ascontiguousarray(data, dtype=dset.dtype)
+            fspace.select_hyperslab(start, buf.shape)
+            mspace = h5s.create_simple(buf.shape)
+        dset.id.write(mspace, fspace, buf, mtype=mtype, dxpl=self._dxpl)
+
+    def _write_static(self, dset: h5py.Dataset, data: np.ndarray) -> None:
+        """Each rank writes its contiguous share of the rows of a dataset all ranks know."""
+        if self.parallel:
+            lo, hi = _share(self.comm.rank, self.comm.size, len(data))
+        else:
+            lo, hi = 0, len(data)
+        self._write(dset, (lo,) + (0,) * (data.ndim - 1), data[lo:hi])
+
+    def _write_row(
+        self, dset: h5py.Dataset, i: int, data: np.ndarray | None, first: int = 0
+    ) -> None:
+        """Snapshot ``i``: ``data`` holds rows ``first, first + 1, ...`` (or is ``None``)."""
+        ndim = len(dset.shape)
+        if data is None or ndim == 1:
+            self._write(dset, (i,), None if data is None else data.reshape(1))
+        else:
+            self._write(dset, (i, first) + (0,) * (ndim - 2), data.reshape((1, *data.shape)))
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError(f"OutputWriter({self.path}): the file is closed")
+
+    def _raise_if_any(self, message: str | None) -> None:
+        """Raise ``ValueError`` on every rank if any rank has a message (no lone raise: hangs)."""
+        if self.comm.allreduce(int(message is not None), op=MPI.SUM):
+            # rare path: every rank raises the same, first, message
+            first = next(m for m in self.comm.allgather(message) if m is not None)
+            raise ValueError(first)
+
+    # ------------------------------------------------------------------ snapshots
+    def _assemble(self, gids: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Send each row to the rank whose gid range holds it; return this rank's range."""
+        comm, size = self.comm, self.comm.size
+        dest = np.searchsorted(self._bounds, gids, side="right") - 1
+        order = np.argsort(dest, kind="stable")
+        send_n = np.bincount(dest, minlength=size).astype(np.int64)
+        recv_n = np.empty(size, dtype=np.int64)
+        comm.Alltoall(send_n, recv_n)
+        sdispl = np.concatenate([[0], np.cumsum(send_n)[:-1]])
+        rdispl = np.concatenate([[0], np.cumsum(recv_n)[:-1]])
+        total = int(recv_n.sum())
+        rg = np.empty(total, dtype=np.int64)
+        rr = np.empty((total, _ROW_COLS), dtype=np.float64)
+        comm.Alltoallv(
+            [np.ascontiguousarray(gids[order]), (send_n, sdispl), MPI.INT64_T],
+            [rg, (recv_n, rdispl), MPI.INT64_T],
+        )
+        c = _ROW_COLS
+        comm.Alltoallv(
+            [np.ascontiguousarray(rows[order]), (send_n * c, sdispl * c), MPI.DOUBLE],
+            [rr, (recv_n * c, rdispl * c), MPI.DOUBLE],
+        )
+        lo, hi = self._lo, self._hi
+        hits = np.bincount(rg - lo, minlength=hi - lo)
+        msg = None
+        if total != hi - lo or np.any(hits != 1):
+            missing = np.flatnonzero(hits == 0)[:5] + lo
+            dup = np.flatnonzero(hits > 1)[:5] + lo
+            msg = (
+                "write_snapshot: every gid must be owned by exactly one rank "
+                f"(missing e.g. {missing.tolist()}, duplicated e.g. {dup.tolist()})"
+            )
+        self._raise_if_any(msg)
+        out = np.empty((hi - lo, _ROW_COLS))
+        out[rg - lo] = rr
+        return out
+
+    def write_snapshot(
+        self,
+        step: int,
+        time: float,
+        gids: np.ndarray,
+        centroid: np.ndarray,
+        quat: np.ndarray,
+        velocity: np.ndarray,
+        angular_velocity: np.ndarray,
+    ) -> None:
+        """Append one snapshot (collective). Each rank passes the rows of the blocks it owns.
+
+        ``gids`` (k,) in any order, ``centroid`` (k, 3), ``quat`` (k, 4) ``(w, x, y, z)``,
+        ``velocity`` (k, 3), ``angular_velocity`` (k, 3); ``k`` may be 0. Every gid must be
+        passed by exactly one rank (``ValueError`` on every rank otherwise). ``step`` and
+        ``time`` are taken from rank 0.
+        """
+        self._check_open()
+        msg = None
+        try:
+            gids = np.asarray(gids, dtype=np.int64).reshape(-1)
+            k = len(gids)
+            rows = np.empty((k, _ROW_COLS))
+            col = 0
+            for name, arr, w in (
+                ("centroid", centroid, 3),
+                ("quat", quat, 4),
+                ("velocity", velocity, 3),
+                ("angular_velocity", angular_velocity, 3),
+            ):
+                a = np.asarray(arr, dtype=np.float64)
+                if a.size != k * w:
+                    raise ValueError(f"write_snapshot: {name} has shape {a.shape}, need ({k}, {w})")
+                rows[:, col : col + w] = a.reshape(k, w)
+                col += w
+            if k and (gids.min() < 0 or gids.max() >= self.n_blocks):
+                raise ValueError(f"write_snapshot: gids outside [0, {self.n_blocks})")
+        except ValueError as e:
+            msg, gids, rows = str(e), np.zeros(0, np.int64), np.zeros((0, _ROW_COLS))
+        self._raise_if_any(msg)
+        mine = self._assemble(gids, rows)
+        i = self.n_snap
+        self.n_snap += 1
+        self._times.append(float(time))
+        if self._io:
+            for d in (self._t, self._step, self._points, *self._series.values()):
+                d.resize(self.n_snap, axis=0)
+            root = self.comm.rank == 0
+            self._write_row(self._t, i, np.array([time], np.float64) if root else None)
+            self._write_row(self._step, i, np.array([step], np.int64) if root else None)
+            col = 0
+            for key, w in (("centroid", 3), ("orientation", 4), ("velocity", 3),
+                           ("angular_velocity", 3)):
+                self._write_row(self._series[key], i, mine[:, col : col + w], self._lo)
+                col += w
+            pts = self._world_points(mine[:, 0:3], mine[:, 3:7])
+            self._write_row(self._points, i, pts, self._vlo)
+            self._f.flush()
+        if self.xdmf_path is not None and self.comm.rank == 0:
+            self._write_xdmf()
+
+    def _world_points(self, centroid: np.ndarray, quat: np.ndarray) -> np.ndarray:
+        """World positions ``c + R(q) v`` of the vertices of this rank's gid range."""
+        R = quat_to_matrix(quat)[self._my_vblock]
+        c = centroid[self._my_vblock]
+        v = self._my_verts
+        # Explicit sums, fixed order: bitwise the same whatever the partition.
+        return c + (
+            R[:, :, 0] * v[:, 0:1] + R[:, :, 1] * v[:, 1:2] + R[:, :, 2] * v[:, 2:3]
+        )
+
+    def _write_xdmf(self) -> None:
+        write_xdmf(
+            self.path, self.xdmf_path, self.n_snap, self._times,
+            self.n_tri, self.n_points, self.n_blocks,
+        )
+
+    # ------------------------------------------------------------------ histories
+    def add_history(self, name: str, ncols: int, attrs: dict[str, Any] | None = None) -> None:
+        """Create ``histories/<name>/{time, value}`` (collective; same arguments everywhere).
+
+        ``value`` has shape (n, ``ncols``); ``attrs`` (e.g. ``block``, ``quantity``,
+        ``units``, ``columns``) go on the ``histories/<name>`` group.
+        """
+        self._check_open()
+        if not name or "/" in name or name in self._hist_rows:
+            raise ValueError(f"add_history: bad or duplicate history name {name!r}")
+        if int(ncols) < 1:
+            raise ValueError(f"add_history({name!r}): ncols must be >= 1 (got {ncols})")
+        self._hist_rows[name] = 0
+        self._hist_cols[name] = int(ncols)
+        if not self._io:
+            return
+        g = self._f["histories"].create_group(name)
+        for key, value in (attrs or {}).items():
+            g.attrs[key] = value
+        g.create_dataset("time", (0,), maxshape=(None,), chunks=(1024,), dtype=np.float64)
+        g.create_dataset(
+            "value", (0, int(ncols)), maxshape=(None, int(ncols)), chunks=(1024, int(ncols)),
+            dtype=np.float64,
+        )
+
+    def write_history(self, name: str, time: float, values: np.ndarray | None) -> None:
+        """Append one row to a history (collective).
+
+        Exactly one rank, the owner of the monitored block, passes ``values`` (``ncols``,);
+        the others pass ``None``. The row's time is the owner's ``time``.
+        """
+        self._check_open()
+        if name not in self._hist_rows:
+            raise ValueError(f"write_history: no history {name!r} (call add_history first)")
+        ncols = self._hist_cols[name]
+        row = None
+        invalid = 0
+        if values is not None:
+            v = np.asarray(values, dtype=np.float64).reshape(-1)
+            if v.size == ncols:
+                row = np.concatenate([[float(time)], v])
+            else:
+                invalid = 1
+        flags = np.array([row is not None, invalid, (self.comm.rank + 1) * (row is not None)])
+        self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.SUM)
+        if flags[1] or flags[0] != 1:
+            raise ValueError(
+                f"write_history({name!r}): exactly one rank must pass {ncols} values "
+                f"({int(flags[0])} valid, {int(flags[1])} of the wrong size)"
+            )
+        owner = int(flags[2]) - 1
+        if not self.parallel and owner != 0:
+            if self.comm.rank == owner:
+                self.comm.Send(row, dest=0, tag=77)
+            elif self.comm.rank == 0:
+                row = np.empty(ncols + 1)
+                self.comm.Recv(row, source=owner, tag=77)
+        i = self._hist_rows[name]
+        self._hist_rows[name] = i + 1
+        if not self._io:
+            return
+        g = self._f["histories"][name]
+        g["time"].resize(i + 1, axis=0)
+        g["value"].resize(i + 1, axis=0)
+        self._write_row(g["time"], i, None if row is None else row[:1])
+        self._write_row(g["value"], i, None if row is None else row[1:])
+
+    # ------------------------------------------------------------------ file
+    def flush(self) -> None:
+        """Flush the HDF5 file to disk (collective)."""
+        if self._f is not None:
+            self._f.flush()
+
+    def close(self) -> None:
+        """Close the file and write the final XDMF (collective; idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+        if self.xdmf_path is not None and self.comm.rank == 0:
+            self._write_xdmf()
+        self.comm.Barrier()  # the file and its sidecar are complete when close returns
+
+    def __enter__(self) -> OutputWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,188 @@
+"""XDMF sidecar for the HDF5 output: a temporal collection ParaView opens directly."""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["write_xdmf", "read_xdmf"]
+
+
+def _hdf(dims: Sequence[int], number_type: str, h5_name: str, dset: str) -> str:
+    d = " ".join(str(int(x)) for x in dims)
+    return (
+        f'<DataItem Dimensions="{d}" NumberType="{number_type}" Precision="8" '
+        f'Format="HDF">{h5_name}:{dset}</DataItem>'
+    )
+
+
+def _slab(i: int, n_snap: int, n_rows: int, ncols: int, h5_name: str, dset: str) -> str:
+    """Snapshot ``i`` of a ``(n_snap, n_rows, ncols)`` dataset as a HyperSlab DataItem."""
+    return (
+        f'<DataItem ItemType="HyperSlab" Dimensions="1 {n_rows} {ncols}" Type="HyperSlab">'
+        f'<DataItem Dimensions="3 3" NumberType="Int" Format="XML">'
+        f"{i} 0 0 1 1 1 1 {n_rows} {ncols}</DataItem>"
+        + _hdf((n_snap, n_rows, ncols), "Float", h5_name, dset)
+        + "</DataItem>"
+    )
+
+
+def write_xdmf(
+    h5_path: str | os.PathLike,
+    xdmf_path: str | os.PathLike,
+    n_snap: int,
+    times: Sequence[float],
+    n_tri: int,
+    n_points: int,
+    n_blocks: int,
+) -> None:
+    """Write the XDMF 3 description of a pdem output file (plain text, any one process).
+
+    Two temporal collections: ``surface`` (the triangulated block surfaces, cell attribute
+    ``block_id``) and ``blocks`` (block centroids as a Polyvertex cloud with ``gid``,
+    ``velocity`` and ``angular_velocity``). Each snapshot reads its geometry as a HyperSlab of
+    ``surface/points`` / ``blocks/centroid``. The HDF5 file is referenced by its bare name, so
+    the pair must stay in the same directory. The file is written to a temporary name and
+    renamed, so a reader never sees half a file.
+    """
+    times = [float(t) for t in times]
+    if len(times) != n_snap:
+        raise ValueError(f"write_xdmf: {len(times)} times for {n_snap} snapshots")
+    h5 = Path(h5_path).name
+    out = [
+        '<?xml version="1.0" encoding="utf-8"?>',
+        '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">',
+        "<Domain>",
+        '<Grid Name="surface" GridType="Collection" CollectionType="Temporal">',
+    ]
+    conn = _hdf((n_tri, 3), "Int", h5, "/surface/connectivity")
+    bid = _hdf((n_tri,), "Int", h5, "/surface/block_id")
+    for i, t in enumerate(times):
+        out += [
+            f'<Grid Name="surface_{i:06d}" GridType="Uniform">',
+            f'<Time Value="{t!r}"/>',
+            f'<Topology TopologyType="Triangle" NumberOfElements="{n_tri}">{conn}</Topology>',
+            f'<Geometry GeometryType="XYZ">'
+            f"{_slab(i, n_snap, n_points, 3, h5, '/surface/points')}</Geometry>",
+            f'<Attribute Name="block_id" AttributeType="Scalar" Center="Cell">{bid}</Attribute>',
+            "</Grid>",
+        ]
+    out += ["</Grid>", '<Grid Name="blocks" GridType="Collection" CollectionType="Temporal">']
+    gid = _hdf((n_blocks,), "Int", h5, "/blocks/gid")
+    for i, t in enumerate(times):
+        out += [
+            f'<Grid Name="blocks_{i:06d}" GridType="Uniform">',
+            f'<Time Value="{t!r}"/>',
+            f'<Topology TopologyType="Polyvertex" NumberOfElements="{n_blocks}" '
+            f'NodesPerElement="1">{gid}</Topology>',
+            f'<Geometry GeometryType="XYZ">'
+            f"{_slab(i, n_snap, n_blocks, 3, h5, '/blocks/centroid')}</Geometry>",
+            f'<Attribute Name="gid" AttributeType="Scalar" Center="Node">{gid}</Attribute>',
+        ]
+        for name in ("velocity", "angular_velocity"):
+            out.append(
+                f'<Attribute Name="{name}" AttributeType="Vector" Center="Node">'
+                f"{_slab(i, n_snap, n_blocks, 3, h5, '/blocks/' + name)}</Attribute>"
+            )
+        out.append("</Grid>")
+    out += ["</Grid>", "</Domain>", "</Xdmf>", ""]
+    xdmf_path = Path(xdmf_path)
+    tmp = xdmf_path.with_name(xdmf_path.name + ".tmp")
+    tmp.write_text("\n".join(out), encoding="utf-8")
+    os.replace(tmp, xdmf_path)
+
+
+def _dims(item: ET.Element) -> tuple[int, ...]:
+    return tuple(int(d) for d in item.get("Dimensions", "").split())
+
+
+def _resolve(item: ET.Element, base: Path, files: dict) -> np.ndarray:
+    """Value of one DataItem (XML, HDF or HyperSlab), checked against its Dimensions."""
+    dims = _dims(item)
+    if item.get("ItemType") == "HyperSlab":
+        sel_item, data_item = list(item)
+        sel = _resolve(sel_item, base, files).astype(np.int64)
+        data = _resolve(data_item, base, files)
+        if sel.shape != (3, data.ndim):
+            raise ValueError(f"HyperSlab selection of shape {sel.shape} for a {data.ndim}-d item")
+        start, stride, count = sel
+        idx = tuple(
+            slice(s, s + st * c, st) for s, st, c in zip(start, stride, count, strict=True)
+        )
+        value = data[idx]
+        if value.shape != tuple(count):
+            raise ValueError(f"HyperSlab {sel.tolist()} out of range of shape {data.shape}")
+    elif item.get("Format") == "HDF":
+        fname, _, dset = (item.text or "").strip().partition(":")
+        import h5py
+
+        fpath = base / fname
+        if fpath not in files:
+            files[fpath] = h5py.File(fpath, "r")
+        if dset not in files[fpath]:
+            raise ValueError(f"{fname}: no dataset {dset}")
+        value = files[fpath][dset][()]
+    elif item.get("Format", "XML") == "XML":
+        value = np.array((item.text or "").split(), dtype=np.float64)
+        value = value.reshape(dims) if dims else value
+    else:
+        raise ValueError(f"unsupported DataItem format {item.get('Format')!r}")
+    if dims and value.shape != dims:
+        raise ValueError(f"DataItem declares {dims}, holds {value.shape}: {item.text!r}")
+    return value
+
+
+def read_xdmf(xdmf_path: str | os.PathLike) -> dict[str, list[dict]]:
+    """Read back an XDMF file written by :func:`write_xdmf` (resolving HyperSlabs).
+
+    Meant for tests and checks: every DataItem is resolved against the HDF5 file and its
+    declared Dimensions verified (``ValueError`` otherwise). Returns, per temporal collection,
+    one dict per step: ``time``, ``topology_type``, ``topology``, ``geometry`` (n, 3) and
+    ``attributes`` (name -> (center, array)).
+    """
+    xdmf_path = Path(xdmf_path)
+    root = ET.parse(xdmf_path).getroot()
+    base = xdmf_path.parent
+    files: dict = {}
+    result: dict[str, list[dict]] = {}
+    try:
+        for coll in root.find("Domain").findall("Grid"):
+            if coll.get("GridType") != "Collection" or coll.get("CollectionType") != "Temporal":
+                raise ValueError(f"grid {coll.get('Name')!r} is not a temporal collection")
+            steps = []
+            for grid in coll.findall("Grid"):
+                topo = grid.find("Topology")
+                n_el = int(topo.get("NumberOfElements"))
+                conn = _resolve(topo.find("DataItem"), base, files).astype(np.int64)
+                geom = _resolve(grid.find("Geometry").find("DataItem"), base, files)
+                geom = geom.reshape(-1, 3)
+                if conn.reshape(n_el, -1).shape[0] != n_el:
+                    raise ValueError("topology size does not match NumberOfElements")
+                if conn.size and (conn.min() < 0 or conn.max() >= len(geom)):
+                    raise ValueError("topology refers to points that do not exist")
+                attrs = {}
+                for a in grid.findall("Attribute"):
+                    val = _resolve(a.find("DataItem"), base, files)
+                    n = n_el if a.get("Center") == "Cell" else len(geom)
+                    val = val.reshape(n, -1) if a.get("AttributeType") == "Vector" else val
+                    if val.reshape(n, -1).shape[0] != n:
+                        raise ValueError(f"attribute {a.get('Name')!r} has the wrong length")
+                    attrs[a.get("Name")] = (a.get("Center"), val)
+                steps.append(
+                    {
+                        "time": float(grid.find("Time").get("Value")),
+                        "topology_type": topo.get("TopologyType"),
+                        "topology": conn.reshape(n_el, -1),
+                        "geometry": geom,
+                        "attributes": attrs,
+                    }
+                )
+            result[coll.get("Name")] = steps
+    finally:
+        for f in files.values():
+            f.close()
+    return result
