@@ -68,12 +68,37 @@ def _run(args, comm, log) -> int:
     solver = Solver(scene, comm)
     try:
         solver.run(time=args.time, steps=args.steps)
-    finally:
-        solver.close()
+    except Exception as exc:
+        _fail_during_run(comm, exc, solver)
+        return 1
+    solver.close()
     if comm.rank == 0:
         log.info("wrote %s (+ %s)", scene.output.file,
                  os.path.splitext(scene.output.file)[0] + ".xdmf")
     return 0
+
+
+def _fail_during_run(comm, exc, solver) -> None:
+    """An error while stepping may have happened on one rank only: the others are waiting in a
+    collective, so a multi-rank job is aborted (the output was flushed at the last snapshot).
+    A serial run closes its files and reports the error."""
+    import traceback
+
+    from .errors import UserError
+
+    if comm.size == 1:
+        solver.close()
+        if isinstance(exc, UserError):
+            print(f"pdem: {exc}", file=sys.stderr)
+            return
+        raise exc
+    if isinstance(exc, UserError):
+        sys.stderr.write(f"pdem: error on rank {comm.rank}: {exc}\n")
+    else:
+        sys.stderr.write(f"pdem: internal error on rank {comm.rank}:\n")
+        traceback.print_exception(exc)
+    sys.stderr.flush()
+    comm.Abort(1)
 
 
 def _check(args, comm, log) -> int:

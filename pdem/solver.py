@@ -86,7 +86,7 @@ class Solver:
         self.refresh(all_contacts=True)
         self.compute_forces(0.0)
         motion.stagger_start(b.q, b.v, b.w, b.L, b.mass, b.inertia, b.mscale, b.fixed, b.vfix,
-                             self.total_force(), b.moment, np.zeros(3), self.dt,
+                             self.total_force(), b.moment, self.gravity, self.dt,
                              self.scalar_inertia)
         self.writer = None
         if output:
@@ -347,10 +347,11 @@ class Solver:
         self.histories = []
         names = {s.name: i for i, s in enumerate(self.specs)}
         for h in out.histories:
-            name = f"{h.block}/{h.quantity}"
+            name = f"{h.block}.{h.quantity}"
             self.writer.add_history(name, 3, {"block": h.block, "quantity": h.quantity})
             self.histories.append((name, names[h.block], h.quantity, h.every))
         self._next_hist = {h[0]: 0.0 for h in self.histories}
+        self._hist_buf = {h[0]: ([], []) for h in self.histories}
 
     def write_snapshot(self):
         if self.writer is None:
@@ -359,21 +360,43 @@ class Solver:
         rows = self.owned_gids()  # rows == gids while the model is replicated
         self.writer.write_snapshot(self.step, self.time, b.gid[rows], b.x[rows], b.q[rows],
                                    b.v[rows], b.w[rows])
+        self.flush_histories()
 
     def sample_histories(self, force: bool = False):
-        if self.writer is None:
+        """Buffer history samples that are due (written in batches by ``flush_histories``)."""
+        if self.writer is None or not self.histories:
             return
         b = self.blocks
-        mine = set(self.owned_gids().tolist())
         for name, gid, qty, every in self.histories:
-            due = force or every is None or self.time >= self._next_hist[name] - 1e-12 * self.dt
+            due = force or every is None or self.time >= self._next_hist[name] - 1e-9 * self.dt
             if not due:
                 continue
             if every is not None:
-                self._next_hist[name] += every
+                while self._next_hist[name] <= self.time + 1e-9 * self.dt:
+                    self._next_hist[name] += every
+            if not self._owns(gid):
+                continue
             value = {"displacement": b.x[gid] - b.x0[gid], "position": b.x[gid],
                      "velocity": b.v[gid], "angular_velocity": b.w[gid]}[qty]
-            self.writer.write_history(name, self.time, value if gid in mine else None)
+            times, values = self._hist_buf[name]
+            times.append(self.time)
+            values.append(value.copy())
+
+    def _owns(self, gid: int) -> bool:
+        r = gid_ranges(self.blocks.n, self.comm.size)
+        return bool(r[self.comm.rank] <= gid < r[self.comm.rank + 1])
+
+    def flush_histories(self):
+        """Collective: the owner of each history's block writes its buffered rows."""
+        if self.writer is None:
+            return
+        for name, gid, _, _ in self.histories:
+            times, values = self._hist_buf[name]
+            mine = self._owns(gid)
+            self.writer.write_history(name, np.array(times), np.array(values).reshape(-1, 3)
+                                      if mine else None)
+            times.clear()
+            values.clear()
 
     # ------------------------------------------------------------------ driver
     def run(self, *, time: float | None = None, steps: int | None = None) -> dict:
@@ -403,7 +426,6 @@ class Solver:
         t0 = wallclock.perf_counter()
         s0 = self.step
         last_report = t0
-        hist_every_step = any(h[3] is None for h in getattr(self, "histories", []))
         while True:
             if end_step is not None and self.step >= end_step:
                 break
@@ -419,8 +441,7 @@ class Solver:
             if self.writer is not None:
                 if self.step % every_steps == 0:
                     self.write_snapshot()
-                if hist_every_step or self.step % every_steps == 0 or self.histories:
-                    self.sample_histories()
+                self.sample_histories()
             now = wallclock.perf_counter()
             if now - last_report >= sv.progress_every and self.comm.rank == 0:
                 last_report = now
@@ -428,8 +449,11 @@ class Solver:
                 left = (n_est - (self.step - s0)) / rate if rate > 0 and n_est else float("nan")
                 log.info("step %d  t=%.5g s  ratio=%.3g  contacts=%d  %.0f steps/s  ETA %.0f s",
                          self.step, self.time, self.ratio, self.contacts.n, rate, left)
-        if self.writer is not None and self.step % every_steps != 0:
-            self.write_snapshot()
+        if self.writer is not None:
+            if self.step % every_steps != 0:
+                self.write_snapshot()
+            else:
+                self.flush_histories()
         elapsed = wallclock.perf_counter() - t0
         summary = {"steps": self.step - s0, "time": self.time, "ratio": self.ratio,
                    "wall": elapsed, "contacts": self.contacts.n}

@@ -434,47 +434,53 @@ class OutputWriter:
             dtype=np.float64,
         )
 
-    def write_history(self, name: str, time: float, values: np.ndarray | None) -> None:
-        """Append one row to a history (collective).
+    def write_history(self, name: str, time, values: np.ndarray | None) -> None:
+        """Append rows to a history (collective).
 
-        Exactly one rank, the owner of the monitored block, passes ``values`` (``ncols``,);
-        the others pass ``None``. The row's time is the owner's ``time``.
+        Exactly one rank, the owner of the monitored block, passes ``values``: one row
+        (``ncols``,) at scalar ``time``, or a batch (k, ``ncols``) at times (k,) -- the solver
+        buffers samples and writes them in batches; the others pass ``None``.
         """
         self._check_open()
         if name not in self._hist_rows:
             raise ValueError(f"write_history: no history {name!r} (call add_history first)")
         ncols = self._hist_cols[name]
-        row = None
+        rows = None
         invalid = 0
         if values is not None:
-            v = np.asarray(values, dtype=np.float64).reshape(-1)
-            if v.size == ncols:
-                row = np.concatenate([[float(time)], v])
+            v = np.asarray(values, dtype=np.float64)
+            t = np.atleast_1d(np.asarray(time, dtype=np.float64))
+            v = v.reshape(len(t), ncols) if v.size == len(t) * ncols else None
+            if v is not None:
+                rows = np.column_stack([t, v])
             else:
                 invalid = 1
-        flags = np.array([row is not None, invalid, (self.comm.rank + 1) * (row is not None)])
+        k = 0 if rows is None else len(rows)
+        flags = np.array([rows is not None, invalid, (self.comm.rank + 1) * (rows is not None), k])
         self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.SUM)
         if flags[1] or flags[0] != 1:
             raise ValueError(
-                f"write_history({name!r}): exactly one rank must pass {ncols} values "
+                f"write_history({name!r}): exactly one rank must pass {ncols} values per row "
                 f"({int(flags[0])} valid, {int(flags[1])} of the wrong size)"
             )
         owner = int(flags[2]) - 1
+        k = int(flags[3])
         if not self.parallel and owner != 0:
             if self.comm.rank == owner:
-                self.comm.Send(row, dest=0, tag=77)
+                self.comm.Send(np.ascontiguousarray(rows), dest=0, tag=77)
             elif self.comm.rank == 0:
-                row = np.empty(ncols + 1)
-                self.comm.Recv(row, source=owner, tag=77)
+                rows = np.empty((k, ncols + 1))
+                self.comm.Recv(rows, source=owner, tag=77)
         i = self._hist_rows[name]
-        self._hist_rows[name] = i + 1
-        if not self._io:
+        self._hist_rows[name] = i + k
+        if not self._io or k == 0:
             return
         g = self._f["histories"][name]
-        g["time"].resize(i + 1, axis=0)
-        g["value"].resize(i + 1, axis=0)
-        self._write_row(g["time"], i, None if row is None else row[:1])
-        self._write_row(g["value"], i, None if row is None else row[1:])
+        g["time"].resize(i + k, axis=0)
+        g["value"].resize(i + k, axis=0)
+        mine = rows is not None
+        self._write(g["time"], (i,), np.ascontiguousarray(rows[:, 0]) if mine else None)
+        self._write(g["value"], (i, 0), np.ascontiguousarray(rows[:, 1:]) if mine else None)
 
     # ------------------------------------------------------------------ file
     def flush(self) -> None:
