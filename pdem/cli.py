@@ -21,6 +21,14 @@ def _parser() -> argparse.ArgumentParser:
     end.add_argument("--time", type=float, help="model time to run instead of solve.*")
     end.add_argument("--steps", type=int, help="steps to run instead of solve.*")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
+    rs = sub.add_parser("restart", help="continue a run from a checkpoint (any rank count)")
+    rs.add_argument("checkpoint", help="checkpoint file written by a run with `checkpoint:`")
+    rs.add_argument("--output", "-o", help="output file (default: the scene's, suffixed "
+                    "with -from<step>)")
+    end = rs.add_mutually_exclusive_group()
+    end.add_argument("--time", type=float, help="model time to run from the checkpoint")
+    end.add_argument("--steps", type=int, help="steps to run from the checkpoint")
+    rs.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
     c = sub.add_parser("check", help="validate a scene file and report its blocks")
     c.add_argument("scene")
     i = sub.add_parser("info", help="summarise a pdem output file")
@@ -45,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "check":
             return _check(args, comm, log)
+        if args.command == "restart":
+            return _restart(args, comm, log)
         return _run(args, comm, log)
     except UserError as exc:
         # every rank validates the same input, so every rank reaches here: no hang
@@ -78,18 +88,51 @@ def _run(args, comm, log) -> int:
     return 0
 
 
+def _restart(args, comm, log) -> int:
+    import logging
+
+    from .config import parse_scene
+    from .io.checkpoint import read_checkpoint
+    from .solver import Solver
+
+    try:
+        ck = read_checkpoint(args.checkpoint)
+    except (OSError, ValueError, KeyError) as exc:
+        from .errors import UserError
+
+        raise UserError(f"cannot restart from {args.checkpoint}: {exc}") from None
+    scene = parse_scene(ck["attrs"]["scene"], f"{args.checkpoint}:scene")
+    step = int(ck["attrs"]["step"])
+    out = args.output or f"{os.path.splitext(scene.output.file)[0]}-from{step}.h5"
+    scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out})})
+    if args.quiet:
+        log.setLevel(logging.WARNING)
+    solver = Solver(scene, comm, state=ck)
+    log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", solver.run_id, step,
+             solver.time, comm.size)
+    try:
+        solver.run(time=args.time, steps=args.steps)
+    except Exception as exc:
+        _fail_during_run(comm, exc, solver)
+        return 1
+    solver.close()
+    return 0
+
+
 def _fail_during_run(comm, exc, solver) -> None:
     """An error while stepping may have happened on one rank only: the others are waiting in a
     collective, so a multi-rank job is aborted (the output was flushed at the last snapshot).
     A serial run closes its files and reports the error."""
     import traceback
 
-    from .errors import UserError
+    from .errors import SimulationError, UserError
 
-    if comm.size == 1:
+    if comm.size == 1 or isinstance(exc, SimulationError):
+        # serial, or raised by every rank alike: close the files properly
         solver.close()
         if isinstance(exc, UserError):
-            print(f"pdem: {exc}", file=sys.stderr)
+            if comm.rank == 0:
+                print(f"pdem: {exc}", file=sys.stderr)
             return
         raise exc
     if isinstance(exc, UserError):

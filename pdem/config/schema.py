@@ -213,6 +213,16 @@ class Contact(Strict):
     overlap_tolerance: PositiveFloat | Literal["auto"] = "auto"
 
 
+class Parallel(Strict):
+    """Domain decomposition. ``dims``: ranks per axis (product = number of ranks), ``auto``
+    = MPI's factorisation with the largest factor on the longest axis, gravity's axis last.
+    ``margin`` (m): how far beyond its blocks a rank keeps ghosts; blocks moving half of it
+    trigger a rebuild (migration + ghost lists). ``auto`` = the cell size."""
+
+    dims: tuple[PositiveInt, PositiveInt, PositiveInt] | Literal["auto"] = "auto"
+    margin: PositiveFloat | Literal["auto"] = "auto"
+
+
 class History(Strict):
     """Record ``quantity`` of block ``block`` every ``every`` model seconds (or every step)."""
 
@@ -234,6 +244,22 @@ class Output(Strict):
         return self
 
 
+class Checkpoint(Strict):
+    """Full-state checkpoints every ``every`` model seconds (or ``every_steps``), named
+    ``{file}-{step:09d}.h5``; the newest ``keep`` are kept. Restart: ``pdem restart FILE``."""
+
+    every: PositiveFloat | None = None
+    every_steps: PositiveInt | None = None
+    keep: PositiveInt = 2
+    file: str = "checkpoint"
+
+    @model_validator(mode="after")
+    def _one_interval(self):
+        if (self.every is None) == (self.every_steps is None):
+            raise ValueError("give exactly one of every, every_steps")
+        return self
+
+
 class Scene(Strict):
     name: str = "pdem"
     gravity: Vec3 = (0.0, 0.0, -9.81)
@@ -242,8 +268,10 @@ class Scene(Strict):
     joint_pairs: list[JointPair] = []
     blocks: list[Block] = Field(min_length=1)
     contact: Contact = Contact()
+    parallel: Parallel = Parallel()
     solve: Solve
     output: Output = Output()
+    checkpoint: Checkpoint | None = None
 
     @model_validator(mode="after")
     def _references(self):

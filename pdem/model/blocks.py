@@ -28,6 +28,8 @@ BLOCK_FIELDS: dict[str, tuple[tuple[int, ...], type]] = {
     "prev_force": ((3,), np.float64),  # last step's unbalanced force (combined damping)
     "prev_moment": ((3,), np.float64),
     "u_acc": ((), np.float64),  # accumulated motion since the last remap (eq. 1)
+    "u_geo": ((), np.float64),  # motion since the last periodic contact-geometry update
+    "u_mig": ((), np.float64),  # motion since the last ghost rebuild / migration
     "radius": ((), np.float64),  # largest centroid-to-vertex distance
     "x0": ((3,), np.float64),  # centroid at start (for displacement histories)
 }
@@ -57,6 +59,8 @@ class BlockStore:
     prev_force: np.ndarray
     prev_moment: np.ndarray
     u_acc: np.ndarray
+    u_geo: np.ndarray
+    u_mig: np.ndarray
     radius: np.ndarray
     x0: np.ndarray
     # geometry (CSR)
@@ -84,3 +88,54 @@ def empty_block_arrays(n: int) -> dict[str, np.ndarray]:
 
 def store_field_names() -> list[str]:
     return [f.name for f in fields(BlockStore)]
+
+
+# The state that moves with a block when it migrates (the rest is static: rebuilt from the
+# scene on every rank, keyed by gid).
+DYNAMIC_FIELDS = ("x", "q", "v", "w", "L", "force", "moment", "prev_force", "prev_moment",
+                  "u_acc", "u_geo", "u_mig")
+STATIC_FIELDS = tuple(k for k in BLOCK_FIELDS if k not in DYNAMIC_FIELDS and k != "owned")
+# What ghosts receive from their owner every step: pose, velocities, this step's rotation
+# increment (the contact normal turns with it) and the motion accumulators (remap triggers).
+HALO_FIELDS = ("x", "q", "v", "w", "u_acc", "u_geo")
+
+
+def _csr_take(start: np.ndarray, rows: np.ndarray):
+    """Index array selecting the CSR entries of ``rows`` in order, and the new start array."""
+    counts = start[rows + 1] - start[rows]
+    new_start = np.zeros(len(rows) + 1, np.int64)
+    np.cumsum(counts, out=new_start[1:])
+    idx = np.repeat(start[rows] - new_start[:-1], counts) + np.arange(new_start[-1])
+    return idx, new_start
+
+
+def take_rows(glob: BlockStore, gids: np.ndarray, owned: np.ndarray) -> BlockStore:
+    """A local store holding blocks ``gids`` of the global (replicated, static) store.
+
+    Dynamic fields come from ``glob`` too; callers overwrite them with migrated state."""
+    gids = np.asarray(gids, np.int64)
+    per_block = {k: getattr(glob, k)[gids].copy() for k in BLOCK_FIELDS}
+    per_block["owned"] = np.asarray(owned, np.uint8)
+    vidx, vert_start = _csr_take(glob.vert_start, gids)
+    fidx, face_start = _csr_take(glob.face_start, gids)
+    fvidx, fvert_start = _csr_take(glob.fvert_start, fidx)
+    eidx, edge_start = _csr_take(glob.edge_start, gids)
+    didx, edir_start = _csr_take(glob.edir_start, gids)
+    # vertex ids inside faces and edges are global vertex rows: renumber to local rows
+    vmap = np.full(len(glob.verts_local), -1, np.int64)
+    vmap[vidx] = np.arange(len(vidx))
+    return BlockStore(
+        **per_block,
+        vert_start=vert_start,
+        verts_local=glob.verts_local[vidx],
+        verts_world=glob.verts_world[vidx].copy(),
+        face_start=face_start,
+        fvert_start=fvert_start,
+        face_verts=vmap[glob.face_verts[fvidx]],
+        normals_local=glob.normals_local[fidx],
+        offsets_local=glob.offsets_local[fidx],
+        edge_start=edge_start,
+        edges=vmap[glob.edges[eidx]],
+        edir_start=edir_start,
+        edirs_local=glob.edirs_local[didx],
+    )
