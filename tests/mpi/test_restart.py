@@ -1,0 +1,79 @@
+"""Checkpoint/restart continuity: 2N steps straight == N steps + checkpoint + restart + N,
+bitwise, when the checkpoint written on 2 ranks is restarted on 1 rank and on all ranks."""
+
+import os
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from pdem.config import parse_scene
+from pdem.io.checkpoint import read_checkpoint
+from pdem.solver import Solver
+
+SCENE = """
+name: restart-pile
+materials: {{rock: {{density: 2600.0}}}}
+joints: {{default: {{kn: 1.0e8, ks: 5.0e7, friction: 30.0, cohesion: 1.0e4, tension: 1.0e4}}}}
+blocks:
+  - {{name: floor, box: {{min: [-3, -3, -0.5], max: [3, 3, 0.0]}}, material: rock, fixed: true}}
+  - name: rock
+    random: {{count: 30, region: {{min: [-2, -2, 0.05], max: [2, 2, 1.3]}}, size: [0.45, 0.6], seed: 3}}
+    material: rock
+    velocity: [0.5, 0.0, -3.0]
+solve: {{steps: {steps}, damping: local}}
+output: {{file: {out}, every_steps: {half}}}
+checkpoint: {{every_steps: {half}, keep: 3, file: {ck}}}
+"""
+N = 1000
+FIELDS = ("centroid", "orientation", "velocity", "angular_velocity")
+
+
+def final_state(path):
+    with h5py.File(path, "r") as f:
+        return {k: f[f"blocks/{k}"][-1] for k in FIELDS}, int(f["step"][-1])
+
+
+@pytest.mark.mpi(min_size=2)
+def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
+    comm = MPI.COMM_WORLD
+    d = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
+    os.makedirs(d, exist_ok=True)
+    text = SCENE.format(steps=2 * N, half=N, out=f"{d}/straight.h5", ck=f"{d}/ck")
+    # the straight run and its checkpoint at step N, on 2 ranks
+    pair = comm.Split(0 if comm.rank < 2 else MPI.UNDEFINED, comm.rank)
+    if pair != MPI.COMM_NULL:
+        s = Solver(parse_scene(text), pair)
+        s.run()
+        assert s.contacts.n > 0  # history matters: blocks are in contact when checkpointed
+        s.close()
+        pair.Free()
+    comm.Barrier()
+    ck_path = f"{d}/ck-{N:09d}.h5"
+    ck = read_checkpoint(ck_path)
+    assert ck["attrs"]["n_ranks"] == 2 and len(ck["nsub"]) > 0
+    assert np.any(ck["sub"]["sc_fs"] != 0.0)  # shear-force history is in the checkpoint
+    scene = parse_scene(ck["attrs"]["scene"])
+    ref, ref_step = final_state(f"{d}/straight.h5")
+    assert ref_step == 2 * N
+
+    def restart(c, out):
+        sc = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
+                                      "checkpoint": None})
+        r = Solver(sc, c, state=ck)
+        assert r.step == N
+        r.run()
+        r.close()
+        return final_state(out)
+
+    if comm.rank == 0:  # on 1 rank
+        got, step = restart(MPI.COMM_SELF, f"{d}/r1.h5")
+        assert step == 2 * N
+        for k in FIELDS:
+            assert np.array_equal(got[k], ref[k]), k
+    comm.Barrier()
+    got, step = restart(comm, f"{d}/r{comm.size}.h5")  # on every rank of the job
+    assert step == 2 * N
+    for k in FIELDS:
+        assert np.array_equal(got[k], ref[k]), k
