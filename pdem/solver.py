@@ -88,6 +88,17 @@ class Solver:
         self._setup_timestep()
         self.ratio = math.inf
         self.ref_force = self._reference_force()
+        # Runaway threshold: no block can honestly move faster than its start speed plus a fall
+        # across the whole model (or what gravity and applied loads add over time); ten times
+        # that is a blow-up, typically a timestep too large for the stiffness.
+        free = g.fixed == 0
+        acc = float(np.linalg.norm(self.gravity))
+        if free.any():
+            acc += float((np.linalg.norm(g.applied_force[free], axis=1) / g.mass[free]).max())
+        size = float(np.linalg.norm(hi.max(0) - lo.min(0)))
+        v0 = float((np.linalg.norm(g.v, axis=1) + np.linalg.norm(g.w, axis=1) * g.radius)
+                   .max(initial=0.0))
+        self.speed_limit = (10.0 * (v0 + math.sqrt(2.0 * acc * size)) + 1.0, 2.0 * acc)
         self.stats = motion.new_stats()
         par = scene.parallel
         self.margin = self.cell_size if par.margin == "auto" else float(par.margin)
@@ -374,7 +385,7 @@ class Solver:
         b = self.blocks
         n = self.n_owned
         speed = np.sqrt((b.v[:n] ** 2).sum(1))
-        limit = 1e3 * (1.0 + float(np.sqrt((self.gravity**2).sum())) * max(self.time, 1.0))
+        limit = self.speed_limit[0] + self.speed_limit[1] * self.time
         bad = ~np.isfinite(speed) | ~np.isfinite(b.x[:n]).all(1) | (speed > limit)
         return int(np.argmax(bad)) if bad.any() else -1
 
