@@ -63,60 +63,52 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-def _run(args, comm, log) -> int:
+def _with_output(scene, path):
+    return scene.model_copy(update={"output": scene.output.model_copy(update={"file": path})})
+
+
+def _march(args, comm, log, scene, state=None) -> int:
+    """Build the solver (on every rank alike), run it, close the files."""
     import logging
 
-    from .config import load_scene
     from .solver import Solver
 
-    scene = load_scene(args.scene)
-    if args.output:
-        scene = scene.model_copy(update={"output": scene.output.model_copy(
-            update={"file": args.output})})
     if args.quiet:
         log.setLevel(logging.WARNING)
-    solver = Solver(scene, comm)
+    solver = Solver(scene, comm, state=state)
+    if state is not None:
+        log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", solver.run_id,
+                 solver.step, solver.time, comm.size)
     try:
         solver.run(time=args.time, steps=args.steps)
     except Exception as exc:
         _fail_during_run(comm, exc, solver)
         return 1
     solver.close()
-    if comm.rank == 0:
-        log.info("wrote %s (+ %s)", scene.output.file,
-                 os.path.splitext(scene.output.file)[0] + ".xdmf")
+    log.info("wrote %s (+ %s)", scene.output.file, os.path.splitext(scene.output.file)[0] + ".xdmf")
     return 0
 
 
-def _restart(args, comm, log) -> int:
-    import logging
+def _run(args, comm, log) -> int:
+    from .config import load_scene
 
+    scene = load_scene(args.scene)
+    return _march(args, comm, log, _with_output(scene, args.output) if args.output else scene)
+
+
+def _restart(args, comm, log) -> int:
     from .config import parse_scene
+    from .errors import UserError
     from .io.checkpoint import read_checkpoint
-    from .solver import Solver
 
     try:
         ck = read_checkpoint(args.checkpoint)
     except (OSError, ValueError, KeyError) as exc:
-        from .errors import UserError
-
         raise UserError(f"cannot restart from {args.checkpoint}: {exc}") from None
     scene = parse_scene(ck["attrs"]["scene"], f"{args.checkpoint}:scene")
     step = int(ck["attrs"]["step"])
     out = args.output or f"{os.path.splitext(scene.output.file)[0]}-from{step}.h5"
-    scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out})})
-    if args.quiet:
-        log.setLevel(logging.WARNING)
-    solver = Solver(scene, comm, state=ck)
-    log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", solver.run_id, step,
-             solver.time, comm.size)
-    try:
-        solver.run(time=args.time, steps=args.steps)
-    except Exception as exc:
-        _fail_during_run(comm, exc, solver)
-        return 1
-    solver.close()
-    return 0
+    return _march(args, comm, log, _with_output(scene, out), state=ck)
 
 
 def _fail_during_run(comm, exc, solver) -> None:
