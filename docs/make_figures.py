@@ -1,0 +1,495 @@
+"""Re-run the physics verification cases of tests/verification and plot numerical against
+closed-form results into docs/figures/*.png (the figures of docs/validation.md).
+
+This is a documentation tool only: it needs matplotlib, which is *not* a dependency of pdem
+and is not installed by ``pip install -e .[test]``; nothing in pdem/ or tests/ imports it.
+
+    .venv/bin/python -m pip install matplotlib
+    .venv/bin/python docs/make_figures.py            # from the repository root, ~1-3 min
+
+The scenes, constants and closed forms are imported from the test modules
+(tests/verification/test_*.py), so the figures show exactly the set-ups the tests assert on.
+Single rank (MPI.COMM_SELF), no output files. Each case also prints its key numbers, which
+docs/validation.md quotes.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "tests", "verification"))
+FIG = os.path.join(ROOT, "docs", "figures")
+
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import test_common_plane_motion as tcp  # noqa: E402
+import test_incline as tin  # noqa: E402
+import test_oscillator as tos  # noqa: E402
+import test_static as tst  # noqa: E402
+import test_tumbling as ttu  # noqa: E402
+import test_wedge as twe  # noqa: E402
+from vhelpers import crossing_times, fit_acceleration, make_solver  # noqa: E402
+
+G = 9.81
+
+
+def free_row(s) -> int:
+    return int(np.nonzero(s.blocks.fixed == 0)[0][0])
+
+
+def save(fig, name: str):
+    os.makedirs(FIG, exist_ok=True)
+    path = os.path.join(FIG, name)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    print(f"  wrote {os.path.relpath(path, ROOT)}")
+
+
+# --------------------------------------------------------------------------- incline
+def incline_run(phi: float, algorithm: str = "fast", time_: float = 1.0):
+    s = make_solver(tin.incline_scene(phi, algorithm, f"time: {time_}"))
+    b = s.blocks
+    i = free_row(s)
+    n = int(round(time_ / s.dt))
+    t = np.empty(n)
+    x = np.empty(n)
+    for k in range(n):
+        s.advance()
+        t[k] = s.time
+        x[k] = b.x[i, 0] - b.x0[i, 0]
+    return t, x
+
+
+def a_incline(phi: float) -> float:
+    psi, ph = math.radians(tin.PSI), math.radians(phi)
+    return max(0.0, G * (math.sin(psi) - math.cos(psi) * math.tan(ph)))
+
+
+def incline():
+    print("incline (psi = 20 deg)")
+    fig, (ax, ar, aw) = plt.subplots(1, 3, figsize=(18, 5))
+    for phi, col in ((10.0, "C0"), (15.0, "C1")):
+        t, x = incline_run(phi)
+        late = t >= 0.1
+        a_num = fit_acceleration(t[late], x[late])
+        a_ex = a_incline(phi)
+        # closed form 1/2 a t^2 plus the start-up offset x0 + v0 t, fitted with a fixed to a_exact
+        c1, c0 = np.polyfit(t[late], x[late] - 0.5 * a_ex * t[late] ** 2, 1)
+        closed = c0 + c1 * t + 0.5 * a_ex * t**2
+        print(f"  phi={phi}: a_num={a_num:.6f} a_exact={a_ex:.6f} rel.err={a_num / a_ex - 1:+.2e}"
+              f"  offset x0={c0:.2e} m v0={c1:.2e} m/s")
+        ax.plot(t, x, col, lw=2.5, alpha=0.5, label=fr"pdem, $\phi$={phi:g}°")
+        ax.plot(t, closed, "k--", lw=1)
+        ar.loglog(t, np.maximum(np.abs(x - closed), 1e-12), col, lw=1,
+                  label=fr"$\phi$={phi:g}°: a = {a_num:.4f} m/s² "
+                        fr"(exact {a_ex:.4f}, rel. err. {a_num / a_ex - 1:+.1e})")
+    ax.plot([], [], "k--", lw=1, label=r"$x_0 + v_0 t + \frac{1}{2} a t^2$, exact $a$")
+    ax.set(xlabel="time t (s)", ylabel="displacement down the slope x (m)",
+           title=r"20° incline: $a = g(\sin\psi - \cos\psi\tan\phi)$, $\psi$ = 20°")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    ar.axvline(0.1, color="0.6", ls=":", lw=1)
+    ar.text(0.11, 1e-7, "fit window\nt ≥ 0.1 s", color="0.4", fontsize=8)
+    ar.set(xlabel="time t (s)", ylabel="|pdem − closed form| (m)", ylim=(1e-11, 1e-4),
+           title="Residual: shear-spring start-up, then nm vibration")
+    ar.legend(fontsize=8, loc="upper right")
+    ar.grid(alpha=0.3, which="both")
+
+    # friction sweep: 0.6 s runs, fit on t in [0.1, 0.6]
+    phis = [0.0, 5.0, 10.0, 12.5, 15.0, 17.5, 19.0, 19.5, 20.5, 21.0, 25.0, 30.0]
+    res = {}
+    for alg in ("fast", "cundall"):
+        sweep = phis if alg == "fast" else phis[::2]
+        pts = []
+        for phi in sweep:
+            t, x = incline_run(phi, alg, 0.6)
+            late = t >= 0.1
+            pts.append(fit_acceleration(t[late], x[late]))
+        res[alg] = (np.array(sweep), np.array(pts))
+        errs = [f"{p:g}:{a:.4f}/{a_incline(p):.4f}" for p, a in zip(sweep, pts, strict=True)]
+        print(f"  sweep {alg}: " + " ".join(errs))
+    pl = np.linspace(0.0, 32.0, 321)
+    aw.plot(pl, [a_incline(p) for p in pl], "k-", lw=1,
+            label=r"$g(\sin\psi - \cos\psi\tan\phi)$, 0 for $\phi \geq \psi$")
+    aw.plot(*res["fast"], "o", color="C0", mfc="none", ms=8, label="pdem, fast common plane")
+    aw.plot(*res["cundall"], "x", color="C3", ms=7, label="pdem, Cundall common plane")
+    aw.axvline(tin.PSI, color="0.6", ls=":", lw=1)
+    aw.text(tin.PSI + 0.3, 2.8, r"$\phi = \psi$ = 20°", color="0.4", fontsize=8)
+    aw.set(xlabel=r"friction angle $\phi$ (deg)", ylabel="sliding acceleration a (m/s²)",
+           title="Friction sweep (fit of x(t) on 0.1 ≤ t ≤ 0.6 s)")
+    aw.legend(fontsize=8)
+    aw.grid(alpha=0.3)
+    save(fig, "incline.png")
+
+
+# --------------------------------------------------------------------------- oscillator
+def oscillator_run(kn: float, periods: float = 30.0):
+    m = tos.RHO
+    delta = m * G / kn
+    text = tos.cube_on_floor(-2.0 * delta).replace(f"kn: {tos.KN}, ks: {tos.KN}",
+                                                     f"kn: {kn!r}, ks: {kn!r}")
+    assert f"kn: {kn!r}" in text
+    s = make_solver(text)
+    b = s.blocks
+    i = free_row(s)
+    period = 2.0 * math.pi * math.sqrt(m / kn)
+    n = int(periods * period / s.dt)
+    t = np.empty(n)
+    z = np.empty(n)
+    vz = np.empty(n)
+    for k in range(n):
+        s.advance()
+        t[k] = s.time
+        z[k] = b.x[i, 2] - 0.5  # bottom face height = - overlap
+        vz[k] = b.v[i, 2]
+    tc = crossing_times(t - 0.5 * s.dt, vz)  # v is at the half step
+    measured = (tc[-1] - tc[0]) / (len(tc) - 1)
+    return t, z, measured, period, delta, s.dt
+
+
+def oscillator():
+    print("contact oscillator")
+    fig, (ax, ap) = plt.subplots(1, 2, figsize=(13, 4.6))
+    t, z, measured, period, delta, dt = oscillator_run(tos.KN, 30.0)
+    omega = 2.0 * math.pi / period
+    show = t <= 3.2 * period
+    tt = np.linspace(0.0, t[show][-1], 600)
+    ax.plot(t[show] * 1e3, -z[show] * 1e6, "o", ms=3, color="C0", label=f"pdem (dt = {dt:.2e} s)")
+    ax.plot(tt * 1e3, delta * (1.0 + np.cos(omega * tt)) * 1e6, "k-", lw=1,
+            label=r"$\delta\,(1 + \cos \omega t)$, $\omega = \sqrt{k_n A / m}$")
+    for k in range(1, 4):
+        ax.axvline(k * period * 1e3, color="0.6", ls=":", lw=1)
+    ax.axhline(delta * 1e6, color="0.8", lw=1)
+    ax.text(period * 1e3, 2.05 * delta * 1e6, " T", color="0.4")
+    ax.set(xlabel="time t (ms)", ylabel=r"overlap $u_n$ = −(bottom face height) (µm)",
+           ylim=(-0.1 * delta * 1e6, 2.2 * delta * 1e6),
+           title=r"Cube on floor, $k_n$ = 1e9 Pa/m, started at 2δ: $T = 2\pi\sqrt{m/(k_n A)}$")
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(alpha=0.3)
+
+    kns = [1e8, 3e8, 1e9, 3e9, 1e10]
+    meas, exact = [], []
+    for kn in kns:
+        *_, mp, pe, _, dtk = oscillator_run(kn, 30.0)
+        meas.append(mp)
+        exact.append(pe)
+        print(f"  kn={kn:.0e}: T={mp:.6e} exact={pe:.6e} rel.err={mp / pe - 1:+.2e} dt={dtk:.2e}")
+    kk = np.logspace(7.8, 10.2, 50)
+    ap.loglog(kk, 2 * np.pi * np.sqrt(tos.RHO / kk) * 1e3, "k-", lw=1,
+              label=r"$2\pi\sqrt{m/(k_n A)}$")
+    ap.loglog(kns, np.array(meas) * 1e3, "o", color="C0", mfc="none", ms=9,
+              label="pdem (mean of ~30 periods); labels: relative error\n"
+                    r"(leapfrog theory: $-(\omega\,\Delta t)^2/24$ = "
+                    f"{-100 * (2 * math.pi * dt / period) ** 2 / 24:+.3f} % at the automatic step)")
+    for kn, mp, pe in zip(kns, meas, exact, strict=True):
+        ap.annotate(f"{100 * (mp / pe - 1):+.3f} %", (kn, mp * 1e3), textcoords="offset points",
+                    xytext=(6, 6), fontsize=8)
+    ap.set(xlabel=r"joint normal stiffness $k_n$ (Pa/m), A = 1 m²", ylabel="period T (ms)",
+           title="Measured vs analytical period (m = 2000 kg)")
+    ap.legend(fontsize=8, loc="lower left")
+    ap.grid(alpha=0.3, which="both")
+    save(fig, "oscillator.png")
+
+
+# --------------------------------------------------------------------------- elastic bounce
+def bounce():
+    print("elastic bounce (h = 1 cm)")
+    h = 0.01
+    m = tos.RHO
+    s = make_solver(tos.cube_on_floor(h, end="time: 1.0"))
+    b = s.blocks
+    i = free_row(s)
+
+    def elastic() -> float:
+        c = s.contacts
+        kn = s.joints["kn"][np.repeat(c.joint, np.diff(c.sc_start))]
+        un = np.maximum(c.sc_un, 0.0)
+        return 0.5 * float(np.sum(kn * c.sc_area * un * un))
+
+    n = int((2.0 * math.sqrt(2.0 * h / G) + 0.02) / s.dt)
+    t = np.empty(n)
+    kin = np.empty(n)
+    pot = np.empty(n)
+    ela = np.empty(n)
+    bottom = np.empty(n)
+    for k in range(n):
+        v_minus = b.v[i].copy()
+        zb = b.x[i, 2] - 0.5
+        t[k] = s.time
+        pot[k] = m * G * zb  # zero at first touch (bottom face at z = 0)
+        ela[k] = elastic()
+        s.advance()
+        kin[k] = 0.5 * m * float(v_minus @ b.v[i])  # leapfrog time-centred K at t[k]
+        bottom[k] = zb
+    e_drop = m * G * h
+    tot = kin + pot + ela
+    drift = (tot.max() - tot.min()) / e_drop
+    lowest = int(np.argmin(bottom))
+    rebound = bottom[lowest:].max() / h
+    print(f"  energy variation {drift:.2e} of m g h, rebound/drop {rebound:.6f}, "
+          f"max overlap {-bottom.min():.2e} m, dt {s.dt:.2e}")
+    fig, (ax, az) = plt.subplots(1, 2, figsize=(13, 4.6))
+    for a in (ax, az):
+        a.plot(t * 1e3, kin / e_drop, label="kinetic $K$ (time-centred)")
+        a.plot(t * 1e3, pot / e_drop, label="potential $m g z_{bottom}$")
+        a.plot(t * 1e3, ela / e_drop, label=r"contact elastic $\sum \frac{1}{2} k_n A_s u_n^2$")
+        a.plot(t * 1e3, tot / e_drop, "k", lw=2, label="total")
+        a.set(xlabel="time t (ms)", ylabel="energy / (m g h)")
+        a.grid(alpha=0.3)
+    fig.suptitle(f"Unit cube (m = 2000 kg) dropped face-on from h = 1 cm onto a fixed floor, "
+                 f"kn = 1e9 Pa/m, no damping: total energy varies by {drift:.1e} m g h, "
+                 f"rebound height {rebound:.4f} h", fontsize=10)
+    ax.set_title("Whole drop and rebound", fontsize=10)
+    ax.legend(fontsize=8, loc="center right")
+    t_touch = math.sqrt(2.0 * h / G)
+    half = math.pi * math.sqrt(m / tos.KN)
+    az.set_xlim((t_touch - 0.3 * half) * 1e3, (t_touch + 1.3 * half) * 1e3)
+    az.axvspan(t_touch * 1e3, (t_touch + half) * 1e3, color="0.9", zorder=0)
+    az.set_title(r"Zoom on the contact: analytical duration $\pi\sqrt{m/(k_n A)}$"
+                 f" = {half * 1e3:.2f} ms (shaded)", fontsize=10)
+    save(fig, "bounce.png")
+
+
+# --------------------------------------------------------------------------- tumbling
+def tumbling():
+    print("free tumbling")
+    fig, (ah, ak) = plt.subplots(1, 2, figsize=(13, 4.6))
+    for shape, col in (("box123", "C0"), ("random", "C1")):
+        text = f"""
+gravity: [0, 0, 0]
+materials: {{rock: {{density: 2500}}}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9}}}}
+blocks:
+  - name: tumbler
+    {ttu.SHAPES[shape][0]}
+    material: rock
+    velocity: [0.3, -0.2, 0.5]
+    angular_velocity: {ttu.vec(ttu.SHAPES[shape][1])}
+solve: {{steps: 5000, damping: none}}
+"""
+        s = make_solver(text)
+        b = s.blocks
+        m = float(b.mass[0])
+
+        def momentum(b=b, m=m):
+            return b.L[0] + m * np.cross(b.x[0], b.v[0])
+
+        def energy(b=b, m=m):
+            return 0.5 * m * float(b.v[0] @ b.v[0]) + 0.5 * float(b.w[0] @ b.L[0])
+
+        h0, k0 = momentum(), energy()
+        n = 5000
+        dh = np.empty(n)
+        dlm = np.empty(n)
+        dk = np.empty(n)
+        turned = 0.0
+        for k in range(n):
+            s.advance()
+            hh = momentum()
+            dh[k] = np.linalg.norm(hh - h0) / np.linalg.norm(h0)
+            dlm[k] = abs(np.linalg.norm(hh) / np.linalg.norm(h0) - 1.0)
+            dk[k] = abs(energy() - k0) / k0
+            turned += float(np.linalg.norm(b.w[0])) * s.dt
+        steps = np.arange(1, n + 1)
+        floor = 1e-18
+        print(f"  {shape}: max |dH|/|H| {dh.max():.2e}, max ||H|/|H0|-1| {dlm.max():.2e}, "
+              f"max |dK|/K {dk.max():.2e}, turned {turned:.2f} rad in {n} steps, dt {s.dt:.2e}")
+        lab = {"box123": "box 1×2×3 m", "random": "random 14-vertex polyhedron"}[shape]
+        ah.semilogy(steps, np.maximum(dh, floor), color=col, lw=1,
+                    label=fr"{lab}: $|H - H_0|/|H_0|$")
+        ah.semilogy(steps, np.maximum(dlm, floor), color=col, lw=1, ls="--", alpha=0.7,
+                    label=fr"{lab}: $||H|/|H_0| - 1|$")
+        ak.semilogy(steps, np.maximum(dk, floor), color=col, lw=1,
+                    label=f"{lab} (turns {turned:.1f} rad)")
+    eps = np.finfo(float).eps
+    ah.axhline(1e-10, color="C3", ls=":", lw=1, label="test tolerance 1e-10")
+    ah.axhline(eps, color="0.5", ls="-.", lw=1, label="machine epsilon")
+    ah.set(xlabel="step", ylabel="relative drift", ylim=(1e-18, 1e-8),
+           title=r"Angular momentum $H = L + m\,x \times v$ (exactly conserved)")
+    ah.legend(fontsize=7, loc="upper left")
+    ah.grid(alpha=0.3, which="both")
+    ak.axhline(1e-5, color="C3", ls=":", lw=1, label="test tolerance 1e-5")
+    ak.set(xlabel="step", ylabel=r"$|K - K_0| / K_0$", ylim=(1e-10, 1e-4),
+           title=r"Kinetic energy $K = \frac{1}{2} m |v|^2 + \frac{1}{2}\,\omega \cdot L$"
+                 " (bounded error)")
+    ak.legend(fontsize=8, loc="lower right")
+    ak.grid(alpha=0.3, which="both")
+    fig.suptitle("Torque-free tumbling, no gravity, no contacts, 5000 steps", fontsize=11)
+    save(fig, "tumbling.png")
+
+
+# --------------------------------------------------------------------------- wedge
+def wedge():
+    print("DDA wedge")
+    phi_c = twe.critical_friction()
+    na, nb = twe.reactions(np.array([0.0, 0.0, -G]))
+    wd = float(np.array([0.0, 0.0, -G]) @ twe.D)
+
+    def a_exact(phi):
+        return max(0.0, wd - (na + nb) * math.tan(math.radians(phi)))
+
+    t, u, _ = twe.run_wedge(15.0, "fast", time=0.5)
+    late = t >= 0.1
+    a_num = fit_acceleration(t[late], u[late])
+    print(f"  phi_c = {phi_c:.4f} deg; phi=15: a_num={a_num:.6f} exact={a_exact(15.0):.6f} "
+          f"rel.err={a_num / a_exact(15.0) - 1:+.2e}")
+    cache = {}
+
+    def u_end_of(phi):
+        if phi not in cache:
+            _, uu, _ = twe.run_wedge(phi, "fast", time=0.5)
+            cache[phi] = float(uu[-1])
+            print(f"  phi={phi:7.4f}: u(0.5 s) = {uu[-1]:.3e} m (rigid, from rest: "
+                  f"{0.5 * a_exact(phi) * 0.25:.3e} m)")
+        return cache[phi]
+
+    phis = [10.0, 15.0, 17.0, 18.0, 19.0, 19.4, 19.6, 19.8, 20.0, 20.5, 22.0, 25.0]
+    u_end = np.array([u_end_of(p) for p in phis])
+    # the bisection of test_wedge.test_wedge_critical_friction: slides = u > 1 mm
+    lo, hi = 18.0, 22.0
+    assert u_end_of(lo) > 1e-3 and u_end_of(hi) <= 1e-3
+    for _ in range(6):
+        mid = 0.5 * (lo + hi)
+        if u_end_of(mid) > 1e-3:
+            lo = mid
+        else:
+            hi = mid
+    phi_num = 0.5 * (lo + hi)
+    print(f"  bisection: phi_c numerical {phi_num:.4f} deg (bracket {lo:.4f}..{hi:.4f}), "
+          f"limit equilibrium {phi_c:.4f}, difference {phi_num - phi_c:+.4f} deg")
+    bis = sorted(p for p in cache if p not in phis)
+    fig, ax = plt.subplots(figsize=(8.5, 5))
+    pl = np.linspace(9.0, 26.0, 800)
+    ua = np.array([0.5 * a_exact(p) * 0.25 for p in pl])
+    ax.semilogy(pl[ua > 0], ua[ua > 0], "k-", lw=1,
+                label=r"rigid wedge from rest: $\frac{1}{2} a t^2$, "
+                      r"$a = (W\cdot d - (N_A + N_B)\tan\phi)/m$")
+    ax.semilogy(phis, np.maximum(np.abs(u_end), 1e-7), "o", color="C0", mfc="none", ms=8,
+                label="pdem (fast common plane), |u| along the line of intersection")
+    ax.semilogy(bis, [max(abs(cache[p]), 1e-7) for p in bis], "+", color="C0", ms=8,
+                label="pdem, bisection runs")
+    ax.axvspan(lo, hi, color="C0", alpha=0.25,
+               label=fr"pdem $\phi_c$ bracket {lo:.3f}–{hi:.3f}° (midpoint {phi_num:.3f}°)")
+    ax.axvline(phi_c, color="C3", lw=1.2, label=fr"limit equilibrium $\phi_c$ = {phi_c:.2f}°")
+    ax.axvline(19.6, color="C2", lw=1.2, ls="--", label=r"explicit 3D-DDA paper: $\phi_c$ = 19.6°")
+    ax.axhline(1e-3, color="0.5", ls=":", lw=1, label="'slides' threshold of the test (1 mm)")
+    ax.set(xlabel=r"joint friction angle $\phi$ (deg), both planes",
+           ylabel="displacement after t = 0.5 s (m)", ylim=(1e-6, 2.0),
+           title=r"Wedge (A 45/005, B 55/135): $\tan\phi_c = W \sin\psi_i / (N_A + N_B)$")
+    ax.legend(fontsize=8, loc="lower left")
+    ax.grid(alpha=0.3, which="both")
+    save(fig, "wedge.png")
+
+
+# --------------------------------------------------------------------------- tipping cube
+def tipping():
+    print("tipping cube")
+    E = tcp.E
+    text = f"""
+name: tipping
+gravity: [0, 0, {-G}]
+materials: {{rock: {{density: {tcp.RHO}}}}}
+joints: {{default: {{kn: {tcp.KN}, ks: {tcp.KN}, friction: 60.0}}}}
+contact: {{algorithm: fast, point_area: 0.1}}
+blocks:
+  - {{name: floor, box: {{min: [-2, -2, -1], max: [0, 2, 0]}}, material: rock, fixed: true}}
+  - {{name: cube, box: {{min: [{E - 0.5}, -0.5, 0], max: [{E + 0.5}, 0.5, 1]}}, material: rock}}
+solve: {{time: 1.0, damping: none}}
+"""
+    s = make_solver(text)
+    b = s.blocks
+    i = free_row(s)
+    m = float(b.mass[i])
+    ip = m / 6.0 + m * (E * E + 0.25)
+    theta, omega, tt = [], [], []
+    for _ in range(20000):
+        s.advance()
+        up = tcp._rotation(b.q[i]) @ np.array([0.0, 0.0, 1.0])
+        theta.append(math.atan2(up[0], up[2]))
+        omega.append(b.w[i, 1])
+        tt.append(s.time)
+        if theta[-1] > math.radians(40.0):
+            break
+    theta, omega = np.array(theta), np.array(omega)
+    zc = 0.5 * np.cos(theta) - E * np.sin(theta)
+    w_ex = np.sqrt(2.0 * m * G * (0.5 - zc) / ip)
+    late = theta > math.radians(10.0)
+    err = float(np.abs(omega[late] / w_ex[late] - 1.0).max())
+    print(f"  {len(theta)} steps to 40 deg (t = {tt[-1]:.3f} s); max |omega/exact - 1| "
+          f"(theta > 10 deg) {err:.3f}")
+    fig, ax = plt.subplots(figsize=(8.5, 5))
+    th = np.linspace(0.0, math.radians(40.0), 400)
+    zz = 0.5 * np.cos(th) - E * np.sin(th)
+    ax.plot(np.degrees(th), np.sqrt(2.0 * m * G * (0.5 - zz) / ip), "k-", lw=1,
+            label=r"rigid pivot: $\omega = \sqrt{2 m g (z_c(0) - z_c(\theta)) / I_p}$")
+    ax.plot(np.degrees(theta), omega, color="C0", lw=2, alpha=0.6, label="pdem (fast common plane)")
+    ax.axvline(10.0, color="0.6", ls=":", lw=1)
+    ax.text(10.3, 0.2, f"θ > 10°: max error {100 * err:.1f} % (test: 3 %)", fontsize=8, color="0.3")
+    ax.set(xlabel=r"tilt angle $\theta$ (deg)", ylabel=r"angular velocity $\omega$ (rad/s)",
+           title="Unit cube tipping over a floor edge (overhang e = 0.1 m)\n"
+                 r"$z_c = \frac{a}{2}\cos\theta - e \sin\theta$, "
+                 r"$I_p = m a^2/6 + m (e^2 + a^2/4)$")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.grid(alpha=0.3)
+    save(fig, "tipping.png")
+
+
+# --------------------------------------------------------------------------- static relaxation
+def static():
+    print("static relaxation of a two-cube stack")
+    m, kn = tst.RHO * 1.0, tst.KN
+    d1, d2 = 2.0 * m * G / kn, m * G / kn
+    fig, ax = plt.subplots(figsize=(8.5, 5))
+    for damping, scaling in (("local", False), ("local", True), ("combined", False),
+                             ("adaptive", False)):
+        s = make_solver(tst.SCENE.replace("DAMP", damping).replace("SCALE", str(scaling).lower()))
+        ratio = []
+        while s.step < 200000:
+            s.advance()
+            ratio.append(s.ratio)
+            if s.ratio <= 1e-5:
+                break
+        z = {s.specs[g].name: s.blocks.x[i, 2] for i, g in enumerate(s.blocks.gid)}
+        e1 = (0.5 - z["low"]) / d1 - 1.0
+        e2 = ((1.5 - z["top"]) - (0.5 - z["low"])) / d2 - 1.0
+        lab = f"{damping}{' + mass scaling' if scaling else ''}"
+        print(f"  {lab}: {s.step} steps (dt {s.dt:.2e} s), ratio {s.ratio:.2e}, overlap errors "
+              f"lower {e1:+.2e} upper {e2:+.2e}, max |v| {np.abs(s.blocks.v).max():.1e} m/s")
+        ax.semilogy(np.arange(1, len(ratio) + 1), ratio, lw=1, ls="--" if scaling else "-",
+                    label=f"{lab}: {s.step} steps, overlap errors {e1:+.1e} / {e2:+.1e}")
+    ax.axhline(1e-5, color="C3", ls=":", lw=1, label="target ratio 1e-5")
+    ax.set(xlabel="step", ylabel="unbalanced-force ratio",
+           title="Two unit cubes on a floor relaxing to equilibrium:\n"
+                 r"overlaps $\delta_1 = 2 m g/(k_n A)$ (lower joint), "
+                 r"$\delta_2 = m g/(k_n A)$ (upper joint)")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1)
+    ax.grid(alpha=0.3, which="both")
+    save(fig, "static.png")
+
+
+CASES = {"incline": incline, "oscillator": oscillator, "bounce": bounce, "tumbling": tumbling,
+         "wedge": wedge, "tipping": tipping, "static": static}
+
+
+def main(argv):
+    names = argv or list(CASES)
+    t_all = time.perf_counter()
+    for name in names:
+        t0 = time.perf_counter()
+        CASES[name]()
+        print(f"  ({time.perf_counter() - t0:.1f} s)")
+    print(f"total {time.perf_counter() - t_all:.1f} s")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
