@@ -333,13 +333,12 @@ class Solver:
                              b.prev_moment[:n], self.dx[:n], self.dtheta[:n], self.stats)
             self.step += 1
             self.time += self.dt
-            # eq. 1 (bounded by the centroid motion plus rotation times the block radius)
-            moved = np.sqrt((self.dx[:n] ** 2).sum(1)) + \
-                np.sqrt((self.dtheta[:n] ** 2).sum(1)) * b.radius[:n]
-            b.u_acc[:n] += moved
-            b.u_geo[:n] += moved
-            b.u_mig[:n] += moved
-            bad = self._non_finite()
+            # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
+            # state check of _non_finite and the ghost-rebuild measure, in one kernel
+            limit = self.speed_limit[0] + self.speed_limit[1] * self.time
+            bad, u_mig_max = motion.motion_bookkeeping(
+                self.dx[:n], self.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n],
+                b.u_geo[:n], b.u_mig[:n], b.v[:n], b.x[:n], limit)
         with tm.phase("halo"):
             self.halo.forward(b, self.dtheta)
         rotation_matrices(b.q, self.R)
@@ -359,8 +358,7 @@ class Solver:
                 self.refresh(all_contacts=False)
         with tm.phase("halo"):
             # one small reduction a step: max unbalanced force, trouble, rebuild needed
-            rebuild = bool(n) and float(b.u_mig[:n][b.fixed[:n] == 0].max(initial=0.0)) > \
-                0.5 * self.margin
+            rebuild = bool(n) and u_mig_max > 0.5 * self.margin
             flags = np.array([self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild)])
             if self.comm.size > 1:
                 from mpi4py import MPI

@@ -75,13 +75,16 @@ class CellSpace:
 
 
 @kernel
-def _cell_range(lo, hi, origin, size, dims, b):
-    r = np.empty(6, np.int64)
-    for k in range(3):
-        a = int(np.floor((lo[b, k] - origin[k]) / size[k]))
-        z = int(np.floor((hi[b, k] - origin[k]) / size[k]))
-        r[k] = min(max(a, 0), dims[k] - 1)
-        r[3 + k] = min(max(z, 0), dims[k] - 1)
+def _cell_ranges(lo, hi, origin, size, dims):
+    """(n, 6) cell index ranges (first i, j, k, last i, j, k) of every envelope."""
+    n = lo.shape[0]
+    r = np.empty((n, 6), np.int64)
+    for b in range(n):
+        for k in range(3):
+            a = int(np.floor((lo[b, k] - origin[k]) / size[k]))
+            z = int(np.floor((hi[b, k] - origin[k]) / size[k]))
+            r[b, k] = min(max(a, 0), dims[k] - 1)
+            r[b, 3 + k] = min(max(z, 0), dims[k] - 1)
     return r
 
 
@@ -90,23 +93,24 @@ def candidate_pairs(lo, hi, active, origin, size, dims):
     """Map every block into the cells (CSR by counting sort), then search from active blocks."""
     n = lo.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
+    d1 = dims[1]
+    d2 = dims[2]
+    rng = _cell_ranges(lo, hi, origin, size, dims)
     count = np.zeros(ncell + 1, np.int64)
     for b in range(n):
-        r = _cell_range(lo, hi, origin, size, dims, b)
-        for i in range(r[0], r[3] + 1):
-            for j in range(r[1], r[4] + 1):
-                for k in range(r[2], r[5] + 1):
-                    count[(i * dims[1] + j) * dims[2] + k + 1] += 1
+        for i in range(rng[b, 0], rng[b, 3] + 1):
+            for j in range(rng[b, 1], rng[b, 4] + 1):
+                for k in range(rng[b, 2], rng[b, 5] + 1):
+                    count[(i * d1 + j) * d2 + k + 1] += 1
     for c in range(ncell):
         count[c + 1] += count[c]
     fill = count[:-1].copy()
     members = np.empty(count[ncell], np.int64)
     for b in range(n):
-        r = _cell_range(lo, hi, origin, size, dims, b)
-        for i in range(r[0], r[3] + 1):
-            for j in range(r[1], r[4] + 1):
-                for k in range(r[2], r[5] + 1):
-                    c = (i * dims[1] + j) * dims[2] + k
+        for i in range(rng[b, 0], rng[b, 3] + 1):
+            for j in range(rng[b, 1], rng[b, 4] + 1):
+                for k in range(rng[b, 2], rng[b, 5] + 1):
+                    c = (i * d1 + j) * d2 + k
                     members[fill[c]] = b
                     fill[c] += 1
     cap = 16 * n + 16
@@ -117,11 +121,12 @@ def candidate_pairs(lo, hi, active, origin, size, dims):
     for b in range(n):
         if not active[b]:
             continue
-        r = _cell_range(lo, hi, origin, size, dims, b)
-        for i in range(r[0], r[3] + 1):
-            for j in range(r[1], r[4] + 1):
-                for k in range(r[2], r[5] + 1):
-                    c = (i * dims[1] + j) * dims[2] + k
+        lb0, lb1, lb2 = lo[b, 0], lo[b, 1], lo[b, 2]
+        hb0, hb1, hb2 = hi[b, 0], hi[b, 1], hi[b, 2]
+        for i in range(rng[b, 0], rng[b, 3] + 1):
+            for j in range(rng[b, 1], rng[b, 4] + 1):
+                for k in range(rng[b, 2], rng[b, 5] + 1):
+                    c = (i * d1 + j) * d2 + k
                     for t in range(count[c], count[c + 1]):
                         o = members[t]
                         if o == b or seen[o] == b:
@@ -130,9 +135,8 @@ def candidate_pairs(lo, hi, active, origin, size, dims):
                         # an active pair is found from both sides: keep it once
                         if active[o] and o < b:
                             continue
-                        if (lo[b, 0] > hi[o, 0] or lo[o, 0] > hi[b, 0] or lo[b, 1] > hi[o, 1]
-                                or lo[o, 1] > hi[b, 1] or lo[b, 2] > hi[o, 2]
-                                or lo[o, 2] > hi[b, 2]):
+                        if (lb0 > hi[o, 0] or lo[o, 0] > hb0 or lb1 > hi[o, 1]
+                                or lo[o, 1] > hb1 or lb2 > hi[o, 2] or lo[o, 2] > hb2):
                             continue
                         if m == cap:
                             cap *= 2

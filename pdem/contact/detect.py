@@ -51,6 +51,40 @@ def _world_normals(R, b, face_start, normals_local):
 
 
 @kernel
+def world_vectors(R, start, local, rows):
+    """Body-frame vectors (CSR by block, ``start``) rotated to the world, for the blocks with
+    ``rows[b] != 0`` (others are left uninitialised)."""
+    out = np.empty_like(local)
+    for b in range(start.shape[0] - 1):
+        if rows[b] == 0:
+            continue
+        for f in range(start[b], start[b + 1]):
+            for k in range(3):
+                out[f, k] = R[b, k, 0] * local[f, 0] + R[b, k, 1] * local[f, 1] \
+                    + R[b, k, 2] * local[f, 2]
+    return out
+
+
+@kernel
+def _plane(a, b, x, vert_start, verts_world, face_start, normals_world, edir_start, edirs_world,
+           n_in, p_in, warm, ctol, algorithm, snap_tol):
+    """``find_plane`` with the world face normals and edge directions precomputed."""
+    va = verts_world[vert_start[a]:vert_start[a + 1]]
+    vb = verts_world[vert_start[b]:vert_start[b + 1]]
+    if algorithm == FAST:
+        n, p, gap, _, _, _ = fast_common_plane(
+            va, vb, x[a], x[b],
+            normals_world[face_start[a]:face_start[a + 1]],
+            normals_world[face_start[b]:face_start[b + 1]],
+            edirs_world[edir_start[a]:edir_start[a + 1]],
+            edirs_world[edir_start[b]:edir_start[b + 1]], n_in, p_in, warm, ctol)
+    else:
+        n, p, gap, _, _, _ = common_plane(va, vb, x[a], x[b], n_in, p_in, warm, ctol, K_MAX,
+                                          K_MIN, snap_tol)
+    return n, p, gap
+
+
+@kernel
 def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, edir_start,
                edirs, n_in, p_in, warm, ctol, algorithm, snap_tol):
     """Common plane of blocks a, b: (n, p, gap). Cundall's iteration (eqs. 5-10) or the fast
@@ -71,6 +105,14 @@ def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, e
 
 
 @kernel
+def _grow(a, size):
+    """``a`` enlarged to ``size`` rows (contents kept)."""
+    out = np.empty((size,) + a.shape[1:], a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@kernel
 def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, edir_start, edirs,
                      point_area, c_ia, c_ib, c_normal, c_point, c_gap, c_ctype, c_warm,
                      old_start, old_pa, old_area, old_un, old_fs, old_us, old_dil, old_state,
@@ -84,44 +126,55 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
     periodic geometry updates).
     """
     nc = c_ia.shape[0]
-    cap = 0
-    for c in range(nc):
-        cap += (old_start[c + 1] - old_start[c]) + (vert_start[c_ia[c] + 1] - vert_start[c_ia[c]]) + \
-            (vert_start[c_ib[c] + 1] - vert_start[c_ib[c]]) + 1
+    # output capacity: the old sub-contacts plus a few per refreshed contact, grown on demand
+    cap = old_start[nc] + 8 * nc + 16
     keep = np.zeros(nc, np.uint8)
     counts = np.zeros(nc, np.int64)
     pa = np.empty((cap, 3))
     area = np.empty(cap)
     un = np.empty(cap)
-    fs = np.zeros((cap, 3))
-    us = np.zeros((cap, 3))
-    dil = np.zeros(cap)
-    state = np.zeros(cap, np.int64)
+    fs = np.empty((cap, 3))
+    us = np.empty((cap, 3))
+    dil = np.empty(cap)
+    state = np.empty(cap, np.int64)
+    # world face normals and edge directions, once per block (each block is in many contacts)
+    rows = np.zeros(vert_start.shape[0] - 1, np.uint8)
+    if algorithm == FAST:
+        for c in range(nc):
+            if todo[c] != 0:
+                rows[c_ia[c]] = 1
+                rows[c_ib[c]] = 1
+    normals_world = world_vectors(R, face_start, normals_local, rows)
+    edirs_world = world_vectors(R, edir_start, edirs, rows)
     pos = 0
-    base = np.empty(nc, np.int64)
     for c in range(nc):
         a = c_ia[c]
         b = c_ib[c]
-        base[c] = pos
         if todo[c] == 0:
             keep[c] = 1
             k = old_start[c + 1] - old_start[c]
+            if pos + k > cap:
+                cap = 2 * cap + k
+                pa, fs, us = _grow(pa, cap), _grow(fs, cap), _grow(us, cap)
+                area, un, dil, state = _grow(area, cap), _grow(un, cap), _grow(dil, cap), \
+                    _grow(state, cap)
             for i in range(k):
                 o = old_start[c] + i
                 s = pos + i
-                pa[s] = old_pa[o]
+                for m in range(3):
+                    pa[s, m] = old_pa[o, m]
+                    fs[s, m] = old_fs[o, m]
+                    us[s, m] = old_us[o, m]
                 area[s] = old_area[o]
                 un[s] = old_un[o]
-                fs[s] = old_fs[o]
-                us[s] = old_us[o]
                 dil[s] = old_dil[o]
                 state[s] = old_state[o]
             counts[c] = k
             pos += k
             continue
-        n, p, gap = find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local,
-                               edir_start, edirs, c_normal[c], c_point[c], c_warm[c] == 1, ctol,
-                               algorithm, snap_tol)
+        n, p, gap = _plane(a, b, x, vert_start, verts_world, face_start, normals_world,
+                           edir_start, edirs_world, c_normal[c], c_point[c], c_warm[c] == 1,
+                           ctol, algorithm, snap_tol)
         if gap > ctol:
             continue
         keep[c] = 1
@@ -135,6 +188,11 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
         c_ctype[c] = min(cnt[0], 3) * 4 + min(cnt[1], 3)
         apt = min(point_area[a], point_area[b])
         k = pts.shape[0]
+        if pos + k > cap:
+            cap = 2 * cap + k
+            pa, fs, us = _grow(pa, cap), _grow(fs, cap), _grow(us, cap)
+            area, un, dil, state = _grow(area, cap), _grow(un, cap), _grow(dil, cap), \
+                _grow(state, cap)
         o0 = old_start[c]
         o1 = old_start[c + 1]
         for i in range(k):
@@ -166,18 +224,21 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
                     us[s, m] = old_us[best, m]
                 dil[s] = old_dil[best]
                 state[s] = old_state[best]
-            elif ovl[i] < 0.0:
+            else:
+                for m in range(3):
+                    fs[s, m] = 0.0
+                    us[s, m] = 0.0
+                dil[s] = 0.0
                 # a joint that forms open has no bond: no tension or cohesion
-                state[s] = FAILED
+                state[s] = FAILED if ovl[i] < 0.0 else 0
         counts[c] = k
         pos += k
     new_start = np.zeros(nc + 1, np.int64)
-    # compact, dropping deleted contacts' (empty) ranges
+    # sub-contacts were written sequentially (deleted contacts have empty ranges)
     tot = 0
     for c in range(nc):
         new_start[c] = tot
         tot += counts[c]
     new_start[nc] = tot
-    # sub-contacts were written at base[c] == new_start[c] already (sequential fill)
     return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], dil[:tot], \
         state[:tot]

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ..jit import kernel
 from .joint import coulomb_slip
 
@@ -45,9 +43,6 @@ def contact_forces(dt, x, R, v, w, dtheta, force, moment,
     opposite sign and correspondingly flips eq. 29/31.)
     """
     nc = c_ia.shape[0]
-    dus = np.empty(3)
-    fs = np.empty(3)
-    us = np.empty(3)
     for c in range(nc):
         a = c_ia[c]
         b = c_ib[c]
@@ -63,6 +58,35 @@ def contact_forces(dt, x, R, v, w, dtheta, force, moment,
         inv = 1.0 / math.sqrt(mx * mx + my * my + mz * mz)
         nx, ny, nz = mx * inv, my * inv, mz * inv
         c_normal[c, 0], c_normal[c, 1], c_normal[c, 2] = nx, ny, nz
+        s0 = sc_start[c]
+        s1 = sc_start[c + 1]
+        if s1 == s0:
+            continue
+        # Per-contact constants, hoisted into locals (the compiler cannot prove the sub-contact
+        # stores do not alias the block arrays, so it would reload them per sub-contact).
+        r00, r01, r02 = R[a, 0, 0], R[a, 0, 1], R[a, 0, 2]
+        r10, r11, r12 = R[a, 1, 0], R[a, 1, 1], R[a, 1, 2]
+        r20, r21, r22 = R[a, 2, 0], R[a, 2, 1], R[a, 2, 2]
+        # r_b = r_a + d with d = x_a - x_b
+        ddx = x[a, 0] - x[b, 0]
+        ddy = x[a, 1] - x[b, 1]
+        ddz = x[a, 2] - x[b, 2]
+        wax, way, waz = w[a, 0], w[a, 1], w[a, 2]
+        wbx, wby, wbz = w[b, 0], w[b, 1], w[b, 2]
+        # eq. 15: V = v_b + w_b x r_b - v_a - w_a x r_a = V0 + (w_b - w_a) x r_a
+        v0x = v[b, 0] - v[a, 0] + (wby * ddz - wbz * ddy)
+        v0y = v[b, 1] - v[a, 1] + (wbz * ddx - wbx * ddz)
+        v0z = v[b, 2] - v[a, 2] + (wbx * ddy - wby * ddx)
+        dwx = wbx - wax
+        dwy = wby - way
+        dwz = wbz - waz
+        kn_j = kn[j]
+        ks_j = ks[j]
+        tphi = tan_phi[j]
+        tpsi = tan_psi[j]
+        coh = cohesion[j]
+        ten = tension[j]
+        ulim = us_lim[j]
         fbx = 0.0
         fby = 0.0
         fbz = 0.0
@@ -72,73 +96,72 @@ def contact_forces(dt, x, R, v, w, dtheta, force, moment,
         mbx = 0.0
         mby = 0.0
         mbz = 0.0
-        for s in range(sc_start[c], sc_start[c + 1]):
-            # world position of the sub-contact (stored in A's body frame)
-            px = x[a, 0] + R[a, 0, 0] * sc_pa[s, 0] + R[a, 0, 1] * sc_pa[s, 1] + R[a, 0, 2] * sc_pa[s, 2]
-            py = x[a, 1] + R[a, 1, 0] * sc_pa[s, 0] + R[a, 1, 1] * sc_pa[s, 1] + R[a, 1, 2] * sc_pa[s, 2]
-            pz = x[a, 2] + R[a, 2, 0] * sc_pa[s, 0] + R[a, 2, 1] * sc_pa[s, 1] + R[a, 2, 2] * sc_pa[s, 2]
-            rax, ray, raz = px - x[a, 0], py - x[a, 1], pz - x[a, 2]
-            rbx, rby, rbz = px - x[b, 0], py - x[b, 1], pz - x[b, 2]
+        for s in range(s0, s1):
+            # sub-contact relative to A's centroid (stored in A's body frame)
+            p0, p1, p2 = sc_pa[s, 0], sc_pa[s, 1], sc_pa[s, 2]
+            rax = r00 * p0 + r01 * p1 + r02 * p2
+            ray = r10 * p0 + r11 * p1 + r12 * p2
+            raz = r20 * p0 + r21 * p1 + r22 * p2
             # eq. 15: velocity of B relative to A at the sub-contact
-            vx = (v[b, 0] + w[b, 1] * rbz - w[b, 2] * rby) - (v[a, 0] + w[a, 1] * raz - w[a, 2] * ray)
-            vy = (v[b, 1] + w[b, 2] * rbx - w[b, 0] * rbz) - (v[a, 1] + w[a, 2] * rax - w[a, 0] * raz)
-            vz = (v[b, 2] + w[b, 0] * rby - w[b, 1] * rbx) - (v[a, 2] + w[a, 0] * ray - w[a, 1] * rax)
+            vx = v0x + (dwy * raz - dwz * ray)
+            vy = v0y + (dwz * rax - dwx * raz)
+            vz = v0z + (dwx * ray - dwy * rax)
             dun = (vx * nx + vy * ny + vz * nz) * dt  # eqs. 20-21
-            dus[0] = vx * dt - dun * nx  # eq. 22
-            dus[1] = vy * dt - dun * ny
-            dus[2] = vz * dt - dun * nz
-            sc_un[s] -= dun
+            dsx = vx * dt - dun * nx  # eq. 22
+            dsy = vy * dt - dun * ny
+            dsz = vz * dt - dun * nz
+            un = sc_un[s] - dun
+            sc_un[s] = un
             # eq. 23: keep the shear force in the (turned) plane, magnitude preserved
-            fs[0], fs[1], fs[2] = sc_fs[s, 0], sc_fs[s, 1], sc_fs[s, 2]
-            mag0 = math.sqrt(fs[0] * fs[0] + fs[1] * fs[1] + fs[2] * fs[2])
-            if mag0 > 0.0:
-                fdn = fs[0] * nx + fs[1] * ny + fs[2] * nz
-                fs[0] -= fdn * nx
-                fs[1] -= fdn * ny
-                fs[2] -= fdn * nz
-                mag1 = math.sqrt(fs[0] * fs[0] + fs[1] * fs[1] + fs[2] * fs[2])
+            fx, fy, fz = sc_fs[s, 0], sc_fs[s, 1], sc_fs[s, 2]
+            fdn = fx * nx + fy * ny + fz * nz
+            if fdn != 0.0:
+                mag0 = fx * fx + fy * fy + fz * fz
+                fx -= fdn * nx
+                fy -= fdn * ny
+                fz -= fdn * nz
+                mag1 = fx * fx + fy * fy + fz * fz
                 if mag1 > 0.0:
-                    fs[0] *= mag0 / mag1
-                    fs[1] *= mag0 / mag1
-                    fs[2] *= mag0 / mag1
+                    sc = math.sqrt(mag0 / mag1)
+                    fx *= sc
+                    fy *= sc
+                    fz *= sc
             area = sc_area[s]
-            kss = ks[j] * area
-            fs[0] -= kss * dus[0]  # eq. 25, 27
-            fs[1] -= kss * dus[1]
-            fs[2] -= kss * dus[2]
-            us[0] = sc_us[s, 0] + dus[0]
-            us[1] = sc_us[s, 1] + dus[1]
-            us[2] = sc_us[s, 2] + dus[2]
-            sc_us[s, 0], sc_us[s, 1], sc_us[s, 2] = us[0], us[1], us[2]
-            fn, dil, st = coulomb_slip(sc_un[s], sc_dil[s], fs, dus, area, kn[j], ks[j],
-                                       tan_phi[j], tan_psi[j], cohesion[j], tension[j],
-                                       us_lim[j], us, sc_state[s])
+            kss = ks_j * area
+            ux = sc_us[s, 0] + dsx
+            uy = sc_us[s, 1] + dsy
+            uz = sc_us[s, 2] + dsz
+            sc_us[s, 0], sc_us[s, 1], sc_us[s, 2] = ux, uy, uz
+            fn, dil, st, fx, fy, fz = coulomb_slip(
+                un, sc_dil[s], fx - kss * dsx, fy - kss * dsy, fz - kss * dsz,  # eq. 25, 27
+                dsx, dsy, dsz, area, kn_j, tphi, tpsi, coh, ten, ulim, ux, uy, uz, sc_state[s])
             sc_fn[s] = fn
             sc_dil[s] = dil
             sc_state[s] = st
-            sc_fs[s, 0], sc_fs[s, 1], sc_fs[s, 2] = fs[0], fs[1], fs[2]
-            # force on B (eq. 28 with our sign), moments about each centroid (eqs. 30, 32)
-            fx = fn * nx + fs[0]
-            fy = fn * ny + fs[1]
-            fz = fn * nz + fs[2]
+            sc_fs[s, 0], sc_fs[s, 1], sc_fs[s, 2] = fx, fy, fz
+            # force on B (eq. 28 with our sign), moments about each centroid (eqs. 30, 32):
+            # m_b = r_b x f = r_a x f + d x f, summed per contact; m_a = -(r_a x f)
+            fx += fn * nx
+            fy += fn * ny
+            fz += fn * nz
             fbx += fx
             fby += fy
             fbz += fz
-            mbx += rby * fz - rbz * fy
-            mby += rbz * fx - rbx * fz
-            mbz += rbx * fy - rby * fx
-            max_ -= ray * fz - raz * fy
-            may -= raz * fx - rax * fz
-            maz -= rax * fy - ray * fx
+            max_ += ray * fz - raz * fy
+            may += raz * fx - rax * fz
+            maz += rax * fy - ray * fx
+        mbx = max_ + (ddy * fbz - ddz * fby)
+        mby = may + (ddz * fbx - ddx * fbz)
+        mbz = maz + (ddx * fby - ddy * fbx)
         force[a, 0] -= fbx
         force[a, 1] -= fby
         force[a, 2] -= fbz
         force[b, 0] += fbx
         force[b, 1] += fby
         force[b, 2] += fbz
-        moment[a, 0] += max_
-        moment[a, 1] += may
-        moment[a, 2] += maz
+        moment[a, 0] -= max_
+        moment[a, 1] -= may
+        moment[a, 2] -= maz
         moment[b, 0] += mbx
         moment[b, 1] += mby
         moment[b, 2] += mbz

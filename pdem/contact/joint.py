@@ -19,64 +19,58 @@ OPEN = 4  # normal force zero: separated
 
 
 @kernel
-def coulomb_slip(un, dil, fs, dus, area, kn, ks, tan_phi, tan_psi, cohesion, tension, us_lim,
-                 us, state):
+def coulomb_slip(un, dil, fx, fy, fz, dx, dy, dz, area, kn, tan_phi, tan_psi, cohesion,
+                 tension, us_lim, ux, uy, uz, state):
     """Update one sub-contact's normal and shear force (eqs. 24-27, 34-43).
+
+    Scalars only, so the force loop keeps everything in registers.
 
     Parameters
     ----------
-    un : float
-        Overlap (normal closure) of the surfaces, + in compression; normal force is
-        ``kn * area * (un + dil)`` (the total form of eqs. 24, 26, 43).
-    dil : float
-        Accumulated dilation (eq. 42).
-    fs : (3,) array, updated in place
-        Shear force on block B, already carrying this step's elastic increment (eq. 25, 27).
-    dus : (3,) array
-        This step's shear displacement increment (eq. 22), for dilation (eq. 41).
-    us : (3,) array
-        Total shear displacement (after this step's increment), for the dilation limit.
-    state : int
-        State bits (SLIPPING, FAILED, OPEN).
+    un : overlap of the surfaces (+ closing); normal force is ``kn * area * (un + dil)``, the
+        total form of eqs. 24, 26, 43.
+    dil : accumulated dilation (eq. 42).
+    fx, fy, fz : trial shear force on block B, already carrying this step's elastic increment
+        (eqs. 25, 27).
+    dx, dy, dz : this step's shear displacement increment (eq. 22), for dilation (eq. 41).
+    ux, uy, uz : total shear displacement after this step, for the dilation limit.
+    state : state bits (SLIPPING, FAILED, OPEN).
 
     Returns
     -------
-    fn, dil, state
+    (fn, dil, state, fx, fy, fz)
     """
     state = state & FAILED
     fn = kn * area * (un + dil)
     t_max = 0.0 if state & FAILED else tension * area  # eq. 34, 36
     c_area = 0.0 if state & FAILED else cohesion * area
     if fn < -t_max:  # eq. 38: tensile failure
-        fs[0] = 0.0
-        fs[1] = 0.0
-        fs[2] = 0.0
         if t_max > 0.0 or c_area > 0.0:
             state |= FAILED
-        return 0.0, dil, state | OPEN
+        return 0.0, dil, state | OPEN, 0.0, 0.0, 0.0
     fs_max = c_area + max(fn, 0.0) * tan_phi  # eq. 35, 37
-    fs_mag = math.sqrt(fs[0] * fs[0] + fs[1] * fs[1] + fs[2] * fs[2])
+    fs_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
     if fs_mag > fs_max:  # eq. 39
         scale = fs_max / fs_mag
-        fs[0] *= scale
-        fs[1] *= scale
-        fs[2] *= scale
+        fx *= scale
+        fy *= scale
+        fz *= scale
         state |= SLIPPING
         if t_max > 0.0 or c_area > 0.0:
             state |= FAILED
         if tan_psi > 0.0:
             # Dilation only while slipping (eq. 41-42), growing when the increment follows the
             # accumulated shear and shrinking when it reverses; none past the limit.
-            dus_mag = math.sqrt(dus[0] * dus[0] + dus[1] * dus[1] + dus[2] * dus[2])
-            us_mag = math.sqrt(us[0] * us[0] + us[1] * us[1] + us[2] * us[2])
+            dus_mag = math.sqrt(dx * dx + dy * dy + dz * dz)
+            us_mag = math.sqrt(ux * ux + uy * uy + uz * uz)
             if us_mag < us_lim:
-                sign = 1.0 if dus[0] * us[0] + dus[1] * us[1] + dus[2] * us[2] >= 0.0 else -1.0
+                sign = 1.0 if dx * ux + dy * uy + dz * uz >= 0.0 else -1.0
                 dil = max(dil + sign * dus_mag * tan_psi, 0.0)
                 fn = kn * area * (un + dil)  # eq. 43
     if fn <= 0.0:
         state |= OPEN
         fn = min(fn, 0.0)
-    return fn, dil, state
+    return fn, dil, state, fx, fy, fz
 
 
 JOINT_MODELS = {"coulomb": 0}

@@ -47,8 +47,12 @@ def hull2d(pts, eps):
 
     Returns (hull (k,2), kind) with kind POINT, SEGMENT or POLYGON."""
     m = pts.shape[0]
-    order = np.argsort(pts[:, 0] * 1.0 + pts[:, 1] * 1e-7)
-    # stable lexicographic order by (x, y)
+    # lexicographic order by (x, y): insertion sort, pre-sorted for larger inputs (the order of
+    # exact duplicates does not change the hull)
+    if m > 32:
+        order = np.argsort(pts[:, 0] * 1.0 + pts[:, 1] * 1e-7)
+    else:
+        order = np.arange(m)
     for i in range(1, m):
         j = i
         while j > 0:
@@ -80,7 +84,7 @@ def hull2d(pts, eps):
         h[k, 1] = pts[i, 1]
         k += 1
     k = max(k - 1, 1)
-    out = h[:k].copy()
+    out = h[:k]
     # collapse to a point/segment when the extent is negligible
     span = 0.0
     for i in range(k):
@@ -192,7 +196,7 @@ def _clip_polygon(subject, clip):
                 nn += 1
         cur, nxt = nxt, cur
         nc = nn
-    return cur[:nc].copy()
+    return cur[:nc]
 
 
 @kernel
@@ -282,39 +286,59 @@ def contact_region(va, vb, n, p, touch_tol):
     e1, e2 = plane_basis(n)
     na = va.shape[0]
     nb = vb.shape[0]
-    ha = np.empty(na)
-    hb = np.empty(nb)
+    n0, n1, n2 = n[0], n[1], n[2]
+    p0, p1, p2 = p[0], p[1], p[2]
+    # heights above the plane: A's in h[:na], B's in h[na:]
+    h = np.empty(na + nb)
+    amax = -np.inf
     for i in range(na):
-        ha[i] = n[0] * (va[i, 0] - p[0]) + n[1] * (va[i, 1] - p[1]) + n[2] * (va[i, 2] - p[2])
+        hi = n0 * (va[i, 0] - p0) + n1 * (va[i, 1] - p1) + n2 * (va[i, 2] - p2)
+        h[i] = hi
+        amax = max(amax, hi)
+    bmin = np.inf
     for i in range(nb):
-        hb[i] = n[0] * (vb[i, 0] - p[0]) + n[1] * (vb[i, 1] - p[1]) + n[2] * (vb[i, 2] - p[2])
-    amax = ha.max()
-    bmin = hb.min()
-    ia = np.nonzero(ha >= amax - touch_tol)[0]
-    ib = np.nonzero(hb <= bmin + touch_tol)[0]
-    sta = np.empty((ia.size, 2))
-    stb = np.empty((ib.size, 2))
-    for k in range(ia.size):
-        d = va[ia[k]] - p
-        sta[k, 0] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
-        sta[k, 1] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
-    for k in range(ib.size):
-        d = vb[ib[k]] - p
-        stb[k, 0] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
-        stb[k, 1] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
-    counts = np.array([ia.size, ib.size])
+        hi = n0 * (vb[i, 0] - p0) + n1 * (vb[i, 1] - p1) + n2 * (vb[i, 2] - p2)
+        h[na + i] = hi
+        bmin = min(bmin, hi)
+    # touching vertices projected on the plane: A's in st[:ka], B's in st[ka:ka + kb], with
+    # their heights in ht
+    st = np.empty((na + nb, 2))
+    ht = np.empty(na + nb)
+    ka = 0
+    for i in range(na):
+        if h[i] >= amax - touch_tol:
+            d0 = va[i, 0] - p0
+            d1 = va[i, 1] - p1
+            d2 = va[i, 2] - p2
+            st[ka, 0] = d0 * e1[0] + d1 * e1[1] + d2 * e1[2]
+            st[ka, 1] = d0 * e2[0] + d1 * e2[1] + d2 * e2[2]
+            ht[ka] = h[i]
+            ka += 1
+    kb = 0
+    for i in range(nb):
+        if h[na + i] <= bmin + touch_tol:
+            d0 = vb[i, 0] - p0
+            d1 = vb[i, 1] - p1
+            d2 = vb[i, 2] - p2
+            st[ka + kb, 0] = d0 * e1[0] + d1 * e1[1] + d2 * e1[2]
+            st[ka + kb, 1] = d0 * e2[0] + d1 * e2[1] + d2 * e2[2]
+            ht[ka + kb] = h[na + i]
+            kb += 1
+    sta = st[:ka]
+    stb = st[ka:ka + kb]
+    counts = np.empty(2, np.int64)
+    counts[0] = ka
+    counts[1] = kb
     # size scale for the 2D tolerances
     scale = 0.0
-    for k in range(ia.size):
-        scale = max(scale, abs(sta[k, 0]) + abs(sta[k, 1]))
-    for k in range(ib.size):
-        scale = max(scale, abs(stb[k, 0]) + abs(stb[k, 1]))
+    for k in range(ka + kb):
+        scale = max(scale, abs(st[k, 0]) + abs(st[k, 1]))
     scale = max(scale, touch_tol, 1e-300)
     eps = 1e-12 * scale * scale
     polya, kinda = hull2d(sta, eps)
     polyb, kindb = hull2d(stb, eps)
-    ca0, cas, cat = height_fit(sta, ha[ia])
-    cb0, cbs, cbt = height_fit(stb, hb[ib])
+    ca0, cas, cat = height_fit(sta, ht[:ka])
+    cb0, cbs, cbt = height_fit(stb, ht[ka:ka + kb])
 
     if kinda == POLYGON and kindb == POLYGON:
         pts = _clip_polygon(polya, polyb)

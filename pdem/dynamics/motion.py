@@ -475,6 +475,36 @@ def stagger_start(
         w[i, 0], w[i, 1], w[i, 2] = r
 
 
+@kernel
+def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, speed_limit):
+    """After :func:`integrate`: accumulate each block's motion bound (eq. 1: centroid motion
+    plus rotation times the block radius) into ``u_acc``, ``u_geo``, ``u_mig``, and check the
+    state.
+
+    Returns ``(bad, u_mig_max)``: the row of the first block with a non-finite position or
+    speed, or a speed above ``speed_limit`` (-1 if none), and the largest ``u_mig`` of the free
+    (not ``fixed``) blocks (0 if none).
+    """
+    bad = -1
+    u_max = 0.0
+    for i in range(dx.shape[0]):
+        moved = math.sqrt(dx[i, 0] * dx[i, 0] + dx[i, 1] * dx[i, 1] + dx[i, 2] * dx[i, 2]) + \
+            math.sqrt(dtheta[i, 0] * dtheta[i, 0] + dtheta[i, 1] * dtheta[i, 1]
+                      + dtheta[i, 2] * dtheta[i, 2]) * radius[i]
+        u_acc[i] += moved
+        u_geo[i] += moved
+        um = u_mig[i] + moved
+        u_mig[i] = um
+        if fixed[i] == 0 and um > u_max:
+            u_max = um
+        if bad < 0:
+            speed = math.sqrt(v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
+            if not (math.isfinite(speed) and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1])
+                    and math.isfinite(x[i, 2])) or speed > speed_limit:
+                bad = i
+    return bad, u_max
+
+
 def new_stats() -> np.ndarray:
     """A zeroed ``out_stats`` array for :func:`integrate`."""
     return np.zeros(N_STATS)
