@@ -334,7 +334,7 @@ class Solver:
             self.step += 1
             self.time += self.dt
             # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
-            # state check of _non_finite and the ghost-rebuild measure, in one kernel
+            # state check and the ghost-rebuild measure, in one kernel
             limit = self.speed_limit[0] + self.speed_limit[1] * self.time
             bad, u_mig_max = motion.motion_bookkeeping(
                 self.dx[:n], self.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n],
@@ -377,15 +377,6 @@ class Solver:
         self.ratio = float(flags[0]) / self.ref_force
         if flags[2] and self.comm.size > 1:
             self.redistribute()
-
-    def _non_finite(self) -> int:
-        """Row of the first owned block with a non-finite or runaway state, or -1."""
-        b = self.blocks
-        n = self.n_owned
-        speed = np.sqrt((b.v[:n] ** 2).sum(1))
-        limit = self.speed_limit[0] + self.speed_limit[1] * self.time
-        bad = ~np.isfinite(speed) | ~np.isfinite(b.x[:n]).all(1) | (speed > limit)
-        return int(np.argmax(bad)) if bad.any() else -1
 
     def _raise_non_finite(self, row: int):
         """Every rank raises the same SimulationError, naming the first bad block (by gid)."""

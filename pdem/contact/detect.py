@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..jit import kernel
-from .common_plane import common_plane
+from .common_plane import common_plane, type_code
 from .fast_common_plane import fast_common_plane
 from .joint import FAILED
 from .subcontacts import POLYGON, contact_region
@@ -185,7 +185,7 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
         va = verts_world[vert_start[a]:vert_start[a + 1]]
         vb = verts_world[vert_start[b]:vert_start[b + 1]]
         pts, ovl, ar, kind, e1, e2, cnt = contact_region(va, vb, n, p, touch_frac * ctol)
-        c_ctype[c] = min(cnt[0], 3) * 4 + min(cnt[1], 3)
+        c_ctype[c] = type_code(cnt[0], cnt[1])  # Table 1
         apt = min(point_area[a], point_area[b])
         k = pts.shape[0]
         if pos + k > cap:

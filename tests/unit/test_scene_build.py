@@ -94,3 +94,15 @@ def test_generators_expand_in_order():
     assert len(specs) == 1 + 6 + 5
     again = expand_blocks(scene)
     assert all(np.array_equal(a.shape.vertices, b.shape.vertices) for a, b in zip(specs, again, strict=True))
+
+
+def test_contact_types_from_touching_vertices():
+    """Table 1: a cube face-down on the floor is face-face; a tetrahedron standing on its
+    apex is vertex-face (numbers of vertices touching the common plane)."""
+    from pdem.contact.common_plane import FACE_FACE, VERTEX_FACE
+
+    s = build("  - {name: cube, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock}\n")
+    assert s.contacts.ctype.tolist() == [FACE_FACE]
+    s = build("  - {name: tip, polyhedron: {vertices: [[0, 0, 0.0005], [1, 0, 1], [-1, 0.5, 1], "
+              "[0, -1, 1]]}, material: rock}\n")
+    assert s.contacts.ctype.tolist() == [VERTEX_FACE]
