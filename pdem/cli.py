@@ -115,8 +115,6 @@ def _fail_during_run(comm, exc, solver) -> None:
     """An error while stepping may have happened on one rank only: the others are waiting in a
     collective, so a multi-rank job is aborted (the output was flushed at the last snapshot).
     A serial run closes its files and reports the error."""
-    import traceback
-
     from .errors import SimulationError, UserError
 
     if comm.size == 1 or isinstance(exc, SimulationError):
@@ -127,13 +125,9 @@ def _fail_during_run(comm, exc, solver) -> None:
                 print(f"pdem: {exc}", file=sys.stderr)
             return
         raise exc
-    if isinstance(exc, UserError):
-        sys.stderr.write(f"pdem: error on rank {comm.rank}: {exc}\n")
-    else:
-        sys.stderr.write(f"pdem: internal error on rank {comm.rank}:\n")
-        traceback.print_exception(exc)
-    sys.stderr.flush()
-    comm.Abort(1)
+    from .parallel.mpi import abort_with_message
+
+    abort_with_message(comm, exc)
 
 
 def _check(args, comm, log) -> int:

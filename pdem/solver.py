@@ -139,8 +139,8 @@ class Solver:
             self.lo = np.zeros((b.n, 3))
             self.hi = np.zeros((b.n, 3))
             envelopes(b.vert_start, b.verts_world, 0.5 * self.ctol, self.lo, self.hi)
-            if b.n:
-                self.cells = CellSpace(self.lo, self.hi, self.cell_size)
+            # a rank whose brick holds no block has no cell space until blocks arrive
+            self.cells = CellSpace(self.lo, self.hi, self.cell_size) if b.n else None
             self.dx = np.zeros((b.n, 3))
             self.dtheta = np.zeros((b.n, 3))
             self.owned_free = b.gid[:self.n_owned][b.fixed[:self.n_owned] == 0]
@@ -243,6 +243,8 @@ class Solver:
         """Remap ``active`` blocks and create contacts with new neighbours (gap <= CTOL is
         decided by the next refresh; pairs found farther apart are dropped there)."""
         b = self.blocks
+        if b.n == 0:
+            return 0
         envelopes(b.vert_start, b.verts_world, 0.5 * self.ctol, self.lo, self.hi)
         # Every search maps all blocks afresh, so a grown cell space needs no extra remap; which
         # pairs are found depends only on the envelopes, never on the cell layout (a rank's

@@ -45,20 +45,30 @@ def install_abort_hook(comm) -> None:
     previous = sys.excepthook
 
     def hook(kind, value, tb):
-        from .. import errors
-
-        if isinstance(value, errors.UserError):
-            sys.stderr.write(f"pdem: error on rank {comm.rank}: {value}\n")
-        else:
-            sys.stderr.write(f"pdem: internal error on rank {comm.rank}:\n")
-            traceback.print_exception(kind, value, tb)
-        sys.stderr.flush()
         try:
-            comm.Abort(1)
+            abort_with_message(comm, value)
         finally:
             previous(kind, value, tb)
 
     sys.excepthook = hook
+
+
+def abort_with_message(comm, exc: BaseException) -> None:
+    """Print this rank's error in one write, let the launcher forward it, abort every rank."""
+    import os
+    import time
+
+    from .. import errors
+
+    if isinstance(exc, errors.UserError):
+        text = f"pdem: error on rank {comm.rank}: {exc}\n"
+    else:
+        text = f"pdem: internal error on rank {comm.rank}:\n" + "".join(
+            traceback.format_exception(type(exc), exc, exc.__traceback__))
+    sys.stdout.flush()
+    os.write(2, text.encode())  # one unbuffered write: the message cannot be cut in half
+    time.sleep(0.5)  # the launcher forwards stderr asynchronously; Abort kills it quickly
+    comm.Abort(1)
 
 
 def allreduce_max(comm, value: float) -> float:

@@ -1,0 +1,104 @@
+"""Failures under MPI: an error on one rank aborts the whole job with that rank's message (no
+hung job), and a blown-up model stops every rank with the same SimulationError naming the step,
+the block and the probable cause."""
+
+from __future__ import annotations
+
+import os
+import textwrap
+
+import pytest
+from mpi4py import MPI
+
+from pdem.errors import SimulationError
+
+pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
+
+
+def row_of_cubes(n: int, dims: str, dt: float | None = None, steps: int = 50) -> str:
+    """``n`` 1 m cubes resting on a fixed floor, one every 2 m along x."""
+    timestep = f", timestep: {{dt: {dt}}}" if dt else ""
+    return f"""
+name: row
+materials: {{rock: {{density: 2500.0}}}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 30.0}}}}
+blocks:
+  - {{name: floor, box: {{min: [-1, -1, -1], max: [{2 * n - 1}, 2, 0]}}, material: rock,
+     fixed: true}}
+  - name: cube
+    array: {{box: {{min: [0, 0, 0], max: [1, 1, 1]}}, count: [{n}, 1, 1], spacing: [2, 1, 1]}}
+    material: rock
+parallel: {{dims: {dims}}}
+solve: {{steps: {steps}, damping: local{timestep}}}
+output: {{every_steps: 10}}
+"""
+
+
+CHILD = """
+import sys
+from pdem.solver import Solver
+import pdem.cli
+
+advance = Solver.advance
+
+def failing_advance(self):
+    if self.comm.rank == 1 and self.step == 5:
+        raise RuntimeError("boom on rank 1")
+    advance(self)
+
+Solver.advance = failing_advance
+sys.exit(pdem.cli.main(["run", sys.argv[1], "-o", sys.argv[2], "-q"]))
+"""
+
+
+def run_child_job(launch_job, tmp: str):
+    scene = os.path.join(tmp, "row.yaml")
+    with open(scene, "w") as f:
+        f.write(row_of_cubes(4, "[2, 1, 1]"))
+    script = os.path.join(tmp, "child.py")
+    with open(script, "w") as f:
+        f.write(textwrap.dedent(CHILD))
+    return launch_job(2, [script, scene, os.path.join(tmp, "row.h5")], timeout=60.0)
+
+
+def test_error_on_one_rank_aborts_all(tmp_path, mpi_tools):
+    """RuntimeError on rank 1 only, in step 6 of ``pdem run``: the job ends (rank 0 was waiting
+    in the step's reduction) with a non-zero code and rank 1's message on stderr."""
+    comm = MPI.COMM_WORLD
+    rc, _, err, seconds = mpi_tools.on_rank0(comm, run_child_job, mpi_tools.launch_job, str(tmp_path))
+    assert rc is not None, f"the 2-rank job hung (killed after {seconds:.0f} s); stderr:\n{err}"
+    assert rc != 0, err
+    assert "boom on rank 1" in err, err
+    assert "rank 1" in err.replace("boom on rank 1", ""), err
+
+
+def test_blow_up_stops_every_rank_with_the_same_message(tmp_path, mpi_tools):
+    """dt = 0.1 s with kn = 1e9 Pa/m: the cubes resting on the floor explode within a few steps.
+    Every rank raises the SimulationError, with the message of the 1-rank run."""
+    t = mpi_tools
+    comm = MPI.COMM_WORLD
+    base = t.shared_dir(comm, tmp_path)
+    text = row_of_cubes(2 * comm.size, f"[{comm.size}, 1, 1]", dt=0.1)
+    scene = t.with_parallel(text, [comm.size, 1, 1], f"{base}/blowup.h5")
+
+    def blow_up(scene, comm):
+        from pdem.solver import Solver
+
+        solver = Solver(scene, comm, output=True)
+        try:
+            with pytest.raises(SimulationError) as info:
+                solver.run()
+        finally:
+            solver.close()
+        return str(info.value), solver.step
+
+    with t.collective(comm, "the blow-up run"):
+        message, step = blow_up(scene, comm)
+    messages = comm.allgather(message)
+    assert messages == [message] * comm.size, messages
+    assert f"step {step}" in message and step < 50
+    assert "block 'cube[" in message and "timestep" in message, message
+
+    ref = t.with_parallel(text, [1, 1, 1], f"{base}/blowup-ref.h5")
+    ref_message, _ = t.on_rank0(comm, blow_up, ref, MPI.COMM_SELF)
+    assert message == ref_message
