@@ -553,6 +553,30 @@ def finish_plane(va, vb, n0, n1, n2, c, maxa, minb, ia, ib):
 
 
 @kernel
+def initial_plane(ca, cb, n_in, p_in, warm):
+    """Starting plane: an existing contact's (warm start), else eq. (5) -- midway between the
+    centroids, normal from A's centroid to B's. Returns (n0, n1, n2, point)."""
+    if warm:
+        n0, n1, n2 = n_in[0], n_in[1], n_in[2]
+        c = p_in.copy()
+    else:
+        n0 = cb[0] - ca[0]
+        n1 = cb[1] - ca[1]
+        n2 = cb[2] - ca[2]
+        c = np.empty(3)
+        for k in range(3):
+            c[k] = 0.5 * (ca[k] + cb[k])
+    s = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if s > 0.0:
+        n0 /= s
+        n1 /= s
+        n2 /= s
+    else:
+        n0, n1, n2 = 0.0, 0.0, 1.0
+    return n0, n1, n2, c
+
+
+@kernel
 def common_plane(va, vb, ca, cb, n_in, p_in, warm, ctol, k_max, k_min, snap_tol, ridge=True):
     """Position the common plane between convex blocks A and B (Cundall, 3DEC).
 
@@ -572,23 +596,7 @@ def common_plane(va, vb, ca, cb, n_in, p_in, warm, ctol, k_max, k_min, snap_tol,
     perturbation cycles (each tries four normals). If ``gap > ctol`` the search stopped early:
     the true maximum gap is at least ``gap``.
     """
-    if warm:
-        n0, n1, n2 = n_in[0], n_in[1], n_in[2]
-        c = p_in.copy()
-    else:
-        n0 = cb[0] - ca[0]
-        n1 = cb[1] - ca[1]
-        n2 = cb[2] - ca[2]
-        c = np.empty(3)
-        for k in range(3):
-            c[k] = 0.5 * (ca[k] + cb[k])
-    s = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    if s > 0.0:
-        n0 /= s
-        n1 /= s
-        n2 /= s
-    else:
-        n0, n1, n2 = 0.0, 0.0, 1.0
+    n0, n1, n2, c = initial_plane(ca, cb, n_in, p_in, warm)
     ok, maxa, minb, ia, ib = support_gap(va, vb, n0, n1, n2, 0, 0, -_INF)
     best = minb - maxa
     iters = 0

@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from pdem.contact.common_plane import finish_plane, support_gap
+from pdem.contact.common_plane import finish_plane, initial_plane, support_gap
 from pdem.jit import kernel
 
 _INF = np.inf
@@ -84,23 +84,7 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
     of candidate normals examined.
     """
     state = np.empty(8)
-    if warm:
-        n0, n1, n2 = n_in[0], n_in[1], n_in[2]
-        c = p_in.copy()
-    else:
-        n0 = cb[0] - ca[0]
-        n1 = cb[1] - ca[1]
-        n2 = cb[2] - ca[2]
-        c = np.empty(3)
-        for k in range(3):
-            c[k] = 0.5 * (ca[k] + cb[k])
-    s = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    if s > 0.0:
-        n0 /= s
-        n1 /= s
-        n2 /= s
-    else:
-        n0, n1, n2 = 0.0, 0.0, 1.0
+    n0, n1, n2, c = initial_plane(ca, cb, n_in, p_in, warm)
     ok, mxa, mnb, ka, kb = support_gap(va, vb, n0, n1, n2, 0, 0, -_INF)
     state[0] = n0
     state[1] = n1
