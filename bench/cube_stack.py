@@ -14,7 +14,7 @@ import time
 from mpi4py import MPI
 
 from pdem.config import parse_scene
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 
 def scene_text(n: int, algorithm: str, damping: str = "local") -> str:
@@ -39,10 +39,10 @@ def main():
     ap.add_argument("--algorithm", default="fast")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    solver = Solver(parse_scene(scene_text(args.n, args.algorithm)), MPI.COMM_SELF, output=False)
+    solver = Simulation(parse_scene(scene_text(args.n, args.algorithm)), MPI.COMM_SELF, output=False)
     t_setup = time.perf_counter() - t0
     solver.run(steps=20)  # warm-up (compilation is cached after the first run)
-    phases = solver.timers.reset() if hasattr(solver, "timers") else None
+    solver.state.timers.reset()
     t0 = time.perf_counter()
     solver.run(steps=args.steps)
     el = time.perf_counter() - t0
@@ -53,9 +53,7 @@ def main():
     print(f"set-up {t_setup:.2f} s; {args.steps} steps in {el:.3f} s")
     print(f"block-steps/s      {nb * args.steps / el:12.4g}")
     print(f"sub-contact-steps/s {nsub * args.steps / el:12.4g}")
-    if hasattr(solver, "timers"):
-        print(solver.timers.report())
-    del phases
+    print(solver.state.timers.report())
 
 
 if __name__ == "__main__":

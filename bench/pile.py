@@ -20,7 +20,7 @@ import time
 from mpi4py import MPI
 
 from pdem.config import parse_scene
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 SIZE = (0.45, 0.6)  # block diameters, m (configs/default.yaml)
 
@@ -71,11 +71,11 @@ def main():
     ap.add_argument("--settle", type=int, default=10000)
     args = ap.parse_args()
     t0 = time.perf_counter()
-    solver = Solver(parse_scene(scene_text(args.count, args.algorithm)), MPI.COMM_SELF,
+    solver = Simulation(parse_scene(scene_text(args.count, args.algorithm)), MPI.COMM_SELF,
                     output=False)
     t_setup = time.perf_counter() - t0
     solver.run(steps=20 + args.settle)  # warm-up (compilation is cached after the first run)
-    solver.timers.reset()
+    solver.state.timers.reset()
     c0 = solver.contacts.n
     t0 = time.perf_counter()
     solver.run(steps=args.steps)
@@ -86,7 +86,7 @@ def main():
           f"(model time {args.steps * solver.dt:.3g} s)")
     print(f"contacts {c0} -> {solver.contacts.n}, {solver.contacts.n_sub} sub-contacts")
     print(f"block-steps/s      {nb * args.steps / el:12.4g}")
-    print(solver.timers.report())
+    print(solver.state.timers.report())
 
 
 if __name__ == "__main__":

@@ -53,29 +53,29 @@ def worker(args) -> None:
     from mpi4py import MPI
 
     from pdem.config import parse_scene
-    from pdem.solver import Solver
+    from pdem.simulation import Simulation
 
     comm = MPI.COMM_WORLD
     text = scene_text(args.n, "fast")
     dims = "auto" if args.dims == "auto" else f"[{comm.size}, 1, 1]"
     text += f"parallel: {{dims: {dims}}}\n"
     t0 = time.perf_counter()
-    solver = Solver(parse_scene(text), comm, output=False)
+    solver = Simulation(parse_scene(text), comm, output=False)
     comm.Barrier()
     setup = time.perf_counter() - t0
     solver.run(steps=args.warmup)
-    solver.timers.reset()
+    solver.state.timers.reset()
     comm.Barrier()
     t0 = time.perf_counter()
     solver.run(steps=args.steps)
     comm.Barrier()
     elapsed = time.perf_counter() - t0
-    report = solver.load_report()
-    phases = comm.gather(solver.timers.report(), root=0)
+    report = solver.state.load_report()
+    phases = comm.gather(solver.state.timers.report(), root=0)
     if comm.rank == 0:
         print("RESULT " + json.dumps({
-            "size": comm.size, "dims": solver.decomp.dims.tolist(), "blocks": solver.glob.n,
-            "free": int((solver.glob.fixed == 0).sum()), "setup": setup, "elapsed": elapsed,
+            "size": comm.size, "dims": solver.state.decomp.dims.tolist(), "blocks": solver.state.glob.n,
+            "free": int((solver.state.glob.fixed == 0).sum()), "setup": setup, "elapsed": elapsed,
             "steps": args.steps, "report": report, "phases": phases}), flush=True)
 
 

@@ -68,23 +68,23 @@ def _with_output(scene, path):
 
 
 def _march(args, comm, log, scene, state=None) -> int:
-    """Build the solver (on every rank alike), run it, close the files."""
+    """Build the simulation (on every rank alike), run it, close the files."""
     import logging
 
-    from .solver import Solver
+    from .simulation import Simulation
 
     if args.quiet:
         log.setLevel(logging.WARNING)
-    solver = Solver(scene, comm, state=state)
+    sim = Simulation(scene, comm, checkpoint=state)
     if state is not None:
-        log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", solver.run_id,
-                 solver.step, solver.time, comm.size)
+        log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", sim.state.run_id,
+                 sim.step, sim.time, comm.size)
     try:
-        solver.run(time=args.time, steps=args.steps)
+        sim.run(time=args.time, steps=args.steps)
     except Exception as exc:
-        _fail_during_run(comm, exc, solver)
+        _fail_during_run(comm, exc, sim)
         return 1
-    solver.close()
+    sim.close()
     log.info("wrote %s (+ %s)", scene.output.file, os.path.splitext(scene.output.file)[0] + ".xdmf")
     return 0
 
@@ -111,7 +111,7 @@ def _restart(args, comm, log) -> int:
     return _march(args, comm, log, _with_output(scene, out), state=ck)
 
 
-def _fail_during_run(comm, exc, solver) -> None:
+def _fail_during_run(comm, exc, sim) -> None:
     """An error while stepping may have happened on one rank only: the others are waiting in a
     collective, so a multi-rank job is aborted (the output was flushed at the last snapshot).
     A serial run closes its files and reports the error."""
@@ -119,7 +119,7 @@ def _fail_during_run(comm, exc, solver) -> None:
 
     if comm.size == 1 or isinstance(exc, SimulationError):
         # serial, or raised by every rank alike: close the files properly
-        solver.close()
+        sim.close()
         if isinstance(exc, UserError):
             if comm.rank == 0:
                 print(f"pdem: {exc}", file=sys.stderr)
@@ -132,12 +132,12 @@ def _fail_during_run(comm, exc, solver) -> None:
 
 def _check(args, comm, log) -> int:
     from .config import load_scene
-    from .solver import Solver
+    from .simulation import Simulation
 
     scene = load_scene(args.scene)
-    solver = Solver(scene, comm, output=False)
+    sim = Simulation(scene, comm, output=False)
     log.info("%s: valid; %d blocks, %d initial contacts, dt=%.4g s, ctol=%.4g m",
-             args.scene, solver.blocks.n, solver.contacts.n, solver.dt, solver.ctol)
+             args.scene, sim.blocks.n, sim.contacts.n, sim.dt, sim.state.ctol)
     return 0
 
 

@@ -1,8 +1,35 @@
-"""The one place numba's compile flags are set, so every kernel compiles alike."""
+"""The one place numba is configured: compile flags and where compiled kernels are cached."""
 
 from __future__ import annotations
 
+import hashlib
+import os
+from pathlib import Path
+
 import numba
+
+
+def _cache_dir() -> str:
+    """numba's cache directory, keyed on pdem's sources (names, sizes, modification times).
+
+    numba's ``cache=True`` checks only the source file of the function it loads, not the files
+    of the kernels that function calls: after an edit (or a ``git pull``) a stale cached kernel
+    could run old code. Keying the directory on every source file makes any change compile
+    afresh (stat only: no file is read). ``NUMBA_CACHE_DIR`` set by the user wins.
+    """
+    if "NUMBA_CACHE_DIR" in os.environ:
+        return os.environ["NUMBA_CACHE_DIR"]
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        st = path.stat()
+        h.update(f"{path.relative_to(root).as_posix()}:{st.st_size}:{st.st_mtime_ns}".encode())
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    return str(base / "pdem-numba" / h.hexdigest()[:16])
+
+
+# numba reads its cache location when a kernel is declared, so it is set before any is.
+numba.config.CACHE_DIR = _cache_dir()
 
 # cache=True: warm starts in ~0.2 s instead of recompiling on every rank.
 # fastmath stays off: the determinism contract needs IEEE-exact, order-fixed arithmetic.

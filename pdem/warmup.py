@@ -1,15 +1,10 @@
 """Compile (and cache) the kernels once by marching a two-block scene a few steps.
 
-``run/demo`` imports this serially before ``mpiexec`` so that the ranks load cached machine
-code instead of each compiling it (a cold compile takes ~30 s per process).
+``run/demo`` runs ``python -m pdem.warmup`` serially before ``mpiexec`` so that the ranks load
+cached machine code instead of each compiling it (a cold compile takes ~30 s per process).
 """
 
 from __future__ import annotations
-
-from mpi4py import MPI
-
-from .config import parse_scene
-from .solver import Solver
 
 SCENE = """
 name: warmup
@@ -18,14 +13,22 @@ joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 30.0}}
 blocks:
   - {name: floor, box: {min: [-2, -2, -1], max: [2, 2, 0]}, material: rock, fixed: true}
   - {name: cube, box: {min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}, material: rock}
-solve: {steps: 12, damping: local}
+solve: {steps: 12, damping: DAMPING}
 """
 
 
-def warm() -> None:
+def warm(damping: str = "local") -> None:
+    """Compile the kernels of both common-plane algorithms with ``damping``."""
+    from mpi4py import MPI
+
+    from .config import parse_scene
+    from .simulation import Simulation
+
     for algorithm in ("fast", "cundall"):
-        scene = parse_scene(SCENE.replace("solve:", f"contact: {{algorithm: {algorithm}}}\nsolve:"))
-        Solver(scene, MPI.COMM_SELF, output=False).run()
+        text = SCENE.replace("DAMPING", damping)
+        scene = parse_scene(text.replace("solve:", f"contact: {{algorithm: {algorithm}}}\nsolve:"))
+        Simulation(scene, MPI.COMM_SELF, output=False).run()
 
 
-warm()
+if __name__ == "__main__":
+    warm()

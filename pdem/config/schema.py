@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import math
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Union
 
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Field,
     NonNegativeFloat,
     PositiveFloat,
@@ -16,42 +13,28 @@ from pydantic import (
     model_validator,
 )
 
+from ..contact.algorithms import ALGORITHMS
+from ..dynamics.damping import DAMPING
+from ..strict import Strict
+
 Vec3 = tuple[float, float, float]
-
-
-class Strict(BaseModel):
-    """Base of every scene model: unknown keys are errors, instances are immutable."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    @model_validator(mode="after")
-    def _finite(self):
-        # YAML accepts .nan and .inf; no physical input of ours is meant to be either.
-        for name, value in self:
-            values = value if isinstance(value, tuple) else (value,)
-            for v in values:
-                if isinstance(v, float) and not math.isfinite(v) and name != "dilation_limit":
-                    raise ValueError(f"{name}: must be finite (got {v})")
-        return self
 
 
 class Material(Strict):
     density: PositiveFloat
 
 
-class Joint(Strict):
-    """Joint (contact) properties in 3DEC units: stiffness in Pa/m, strengths in Pa, angles in
-    degrees. ``dilation_limit`` is the shear displacement beyond which dilation stops (eq. 43
-    text); null means no limit."""
+def _joint_law_union():
+    """The union of the registered joint laws' parameter models, told apart by ``model``."""
+    from ..contact.laws import JOINT_LAWS
 
-    model: Literal["coulomb"] = "coulomb"
-    kn: PositiveFloat
-    ks: PositiveFloat
-    friction: Annotated[float, Field(ge=0.0, lt=90.0)] = 30.0
-    dilation: Annotated[float, Field(ge=0.0, lt=90.0)] = 0.0
-    cohesion: NonNegativeFloat = 0.0
-    tension: NonNegativeFloat = 0.0
-    dilation_limit: PositiveFloat | None = None
+    models = tuple(law.params for law in JOINT_LAWS.values())
+    if len(models) == 1:
+        return models[0]
+    return Annotated[Union[models], Field(discriminator="model")]  # noqa: UP007
+
+
+Joint = _joint_law_union()
 
 
 class JointPair(Strict):
@@ -163,7 +146,11 @@ class Timestep(Strict):
     dt: PositiveFloat | None = None
 
 
-DampingMode = Literal["none", "local", "combined", "adaptive", "viscous"]
+def _names(registry) -> type:
+    return Literal[registry.names()]
+
+
+DampingMode = _names(DAMPING)
 
 
 class Damping(Strict):
@@ -208,7 +195,7 @@ class Contact(Strict):
     cell_size: PositiveFloat | Literal["auto"] = "auto"
     detect_every: PositiveInt = 10
     refresh_tolerance: NonNegativeFloat = 0.01
-    algorithm: Literal["fast", "cundall"] = "fast"
+    algorithm: _names(ALGORITHMS) = "fast"
     point_area: NonNegativeFloat = 0.01
     overlap_tolerance: PositiveFloat | Literal["auto"] = "auto"
 
@@ -272,6 +259,15 @@ class Scene(Strict):
     solve: Solve
     output: Output = Output()
     checkpoint: Checkpoint | None = None
+
+    @field_validator("joints", mode="before")
+    @classmethod
+    def _default_law(cls, v):
+        # ``model`` may be omitted: Coulomb slip, as in 3DEC
+        if isinstance(v, dict):
+            return {k: ({"model": "coulomb", **j} if isinstance(j, dict) and "model" not in j
+                        else j) for k, j in v.items()}
+        return v
 
     @model_validator(mode="after")
     def _references(self):

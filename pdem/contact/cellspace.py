@@ -16,25 +16,6 @@ import numpy as np
 from ..jit import kernel
 
 
-@kernel
-def envelopes(vert_start, verts_world, pad, lo, hi):
-    """Axis-aligned envelope of each block, enlarged by ``pad`` on every side."""
-    for b in range(vert_start.shape[0] - 1):
-        for k in range(3):
-            lo[b, k] = np.inf
-            hi[b, k] = -np.inf
-        for v in range(vert_start[b], vert_start[b + 1]):
-            for k in range(3):
-                c = verts_world[v, k]
-                if c < lo[b, k]:
-                    lo[b, k] = c
-                if c > hi[b, k]:
-                    hi[b, k] = c
-        for k in range(3):
-            lo[b, k] -= pad
-            hi[b, k] += pad
-
-
 class CellSpace:
     """The grid: ``origin``, ``size`` (cell edge per axis) and ``dims`` (cells per axis)."""
 

@@ -11,97 +11,30 @@ region changes (3DEC reallocates sub-contact forces for the same reason).
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
+from ..dynamics.kinematics import world_vectors
 from ..jit import kernel
-from .common_plane import common_plane, type_code
-from .fast_common_plane import fast_common_plane
-from .joint import FAILED
+from .algorithms import find_plane, uses_face_normals
+from .common_plane import type_code
+from .laws import FAILED
 from .subcontacts import POLYGON, contact_region
 
-CUNDALL = 0
-FAST = 1
-ALGORITHMS = {"cundall": CUNDALL, "fast": FAST}
-
-K_MAX = np.tan(np.radians(5.0))
-K_MIN = np.tan(np.radians(0.01))
+# The contact arrays the geometry update reads and writes.
+Planes = namedtuple("Planes", "ia ib normal point gap ctype warm")
 
 
 @kernel
-def update_verts_world(x, R, vert_start, verts_local, verts_world):
-    """World vertices from the pose (no drift: always from the body-frame geometry)."""
-    for b in range(vert_start.shape[0] - 1):
-        for v in range(vert_start[b], vert_start[b + 1]):
-            for k in range(3):
-                verts_world[v, k] = x[b, k] + R[b, k, 0] * verts_local[v, 0] + \
-                    R[b, k, 1] * verts_local[v, 1] + R[b, k, 2] * verts_local[v, 2]
-
-
-@kernel
-def _world_normals(R, b, face_start, normals_local):
-    """Rows face_start[b]..face_start[b+1] of body-frame vectors, rotated to the world."""
-    f0 = face_start[b]
-    f1 = face_start[b + 1]
-    out = np.empty((f1 - f0, 3))
-    for f in range(f0, f1):
-        for k in range(3):
-            out[f - f0, k] = R[b, k, 0] * normals_local[f, 0] + R[b, k, 1] * normals_local[f, 1] \
-                + R[b, k, 2] * normals_local[f, 2]
-    return out
-
-
-@kernel
-def world_vectors(R, start, local, rows):
-    """Body-frame vectors (CSR by block, ``start``) rotated to the world, for the blocks with
-    ``rows[b] != 0`` (others are left uninitialised)."""
-    out = np.empty_like(local)
-    for b in range(start.shape[0] - 1):
-        if rows[b] == 0:
-            continue
-        for f in range(start[b], start[b + 1]):
-            for k in range(3):
-                out[f, k] = R[b, k, 0] * local[f, 0] + R[b, k, 1] * local[f, 1] \
-                    + R[b, k, 2] * local[f, 2]
-    return out
-
-
-@kernel
-def _plane(a, b, x, vert_start, verts_world, face_start, normals_world, edir_start, edirs_world,
-           n_in, p_in, warm, ctol, algorithm, snap_tol):
-    """``find_plane`` with the world face normals and edge directions precomputed."""
-    va = verts_world[vert_start[a]:vert_start[a + 1]]
-    vb = verts_world[vert_start[b]:vert_start[b + 1]]
-    if algorithm == FAST:
-        n, p, gap, _, _, _ = fast_common_plane(
-            va, vb, x[a], x[b],
-            normals_world[face_start[a]:face_start[a + 1]],
-            normals_world[face_start[b]:face_start[b + 1]],
-            edirs_world[edir_start[a]:edir_start[a + 1]],
-            edirs_world[edir_start[b]:edir_start[b + 1]], n_in, p_in, warm, ctol)
-    else:
-        n, p, gap, _, _, _ = common_plane(va, vb, x[a], x[b], n_in, p_in, warm, ctol, K_MAX,
-                                          K_MIN, snap_tol)
-    return n, p, gap
-
-
-@kernel
-def find_plane(a, b, x, R, vert_start, verts_world, face_start, normals_local, edir_start,
-               edirs, n_in, p_in, warm, ctol, algorithm, snap_tol):
-    """Common plane of blocks a, b: (n, p, gap). Cundall's iteration (eqs. 5-10) or the fast
-    common plane (DDA §3), warm-started from an existing contact's plane for Cundall."""
-    va = verts_world[vert_start[a]:vert_start[a + 1]]
-    vb = verts_world[vert_start[b]:vert_start[b + 1]]
-    if algorithm == FAST:
-        n, p, gap, _, _, _ = fast_common_plane(
-            va, vb, x[a], x[b],
-            _world_normals(R, a, face_start, normals_local),
-            _world_normals(R, b, face_start, normals_local),
-            _world_normals(R, a, edir_start, edirs),
-            _world_normals(R, b, edir_start, edirs), n_in, p_in, warm, ctol)
-    else:
-        n, p, gap, _, _, _ = common_plane(va, vb, x[a], x[b], n_in, p_in, warm, ctol, K_MAX,
-                                          K_MIN, snap_tol)
-    return n, p, gap
+def _plane(a, b, x, shapes, normals_world, edirs_world, n_in, p_in, warm, alg):
+    """Common plane of blocks a and b, world face normals and edge directions precomputed."""
+    vs, fs, es = shapes.vert_start, shapes.face_start, shapes.edir_start
+    va = shapes.verts_world[vs[a]:vs[a + 1]]
+    vb = shapes.verts_world[vs[b]:vs[b + 1]]
+    return find_plane(alg, va, vb, x[a], x[b], normals_world[fs[a]:fs[a + 1]],
+                      normals_world[fs[b]:fs[b + 1]], edirs_world[es[a]:es[a + 1]],
+                      edirs_world[es[b]:es[b + 1]], n_in, p_in, warm)
 
 
 @kernel
@@ -113,18 +46,22 @@ def _grow(a, size):
 
 
 @kernel
-def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, edir_start, edirs,
-                     point_area, c_ia, c_ib, c_normal, c_point, c_gap, c_ctype, c_warm,
-                     old_start, old_pa, old_area, old_un, old_fs, old_us, old_dil, old_state,
-                     todo, ctol, touch_frac, algorithm, snap_tol):
-    """Re-detect every contact; returns (keep, new_start, pa, area, un, fs, us, dil, state).
+def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_frac, alg):
+    """Re-detect contacts; returns (keep, new_start, pa, area, un, fs, us, dil, state, hist).
 
-    ``point_area[b]`` is the area given to each vertex/edge sub-contact involving block b (the
-    smaller of the two blocks' values is used); ``touch_frac`` * CTOL is the distance within
-    which a vertex counts as touching the common plane. Contacts with ``todo[c] == 0`` keep
-    their plane and sub-contacts unchanged (only new contacts need detecting between the
-    periodic geometry updates).
+    ``shapes`` (:class:`pdem.model.blocks.Shapes`): ``point_area[b]`` is the area given to
+    each vertex/edge sub-contact involving block b (the smaller of the two blocks' values is
+    used). ``planes`` (:data:`Planes`) and ``old`` (:class:`pdem.model.contacts.Subs`, CSR
+    ``old_start``) are the contacts before the update. ``touch_frac`` * CTOL is the distance
+    within which a vertex counts as touching the common plane. Contacts with ``todo[c] == 0``
+    keep their plane and sub-contacts unchanged (only new contacts need detecting between the
+    periodic geometry updates). ``alg``: the common-plane algorithm (:mod:`.algorithms`).
     """
+    c_ia, c_ib, c_normal, c_point = planes.ia, planes.ib, planes.normal, planes.point
+    c_gap, c_ctype, c_warm = planes.gap, planes.ctype, planes.warm
+    old_pa, old_area, old_un, old_fs = old.pa, old.area, old.un, old.fs
+    old_us, old_dil, old_state, old_hist = old.us, old.dil, old.state, old.hist
+    vert_start, verts_world, point_area = shapes.vert_start, shapes.verts_world, shapes.point_area
     nc = c_ia.shape[0]
     # output capacity: the old sub-contacts plus a few per refreshed contact, grown on demand
     cap = old_start[nc] + 8 * nc + 16
@@ -137,15 +74,16 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
     us = np.empty((cap, 3))
     dil = np.empty(cap)
     state = np.empty(cap, np.int64)
+    hist = np.empty((cap, old_hist.shape[1]))
     # world face normals and edge directions, once per block (each block is in many contacts)
     rows = np.zeros(vert_start.shape[0] - 1, np.uint8)
-    if algorithm == FAST:
+    if uses_face_normals(alg):
         for c in range(nc):
             if todo[c] != 0:
                 rows[c_ia[c]] = 1
                 rows[c_ib[c]] = 1
-    normals_world = world_vectors(R, face_start, normals_local, rows)
-    edirs_world = world_vectors(R, edir_start, edirs, rows)
+    normals_world = world_vectors(R, shapes.face_start, shapes.normals_local, rows)
+    edirs_world = world_vectors(R, shapes.edir_start, shapes.edirs_local, rows)
     pos = 0
     for c in range(nc):
         a = c_ia[c]
@@ -158,6 +96,7 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
                 pa, fs, us = _grow(pa, cap), _grow(fs, cap), _grow(us, cap)
                 area, un, dil, state = _grow(area, cap), _grow(un, cap), _grow(dil, cap), \
                     _grow(state, cap)
+                hist = _grow(hist, cap)
             for i in range(k):
                 o = old_start[c] + i
                 s = pos + i
@@ -169,12 +108,13 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
                 un[s] = old_un[o]
                 dil[s] = old_dil[o]
                 state[s] = old_state[o]
+                for m in range(hist.shape[1]):
+                    hist[s, m] = old_hist[o, m]
             counts[c] = k
             pos += k
             continue
-        n, p, gap = _plane(a, b, x, vert_start, verts_world, face_start, normals_world,
-                           edir_start, edirs_world, c_normal[c], c_point[c], c_warm[c] == 1,
-                           ctol, algorithm, snap_tol)
+        n, p, gap = _plane(a, b, x, shapes, normals_world, edirs_world, c_normal[c],
+                           c_point[c], c_warm[c] == 1, alg)
         if gap > ctol:
             continue
         keep[c] = 1
@@ -193,6 +133,7 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
             pa, fs, us = _grow(pa, cap), _grow(fs, cap), _grow(us, cap)
             area, un, dil, state = _grow(area, cap), _grow(un, cap), _grow(dil, cap), \
                 _grow(state, cap)
+            hist = _grow(hist, cap)
         o0 = old_start[c]
         o1 = old_start[c + 1]
         for i in range(k):
@@ -224,11 +165,15 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
                     us[s, m] = old_us[best, m]
                 dil[s] = old_dil[best]
                 state[s] = old_state[best]
+                for m in range(hist.shape[1]):
+                    hist[s, m] = old_hist[best, m]
             else:
                 for m in range(3):
                     fs[s, m] = 0.0
                     us[s, m] = 0.0
                 dil[s] = 0.0
+                for m in range(hist.shape[1]):
+                    hist[s, m] = 0.0
                 # a joint that forms open has no bond: no tension or cohesion
                 state[s] = FAILED if ovl[i] < 0.0 else 0
         counts[c] = k
@@ -241,4 +186,4 @@ def refresh_contacts(x, R, vert_start, verts_world, face_start, normals_local, e
         tot += counts[c]
     new_start[nc] = tot
     return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], dil[:tot], \
-        state[:tot]
+        state[:tot], hist[:tot]

@@ -40,8 +40,8 @@ inertia is taken at the mid-step orientation this solves Euler's equations (45) 
 order, exactly as (49) does for the linear equations.  ``scalar_inertia=True`` reproduces
 3DEC's approximation (46): ``I = mean principal moment``, ``w = L / I`` (no iteration).
 
-Damping (``damping_mode``)
---------------------------
+Damping (``damping``, a mode of :mod:`pdem.dynamics.damping`)
+-----------------------------------------------------------
 ``NONE``      alpha ignored.
 ``VISCOUS``   mass-proportional, eq. (49): ``v+ = (D1 v- + a dt) D2``,
               ``D1 = 1 - alpha dt/2``, ``D2 = 1/(1 + alpha dt/2)``; applied to ``L`` alike.
@@ -66,9 +66,11 @@ values.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
+from pdem.dynamics.damping import damped_momentum
 from pdem.dynamics.rotation import (
     quat_from_rotvec_s,
     quat_mul_s,
@@ -78,19 +80,10 @@ from pdem.dynamics.rotation import (
 )
 from pdem.jit import kernel
 
-# Damping modes.
-NONE = 0
-LOCAL = 1
-COMBINED = 2
-VISCOUS = 3
-ADAPTIVE = 4
-DAMPING_MODES: dict[str, int] = {
-    "none": NONE,
-    "local": LOCAL,
-    "combined": COMBINED,
-    "viscous": VISCOUS,
-    "adaptive": ADAPTIVE,
-}
+# The block arrays integrate reads and writes (owned rows); ``force`` is the total applied
+# force without gravity (contact + applied loads).
+Motion = namedtuple("Motion", "x q v w L mass inertia fixed vfix force moment mscale "
+                              "prev_force prev_moment dx dtheta")
 
 # Layout of ``out_stats`` (local to the blocks passed in; reduce over ranks yourself:
 # max for the MAX_* entries, sum for the rest).  Only free blocks (not fixed, not vfix) count.
@@ -106,15 +99,6 @@ N_STATS = 8
 
 ROT_TOL = 1e-15  # relative change of w_mid that ends the fixed-point iteration
 ROT_MAX_ITER = 10
-
-
-@kernel
-def _sgn(a):
-    if a > 0.0:
-        return 1.0
-    if a < 0.0:
-        return -1.0
-    return 0.0
 
 
 @kernel
@@ -171,48 +155,21 @@ def midpoint_omega_s(qw, qx, qy, qz, lx, ly, lz, i1, i2, i3, dt):
 
 
 @kernel
-def integrate(
-    x,
-    q,
-    v,
-    w,
-    L,
-    mass,
-    inertia,
-    fixed,
-    vfix,
-    force,
-    moment,
-    gravity,
-    dt,
-    damping_mode,
-    alpha,
-    scalar_inertia,
-    mass_scale,
-    prev_force,
-    prev_moment,
-    out_dx,
-    out_dtheta,
-    out_stats,
-):
+def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
     """Advance all blocks one step; see the module docstring for time levels and damping.
 
-    Updates x, q, v, w, L, prev_force, prev_moment in place; writes out_dx, out_dtheta
-    (n, 3) and out_stats (N_STATS,).  ``fixed``/``vfix`` are uint8 (or bool) flags.
+    ``m`` (:data:`Motion`): updates x, q, v, w, L, prev_force, prev_moment in place and writes
+    dx, dtheta (n, 3); ``damping``: a mode of :mod:`pdem.dynamics.damping`; ``out_stats``
+    (N_STATS,). ``fixed``/``vfix`` are uint8 (or bool) flags.
     """
+    x, q, v, w, L = m.x, m.q, m.v, m.w, m.L
+    mass, inertia, fixed, vfix, mass_scale = m.mass, m.inertia, m.fixed, m.vfix, m.mscale
+    force, moment, prev_force, prev_moment = m.force, m.moment, m.prev_force, m.prev_moment
+    out_dx, out_dtheta = m.dx, m.dtheta
     n = x.shape[0]
     gx = gravity[0]
     gy = gravity[1]
     gz = gravity[2]
-    viscous = damping_mode == VISCOUS or damping_mode == ADAPTIVE
-    if viscous:
-        d1 = 1.0 - 0.5 * alpha * dt
-        d2 = 1.0 / (1.0 + 0.5 * alpha * dt)
-    else:
-        d1 = 1.0
-        d2 = 1.0
-    a_loc = alpha if (damping_mode == LOCAL or damping_mode == COMBINED) else 0.0
-    combined = damping_mode == COMBINED
 
     max_f = 0.0
     sum_f = 0.0
@@ -224,21 +181,17 @@ def integrate(
     max_it = 0
 
     for i in range(n):
-        m = mass[i]
+        mb = mass[i]
         ms = mass_scale[i]
-        mi = m * ms
-        ftx = force[i, 0] + m * gx
-        fty = force[i, 1] + m * gy
-        ftz = force[i, 2] + m * gz
+        mi = mb * ms
+        ftx = force[i, 0] + mb * gx
+        fty = force[i, 1] + mb * gy
+        ftz = force[i, 2] + mb * gz
         mx = moment[i, 0]
         my = moment[i, 1]
         mz = moment[i, 2]
-        pfx = prev_force[i, 0]
-        pfy = prev_force[i, 1]
-        pfz = prev_force[i, 2]
-        pmx = prev_moment[i, 0]
-        pmy = prev_moment[i, 1]
-        pmz = prev_moment[i, 2]
+        pf = (prev_force[i, 0], prev_force[i, 1], prev_force[i, 2])
+        pm = (prev_moment[i, 0], prev_moment[i, 1], prev_moment[i, 2])
         prev_force[i, 0] = ftx
         prev_force[i, 1] = fty
         prev_force[i, 2] = ftz
@@ -296,57 +249,14 @@ def integrate(
             l0y = L[i, 1]
             l0z = L[i, 2]
 
-            # --- translation (eq. 49 / 78) and angular momentum
-            if viscous:
-                c = dt / mi
-                vx = (d1 * v0x + ftx * c) * d2
-                vy = (d1 * v0y + fty * c) * d2
-                vz = (d1 * v0z + ftz * c) * d2
-                lx = (d1 * l0x + mx * dt) * d2
-                ly = (d1 * l0y + my * dt) * d2
-                lz = (d1 * l0z + mz * dt) * d2
-                # damping force/moment actually applied: alpha * m * v(t), v(t) from eq. 47
-                fdx = alpha * mi * 0.5 * (v0x + vx)
-                fdy = alpha * mi * 0.5 * (v0y + vy)
-                fdz = alpha * mi * 0.5 * (v0z + vz)
-                mdx = alpha * 0.5 * (l0x + lx)
-                mdy = alpha * 0.5 * (l0y + ly)
-                mdz = alpha * 0.5 * (l0z + lz)
-            else:
-                if a_loc != 0.0:
-                    sfx = _sgn(v0x)
-                    sfy = _sgn(v0y)
-                    sfz = _sgn(v0z)
-                    smx = _sgn(w0x)
-                    smy = _sgn(w0y)
-                    smz = _sgn(w0z)
-                    if combined:
-                        sfx = 0.5 * (sfx - _sgn(ftx - pfx))
-                        sfy = 0.5 * (sfy - _sgn(fty - pfy))
-                        sfz = 0.5 * (sfz - _sgn(ftz - pfz))
-                        smx = 0.5 * (smx - _sgn(mx - pmx))
-                        smy = 0.5 * (smy - _sgn(my - pmy))
-                        smz = 0.5 * (smz - _sgn(mz - pmz))
-                    fdx = a_loc * abs(ftx) * sfx
-                    fdy = a_loc * abs(fty) * sfy
-                    fdz = a_loc * abs(ftz) * sfz
-                    mdx = a_loc * abs(mx) * smx
-                    mdy = a_loc * abs(my) * smy
-                    mdz = a_loc * abs(mz) * smz
-                else:
-                    fdx = 0.0
-                    fdy = 0.0
-                    fdz = 0.0
-                    mdx = 0.0
-                    mdy = 0.0
-                    mdz = 0.0
-                c = dt / mi
-                vx = v0x + (ftx - fdx) * c
-                vy = v0y + (fty - fdy) * c
-                vz = v0z + (ftz - fdz) * c
-                lx = l0x + (mx - mdx) * dt
-                ly = l0y + (my - mdy) * dt
-                lz = l0z + (mz - mdz) * dt
+            # --- translation and angular momentum with the scene's damping (eqs. 49, 78-83)
+            vn, ln, fd, md = damped_momentum(
+                damping, mi, dt, (v0x, v0y, v0z), (l0x, l0y, l0z), (w0x, w0y, w0z),
+                (ftx, fty, ftz), (mx, my, mz), pf, pm)
+            vx, vy, vz = vn
+            lx, ly, lz = ln
+            fdx, fdy, fdz = fd
+            mdx, mdy, mdz = md
 
             # --- angular velocity at t + dt/2
             if scalar_inertia:
@@ -416,17 +326,6 @@ def integrate(
 
 
 @kernel
-def omega_from_momentum(q, L, inertia, mass_scale, scalar_inertia, out_w):
-    """out_w[i] = R_i I_i^-1 R_i^T L[i] (inertial, i.e. scaled, moments)."""
-    for i in range(q.shape[0]):
-        i1, i2, i3 = _block_inertia(inertia, i, mass_scale[i], scalar_inertia)
-        r = omega_from_L_s(
-            q[i, 0], q[i, 1], q[i, 2], q[i, 3], L[i, 0], L[i, 1], L[i, 2], i1, i2, i3
-        )
-        out_w[i, 0], out_w[i, 1], out_w[i, 2] = r
-
-
-@kernel
 def momentum_from_omega(q, w, inertia, mass_scale, scalar_inertia, out_L):
     """out_L[i] = R_i I_i R_i^T w[i] (inertial, i.e. scaled, moments)."""
     for i in range(q.shape[0]):
@@ -438,28 +337,16 @@ def momentum_from_omega(q, w, inertia, mass_scale, scalar_inertia, out_L):
 
 
 @kernel
-def stagger_start(
-    q,
-    v,
-    w,
-    L,
-    mass,
-    inertia,
-    mass_scale,
-    fixed,
-    vfix,
-    force,
-    moment,
-    gravity,
-    dt,
-    scalar_inertia,
-):
+def stagger_start(m, gravity, dt, scalar_inertia):
     """Turn velocities given at t = 0 into the t = -dt/2 values the integrator expects.
 
     Call once, with v and L at t = 0 (e.g. L from :func:`momentum_from_omega`) and the
-    forces/moments at t = 0: ``v -= (F + m g)/m_s dt/2``, ``L -= M dt/2``, and ``w`` is
-    recomputed from ``L`` at ``q(0)``.  Undamped; fixed and vfix blocks are left alone.
+    forces/moments at t = 0 (``m``: :data:`Motion`): ``v -= (F + m g)/m_s dt/2``,
+    ``L -= M dt/2``, and ``w`` is recomputed from ``L`` at ``q(0)``.  Undamped; fixed and vfix
+    blocks are left alone.
     """
+    q, v, w, L, mass, inertia = m.q, m.v, m.w, m.L, m.mass, m.inertia
+    mass_scale, fixed, vfix, force, moment = m.mscale, m.fixed, m.vfix, m.force, m.moment
     for i in range(q.shape[0]):
         if fixed[i] or vfix[i]:
             continue

@@ -18,11 +18,17 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..model.blocks import DYNAMIC_FIELDS
-from ..model.contacts import CONTACT_FIELDS, SUB_FIELDS
+from ..model import csr
+from ..model.contacts import ContactStore
+from ..model.fields import BLOCK_BY_NAME, CHECKPOINT, CONTACT, SUB, SUB_HIST, select
+from ..parallel.mpi import allgather, barrier
 
 FORMAT = "checkpoint"
-FORMAT_VERSION = 1
+# 2: contact rows (ia, ib) no longer stored, joint-law history columns (subcontacts/sc_hist),
+# the resolved scene values and the plugins' restart state as attributes. 1 still reads.
+FORMAT_VERSION = 2
+CONTACT_CK = select(CONTACT, checkpoint=True)
+SUB_CK = select(SUB, checkpoint=True) + (SUB_HIST,)
 
 
 def new_run_id() -> str:
@@ -39,35 +45,38 @@ def _runs(sorted_rows: np.ndarray):
     return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
-def checkpoint_payload(solver) -> tuple[dict, dict, dict, np.ndarray]:
+def checkpoint_payload(state, extra_attrs: dict) -> tuple[dict, dict, dict, np.ndarray]:
     """This rank's share: (attrs, block rows {field: array, 'gid'}, contacts, nsub)."""
-    b = solver.blocks
-    n = solver.n_owned
-    rows = {k: getattr(b, k)[:n] for k in DYNAMIC_FIELDS}
+    b = state.blocks
+    n = state.n_owned
+    rows = {k: getattr(b, k)[:n] for k in CHECKPOINT}
     rows["gid"] = b.gid[:n]
-    c = solver.contacts
-    free = solver.glob.fixed == 0
-    owned = set(b.gid[:n].tolist())
-    ga_mine = np.array([g in owned for g in c.ga.tolist()], bool) & free[c.ga]
-    gb_mine = np.array([g in owned for g in c.gb.tolist()], bool) & free[c.gb]
-    write = ga_mine | (gb_mine & ~free[c.ga])
+    c = state.contacts
+    free = state.glob.fixed == 0
+    owned = np.zeros(state.glob.n, bool)
+    owned[b.gid[:n]] = True
+    # each contact once: by the owner of its lower-gid free block
+    write = (owned[c.ga] & free[c.ga]) | (owned[c.gb] & free[c.gb] & ~free[c.ga])
     sel = c.select(write)
     contacts = {**sel.arrays, **sel.sub}
     attrs = {
-        "pdem_format": FORMAT, "format_version": FORMAT_VERSION, "run_id": solver.run_id,
-        "step": solver.step, "time": solver.time, "dt": solver.dt, "alpha": solver.alpha,
-        "ratio": solver.ratio if np.isfinite(solver.ratio) else -1.0,
-        "n_blocks": solver.glob.n, "n_ranks": solver.comm.size, "scene": solver.scene_yaml,
+        "pdem_format": FORMAT, "format_version": FORMAT_VERSION, "run_id": state.run_id,
+        "step": state.step, "time": state.time, "dt": state.dt, "alpha": state.alpha,
+        "ratio": state.ratio if np.isfinite(state.ratio) else -1.0,
+        "n_blocks": state.glob.n, "n_ranks": state.comm.size, "scene": state.scene_yaml,
+        "resolved": state.resolved.to_json(), **extra_attrs,
     }
     return attrs, rows, contacts, np.diff(sel.sc_start)
 
 
-def write_checkpoint(path: str | os.PathLike, solver) -> str:
-    """Write the solver's state to ``path`` (collective). Returns the final path."""
-    comm = solver.comm
+def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = None) -> str:
+    """Write the model state to ``path`` (collective). Returns the final path.
+
+    ``extra_attrs``: the plugins' restart state (str/int/float values)."""
+    comm = state.comm
     path = str(path)
     tmp = path + ".tmp"
-    attrs, rows, contacts, nsub = checkpoint_payload(solver)
+    attrs, rows, contacts, nsub = checkpoint_payload(state, extra_attrs or {})
     parallel = comm.size > 1 and h5py.get_config().mpi
     if not parallel and comm.size > 1:
         parts = comm.gather((rows, contacts, nsub), root=0)
@@ -77,7 +86,7 @@ def write_checkpoint(path: str | os.PathLike, solver) -> str:
             nsub = np.concatenate([p[2] for p in parts])
     counts = np.array([len(nsub), int(nsub.sum())])
     if parallel:
-        all_counts = np.array(comm.allgather(counts))
+        all_counts = np.array(allgather(comm, counts))
         offs = all_counts.cumsum(0) - all_counts
         tot = all_counts.sum(0)
         off_c, off_s = offs[comm.rank]
@@ -93,33 +102,33 @@ def write_checkpoint(path: str | os.PathLike, solver) -> str:
             n_blocks = attrs["n_blocks"]
             order = np.argsort(rows["gid"], kind="stable")
             gid = rows["gid"][order]
-            for k in DYNAMIC_FIELDS:
+            for k in CHECKPOINT:
                 data = rows[k][order]
                 d = f.create_dataset(f"blocks/{k}", (n_blocks, *data.shape[1:]), dtype=data.dtype)
+                d.attrs["units"] = BLOCK_BY_NAME[k].units
                 for a, z in _runs(gid):
                     d[gid[a]:gid[a] + (z - a)] = data[a:z]
-            for k in CONTACT_FIELDS:
-                shape, dt = CONTACT_FIELDS[k]
-                d = f.create_dataset(f"contacts/{k}", (int(tot[0]), *shape), dtype=dt)
-                if counts[0]:
-                    d[off_c:off_c + counts[0]] = contacts[k]
+            groups = (("contacts", CONTACT_CK, 0, off_c), ("subcontacts", SUB_CK, 1, off_s))
+            for group, fields, axis, off in groups:
+                for fd in fields:
+                    shape = contacts[fd.name].shape[1:]
+                    d = f.create_dataset(f"{group}/{fd.name}", (int(tot[axis]), *shape),
+                                         dtype=fd.dtype)
+                    if counts[axis]:
+                        d[off:off + counts[axis]] = contacts[fd.name]
             d = f.create_dataset("contacts/nsub", (int(tot[0]),), dtype=np.int64)
             if counts[0]:
                 d[off_c:off_c + counts[0]] = nsub
-            for k in SUB_FIELDS:
-                shape, dt = SUB_FIELDS[k]
-                d = f.create_dataset(f"subcontacts/{k}", (int(tot[1]), *shape), dtype=dt)
-                if counts[1]:
-                    d[off_s:off_s + counts[1]] = contacts[k]
-    comm.Barrier()
+    barrier(comm)
     if comm.rank == 0:
         os.replace(tmp, path)  # atomic: a reader sees the old or the complete new file
-    comm.Barrier()
+    barrier(comm)
     return path
 
 
 def read_checkpoint(path: str | os.PathLike) -> dict:
-    """Everything in a checkpoint (read by each rank; restart keeps what it needs)."""
+    """Everything in a checkpoint (read by each rank; restart keeps what it needs):
+    ``attrs``, ``blocks`` {field: (n_blocks, ...)} and ``contacts`` (a ContactStore)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no checkpoint at {path}")
@@ -130,10 +139,15 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
             raise ValueError(f"{path}: checkpoint format {int(f.attrs['format_version'])} is newer "
                              f"than this pdem reads ({FORMAT_VERSION})")
         out = {"attrs": {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}}
-        out["blocks"] = {k: f[f"blocks/{k}"][()] for k in DYNAMIC_FIELDS}
-        out["contacts"] = {k: f[f"contacts/{k}"][()] for k in CONTACT_FIELDS}
-        out["nsub"] = f["contacts/nsub"][()]
-        out["sub"] = {k: f[f"subcontacts/{k}"][()] for k in SUB_FIELDS}
+        out["blocks"] = {k: f[f"blocks/{k}"][()] for k in CHECKPOINT}
+        nsub = f["contacts/nsub"][()]
+        arrays = {fd.name: f[f"contacts/{fd.name}"][()] for fd in CONTACT_CK}
+        for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed
+            arrays.setdefault(fd.name, np.zeros((len(nsub), *fd.shape), fd.dtype))
+        sub = {fd.name: f[f"subcontacts/{fd.name}"][()] for fd in SUB_CK
+               if f"subcontacts/{fd.name}" in f}
+        sub.setdefault("sc_hist", np.zeros((int(nsub.sum()), 0)))  # format 1: no law history
+    out["contacts"] = ContactStore(arrays, sub, csr.starts(nsub))
     return out
 
 

@@ -14,6 +14,8 @@ import numpy as np
 from h5py import h5fd, h5p, h5s, h5t
 from mpi4py import MPI
 
+from ..dynamics.kinematics import rotation_matrices
+from ..model.fields import OUTPUT, row_width
 from .xdmf import write_xdmf
 
 __all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
@@ -21,7 +23,13 @@ __all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
 log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 1
-_ROW_COLS = 13  # centroid 3 + quaternion 4 + velocity 3 + angular velocity 3
+# a snapshot row: the block fields declared with an output name (pdem.model.fields)
+_ROW_COLS = row_width(OUTPUT)
+_COLS = {}
+_c = 0
+for _f in OUTPUT:
+    _COLS[_f.output] = (_c, _f.width)
+    _c += _f.width
 _CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
 
 
@@ -32,21 +40,12 @@ def _h5py_has_mpi() -> bool:
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(n, 3, 3)`` of unit quaternions ``(n, 4)`` ``(w, x, y, z)``.
 
-    Element-wise arithmetic only (no BLAS), so a block's matrix does not depend on how many
-    blocks are converted together: the output is bitwise independent of the rank count.
+    Element-wise per block, so a block's matrix does not depend on how many blocks are
+    converted together: the output is bitwise independent of the rank count.
     """
-    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 4)
     R = np.empty((len(q), 3, 3))
-    R[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    R[:, 0, 1] = 2.0 * (x * y - w * z)
-    R[:, 0, 2] = 2.0 * (x * z + w * y)
-    R[:, 1, 0] = 2.0 * (x * y + w * z)
-    R[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    R[:, 1, 2] = 2.0 * (y * z - w * x)
-    R[:, 2, 0] = 2.0 * (x * z - w * y)
-    R[:, 2, 1] = 2.0 * (y * z + w * x)
-    R[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    rotation_matrices(q, R)
     return R
 
 
@@ -229,19 +228,11 @@ class OutputWriter:
         name_t = h5py.string_dtype("utf-8", max(1, max(len(s) for s in encoded)))
         self._write_static(g.create_dataset("name", (n,), dtype=name_t), np.array(encoded))
         self._write_static(g.create_dataset("gid", (n,), dtype=np.int64), np.arange(n))
-        self._series = {
-            "centroid": series("blocks/centroid", (n, 3), np.float64),
-            "orientation": series("blocks/orientation", (n, 4), np.float64),
-            "velocity": series("blocks/velocity", (n, 3), np.float64),
-            "angular_velocity": series("blocks/angular_velocity", (n, 3), np.float64),
-        }
-        for key, units in (
-            ("centroid", "m"),
-            ("orientation", "1 (unit quaternion w, x, y, z; body to world)"),
-            ("velocity", "m/s"),
-            ("angular_velocity", "rad/s"),
-        ):
-            self._series[key].attrs["units"] = units
+        self._series = {fd.output: series(f"blocks/{fd.output}", (n, *fd.shape), fd.dtype)
+                        for fd in OUTPUT}
+        for fd in OUTPUT:
+            self._series[fd.output].attrs["units"] = (
+                "1 (unit quaternion w, x, y, z; body to world)" if fd.name == "q" else fd.units)
         s = f.create_group("surface")
         self._write_static(s.create_dataset("connectivity", (self.n_tri, 3), np.int64), conn)
         self._write_static(s.create_dataset("block_id", (self.n_tri,), np.int64), tri_block)
@@ -332,22 +323,15 @@ class OutputWriter:
         out[rg - lo] = rr
         return out
 
-    def write_snapshot(
-        self,
-        step: int,
-        time: float,
-        gids: np.ndarray,
-        centroid: np.ndarray,
-        quat: np.ndarray,
-        velocity: np.ndarray,
-        angular_velocity: np.ndarray,
-    ) -> None:
+    def write_snapshot(self, step: int, time: float, gids: np.ndarray,
+                       fields: dict[str, np.ndarray]) -> None:
         """Append one snapshot (collective). Each rank passes the rows of the blocks it owns.
 
-        ``gids`` (k,) in any order, ``centroid`` (k, 3), ``quat`` (k, 4) ``(w, x, y, z)``,
-        ``velocity`` (k, 3), ``angular_velocity`` (k, 3); ``k`` may be 0. Every gid must be
-        passed by exactly one rank (``ValueError`` on every rank otherwise). ``step`` and
-        ``time`` are taken from rank 0.
+        ``gids`` (k,) in any order; ``fields`` maps every output name (``centroid``,
+        ``orientation``, ``velocity``, ``angular_velocity``: the fields of pdem.model.fields
+        with an output name) to its (k, ...) rows; ``k`` may be 0. Every gid must be passed
+        by exactly one rank (``ValueError`` on every rank otherwise). ``step`` and ``time``
+        are taken from rank 0.
         """
         self._check_open()
         msg = None
@@ -355,18 +339,13 @@ class OutputWriter:
             gids = np.asarray(gids, dtype=np.int64).reshape(-1)
             k = len(gids)
             rows = np.empty((k, _ROW_COLS))
-            col = 0
-            for name, arr, w in (
-                ("centroid", centroid, 3),
-                ("quat", quat, 4),
-                ("velocity", velocity, 3),
-                ("angular_velocity", angular_velocity, 3),
-            ):
-                a = np.asarray(arr, dtype=np.float64)
+            for name, (col, w) in _COLS.items():
+                if name not in fields:
+                    raise ValueError(f"write_snapshot: no {name} rows")
+                a = np.asarray(fields[name], dtype=np.float64)
                 if a.size != k * w:
                     raise ValueError(f"write_snapshot: {name} has shape {a.shape}, need ({k}, {w})")
                 rows[:, col : col + w] = a.reshape(k, w)
-                col += w
             if k and (gids.min() < 0 or gids.max() >= self.n_blocks):
                 raise ValueError(f"write_snapshot: gids outside [0, {self.n_blocks})")
         except ValueError as e:
@@ -382,12 +361,10 @@ class OutputWriter:
             root = self.comm.rank == 0
             self._write_row(self._t, i, np.array([time], np.float64) if root else None)
             self._write_row(self._step, i, np.array([step], np.int64) if root else None)
-            col = 0
-            for key, w in (("centroid", 3), ("orientation", 4), ("velocity", 3),
-                           ("angular_velocity", 3)):
-                self._write_row(self._series[key], i, mine[:, col : col + w], self._lo)
-                col += w
-            pts = self._world_points(mine[:, 0:3], mine[:, 3:7])
+            for name, (col, w) in _COLS.items():
+                self._write_row(self._series[name], i, mine[:, col : col + w], self._lo)
+            c0, q0 = _COLS["centroid"][0], _COLS["orientation"][0]
+            pts = self._world_points(mine[:, c0:c0 + 3], mine[:, q0:q0 + 4])
             self._write_row(self._points, i, pts, self._vlo)
             self._f.flush()
         if self.xdmf_path is not None and self.comm.rank == 0:

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..config import ConfigError
 from ..config.schema import Block, BoxShape, Scene
+from ..dynamics.rotation import quat_to_matrix
 from ..geometry import (
     ConvexPolyhedron,
     GeometryError,
@@ -17,7 +18,8 @@ from ..geometry import (
     from_vertices,
     prism,
 )
-from .blocks import BlockStore, empty_block_arrays
+from .blocks import BlockStore
+from .fields import BLOCK, allocate
 
 
 @dataclass
@@ -133,12 +135,12 @@ def expand_blocks(scene: Scene) -> list[BlockSpec]:
     return out
 
 
-def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = None):
-    """BlockStore holding ``specs[rows]`` (all by default), body frame = principal axes."""
-    if rows is None:
-        rows = np.arange(len(specs))
+def block_store(scene: Scene, specs: list[BlockSpec]):
+    """BlockStore of every block of the scene (gid order), body frame = principal axes;
+    returns (store, sorted group names)."""
+    rows = np.arange(len(specs))
     n = len(rows)
-    arr = empty_block_arrays(n)
+    arr = allocate(BLOCK, n)
     mats = list(scene.materials)
     groups = sorted({b.group for b in scene.blocks})
     vl, fn, fo, fv, fvs, ed = [], [], [], [], [0], []
@@ -185,11 +187,10 @@ def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = 
         edir_start.append(edir_start[-1] + len(dirs))
     # world angular momentum from the initial angular velocity: L = R diag(I) R^T w
     for r in range(n):
-        Rm = _quat_matrix(arr["q"][r])
+        Rm = quat_to_matrix(arr["q"][r])
         arr["L"][r] = Rm @ (arr["inertia"][r] * (Rm.T @ arr["w"][r]))
     verts_local = np.concatenate(vl) if vl else np.zeros((0, 3))
-    return BlockStore(
-        **arr,
+    return BlockStore(arr, dict(
         vert_start=np.array(vert_start, np.int64),
         verts_local=verts_local,
         verts_world=np.zeros_like(verts_local),
@@ -202,7 +203,7 @@ def block_store(scene: Scene, specs: list[BlockSpec], rows: np.ndarray | None = 
         edges=np.concatenate(ed).astype(np.int64) if ed else np.zeros((0, 2), np.int64),
         edir_start=np.array(edir_start, np.int64),
         edirs_local=np.concatenate(edirs) if edirs else np.zeros((0, 3)),
-    ), groups
+    )), groups
 
 
 def unique_directions(vectors: np.ndarray, tol: float = 1e-9) -> np.ndarray:
@@ -214,12 +215,3 @@ def unique_directions(vectors: np.ndarray, tol: float = 1e-9) -> np.ndarray:
         if not any(abs(abs(float(v @ u)) - 1.0) < tol for u in out):
             out.append(v)
     return np.array(out).reshape(-1, 3)
-
-
-def _quat_matrix(q):
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])

@@ -1,35 +1,22 @@
-"""ContactStore: contacts sorted by key (gid_a, gid_b) with their sub-contacts as CSR."""
+"""ContactStore: contacts sorted by key (gid_a, gid_b) with their sub-contacts as CSR.
+
+Fields are declared in :mod:`pdem.model.fields` (``CONTACT``, ``SUB`` and the joint laws'
+history columns ``sc_hist``).
+"""
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 
-CONTACT_FIELDS: dict[str, tuple[tuple[int, ...], type]] = {
-    "ia": ((), np.int64),  # row of block A in the block store
-    "ib": ((), np.int64),
-    "ga": ((), np.int64),  # gid of A (ga < gb)
-    "gb": ((), np.int64),
-    "joint": ((), np.int32),  # row in the joint table
-    "normal": ((3,), np.float64),  # common-plane unit normal, A -> B
-    "point": ((3,), np.float64),  # common-plane reference point
-    "gap": ((), np.float64),
-    "ctype": ((), np.int32),  # contact type code (Table 1)
-    "warm": ((), np.uint8),  # common plane known (warm start)
-    "moved": ((), np.float64),  # motion of the two blocks since the last geometry update
-}
+from . import csr
+from .fields import CONTACT, SUB, allocate
 
-SUB_FIELDS: dict[str, tuple[tuple[int, ...], type]] = {
-    "sc_pa": ((3,), np.float64),  # point in A's body frame
-    "sc_area": ((), np.float64),
-    "sc_un": ((), np.float64),  # overlap, + closing
-    "sc_fn": ((), np.float64),
-    "sc_fs": ((3,), np.float64),  # shear force on B
-    "sc_us": ((3,), np.float64),  # total shear displacement
-    "sc_dil": ((), np.float64),
-    "sc_state": ((), np.int64),
-}
+# What the force kernel reads and writes of the contacts and sub-contacts.
+Pairs = namedtuple("Pairs", "ia ib joint normal sc_start")
+Subs = namedtuple("Subs", "pa area un fn fs us dil state hist")
 
 
 @dataclass
@@ -48,53 +35,64 @@ class ContactStore:
     def n_sub(self) -> int:
         return int(self.sc_start[-1])
 
+    @property
+    def hist_width(self) -> int:
+        return self.sub["sc_hist"].shape[1]
+
     def __getattr__(self, name):
         try:
-            return self.arrays[name] if name in CONTACT_FIELDS else self.sub[name]
+            arrays = self.__dict__["arrays"]
+            return arrays[name] if name in arrays else self.__dict__["sub"][name]
         except KeyError:
             raise AttributeError(name) from None
 
     @staticmethod
-    def empty() -> ContactStore:
-        return ContactStore(
-            {k: np.zeros((0, *s), dt) for k, (s, dt) in CONTACT_FIELDS.items()},
-            {k: np.zeros((0, *s), dt) for k, (s, dt) in SUB_FIELDS.items()},
-            np.zeros(1, np.int64),
-        )
+    def empty(hist_width: int = 0) -> ContactStore:
+        sub = allocate(SUB, 0)
+        sub["sc_hist"] = np.zeros((0, hist_width))
+        return ContactStore(allocate(CONTACT, 0), sub, np.zeros(1, np.int64))
 
     def keys(self) -> np.ndarray:
-        return self.arrays["ga"] * (1 << 31) + self.arrays["gb"]
+        return self.arrays["ga"] * csr.KEY_SHIFT + self.arrays["gb"]
+
+    def pairs(self) -> Pairs:
+        a = self.arrays
+        return Pairs(a["ia"], a["ib"], a["joint"], a["normal"], self.sc_start)
+
+    def subs(self) -> Subs:
+        s = self.sub
+        return Subs(s["sc_pa"], s["sc_area"], s["sc_un"], s["sc_fn"], s["sc_fs"], s["sc_us"],
+                    s["sc_dil"], s["sc_state"], s["sc_hist"])
+
+    def take(self, idx: np.ndarray) -> ContactStore:
+        """Contacts ``idx`` (in that order), their sub-contacts carried along."""
+        sub_idx, start = csr.take(self.sc_start, idx)
+        return ContactStore({k: a[idx] for k, a in self.arrays.items()},
+                            {k: a[sub_idx] for k, a in self.sub.items()}, start)
 
     def select(self, keep: np.ndarray) -> ContactStore:
         """Contacts where ``keep`` is true, sub-contacts carried along."""
-        idx = np.nonzero(keep)[0]
-        counts = np.diff(self.sc_start)[idx]
-        starts = self.sc_start[idx]
-        sub_idx = np.repeat(starts - np.concatenate(([0], np.cumsum(counts)[:-1])), counts) + \
-            np.arange(counts.sum())
-        return ContactStore(
-            {k: a[idx] for k, a in self.arrays.items()},
-            {k: a[sub_idx] for k, a in self.sub.items()},
-            np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
-        )
+        return self.take(np.nonzero(keep)[0])
 
     def with_new_pairs(self, ia, ib, ga, gb, joint) -> ContactStore:
         """Merge new pairs (no sub-contacts yet, cold common plane) keeping key order."""
         m = len(ia)
         if m == 0:
             return self
-        new = {k: np.zeros((m, *s), dt) for k, (s, dt) in CONTACT_FIELDS.items()}
+        new = allocate(CONTACT, m)
         new.update(ia=ia, ib=ib, ga=ga, gb=gb, joint=joint)
-        arrays = {k: np.concatenate([self.arrays[k], new[k]]) for k in CONTACT_FIELDS}
-        counts = np.concatenate([np.diff(self.sc_start), np.zeros(m, np.int64)])
-        keys = arrays["ga"] * (1 << 31) + arrays["gb"]
-        order = np.argsort(keys, kind="stable")
-        starts = np.concatenate([self.sc_start[:-1], np.full(m, self.sc_start[-1])])[order]
-        counts = counts[order]
-        sub_idx = np.repeat(starts - np.concatenate(([0], np.cumsum(counts)[:-1])), counts) + \
-            np.arange(counts.sum())
-        return ContactStore(
-            {k: a[order] for k, a in arrays.items()},
-            {k: a[sub_idx] for k, a in self.sub.items()},
-            np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
-        )
+        arrays = {k: np.concatenate([self.arrays[k], new[k]]) for k in self.arrays}
+        merged = ContactStore(arrays, self.sub,
+                              np.concatenate([self.sc_start, np.full(m, self.sc_start[-1])]))
+        return merged.take(np.argsort(merged.keys(), kind="stable"))
+
+    @staticmethod
+    def concatenate(stores: list[ContactStore], hist_width: int) -> ContactStore:
+        """The contacts of several stores one after the other (no sorting)."""
+        stores = [s for s in stores if s.n]
+        if not stores:
+            return ContactStore.empty(hist_width)
+        arrays = {k: np.concatenate([s.arrays[k] for s in stores]) for k in stores[0].arrays}
+        sub = {k: np.concatenate([s.sub[k] for s in stores]) for k in stores[0].sub}
+        return ContactStore(arrays, sub, csr.starts(np.concatenate([np.diff(s.sc_start)
+                                                                    for s in stores])))

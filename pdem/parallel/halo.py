@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-# columns of a halo row: x(3) q(4) v(3) w(3) dtheta(3) u_acc u_geo
-ROW = 18
+from ..model.fields import HALO, pack, row_width, unpack
+
+# columns of a halo row: the block fields declared with halo=True (pdem.model.fields)
+ROW = row_width(HALO)
 
 
 class Halo:
@@ -34,28 +36,17 @@ class Halo:
     def neighbours(self) -> list[int]:
         return sorted(set(self.send) | set(self.recv))
 
-    def forward(self, blocks, dtheta):
+    def forward(self, blocks):
         """Copy owners' state into the ghost rows (collective among neighbours)."""
         from mpi4py import MPI
 
+        if not self.send and not self.recv:
+            return
+        arrays = blocks.fields()
         reqs = [self.comm.Irecv(buf, source=r, tag=11) for r, buf in self.rbuf.items()]
         for r, rows in self.send.items():
-            buf = self.sbuf[r]
-            buf[:, 0:3] = blocks.x[rows]
-            buf[:, 3:7] = blocks.q[rows]
-            buf[:, 7:10] = blocks.v[rows]
-            buf[:, 10:13] = blocks.w[rows]
-            buf[:, 13:16] = dtheta[rows]
-            buf[:, 16] = blocks.u_acc[rows]
-            buf[:, 17] = blocks.u_geo[rows]
-            reqs.append(self.comm.Isend(buf, dest=r, tag=11))
+            pack(arrays, HALO, rows, self.sbuf[r])
+            reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=11))
         MPI.Request.Waitall(reqs)
         for r, rows in self.recv.items():
-            buf = self.rbuf[r]
-            blocks.x[rows] = buf[:, 0:3]
-            blocks.q[rows] = buf[:, 3:7]
-            blocks.v[rows] = buf[:, 7:10]
-            blocks.w[rows] = buf[:, 10:13]
-            dtheta[rows] = buf[:, 13:16]
-            blocks.u_acc[rows] = buf[:, 16]
-            blocks.u_geo[rows] = buf[:, 17]
+            unpack(arrays, HALO, rows, self.rbuf[r])

@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.blocks import DYNAMIC_FIELDS, BlockStore, take_rows
-from ..model.contacts import CONTACT_FIELDS, SUB_FIELDS, ContactStore
+from ..model.blocks import BlockStore, take_rows
+from ..model.contacts import ContactStore
+from ..model.fields import MIGRATE
 from .halo import Halo
+from .mpi import allgather, alltoall
 
 
 def _boxes(x, radius, pad):
@@ -33,47 +35,18 @@ def contacts_needed(contacts: ContactStore, owned_free_gids: np.ndarray) -> np.n
     return np.isin(contacts.ga, owned_free_gids) | np.isin(contacts.gb, owned_free_gids)
 
 
-def _pack_contacts(contacts: ContactStore, mask: np.ndarray) -> dict:
-    sel = contacts.select(mask)
-    return {"arrays": sel.arrays, "sub": sel.sub, "sc_start": sel.sc_start}
-
-
-def _merge_contacts(parts: list[dict]) -> ContactStore:
+def _merge_contacts(parts: list[ContactStore]) -> ContactStore:
     """Union by key (duplicates are identical copies: keep the first), sorted by key."""
-    stores = [ContactStore(p["arrays"], p["sub"], p["sc_start"]) for p in parts if len(p["sc_start"]) > 1]
-    if not stores:
-        return ContactStore.empty()
-    arrays = {k: np.concatenate([s.arrays[k] for s in stores]) for k in CONTACT_FIELDS}
-    sub = {k: np.concatenate([s.sub[k] for s in stores]) for k in SUB_FIELDS}
-    counts = np.concatenate([np.diff(s.sc_start) for s in stores])
-    start = np.zeros(len(counts) + 1, np.int64)
-    np.cumsum(counts, out=start[1:])
-    merged = ContactStore(arrays, sub, start)
-    keys = merged.keys()
-    _, first = np.unique(keys, return_index=True)  # sorted by key, first occurrence
-    keep = np.zeros(len(keys), bool)
-    keep[first] = True
-    sel = merged.select(keep)
-    order = np.argsort(sel.keys(), kind="stable")
-    if np.all(order == np.arange(len(order))):
-        return sel
-    return _reorder(sel, order)
-
-
-def _reorder(c: ContactStore, order: np.ndarray) -> ContactStore:
-    counts = np.diff(c.sc_start)[order]
-    start = np.zeros(len(order) + 1, np.int64)
-    np.cumsum(counts, out=start[1:])
-    idx = np.repeat(c.sc_start[order] - start[:-1], counts) + np.arange(start[-1])
-    return ContactStore({k: a[order] for k, a in c.arrays.items()},
-                        {k: a[idx] for k, a in c.sub.items()}, start)
+    merged = ContactStore.concatenate(parts, parts[0].hist_width)
+    _, first = np.unique(merged.keys(), return_index=True)  # sorted by key, first occurrence
+    return merged.take(first)
 
 
 def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
             contacts: ContactStore, pad: float, margin: float):
     """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo).
 
-    ``owned_gids``/``state``: the blocks this rank owns now and their DYNAMIC_FIELDS arrays;
+    ``owned_gids``/``state``: the blocks this rank owns now and their MIGRATE arrays;
     ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here).
     """
     size, rank = comm.size, comm.rank
@@ -84,18 +57,17 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
     out = []
     for r in range(size):
         go = dest == r
-        msg = {"gid": owned_gids[go], **{k: state[k][go] for k in DYNAMIC_FIELDS}}
+        msg = {"gid": owned_gids[go], **{k: state[k][go] for k in MIGRATE}}
         if r != rank and contacts.n:
             leaving_free = owned_gids[go & ~fixed[owned_gids]]
-            msg["contacts"] = _pack_contacts(contacts, contacts_needed(contacts, leaving_free))
+            msg["contacts"] = contacts.select(contacts_needed(contacts, leaving_free))
         out.append(msg)
-    got = comm.alltoall(out) if size > 1 else out
+    got = alltoall(comm, out)
     gids = np.concatenate([m["gid"] for m in got])
     order = np.argsort(gids, kind="stable")
     gids = gids[order]
-    new_state = {k: np.concatenate([m[k] for m in got])[order] for k in DYNAMIC_FIELDS}
-    parts = [{"arrays": contacts.arrays, "sub": contacts.sub, "sc_start": contacts.sc_start}]
-    parts += [m["contacts"] for m in got if "contacts" in m]
+    new_state = {k: np.concatenate([m[k] for m in got])[order] for k in MIGRATE}
+    parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
     merged = _merge_contacts(parts)
 
     # 2. interest boxes and ghosts
@@ -106,7 +78,7 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
         box = np.concatenate([lo.min(0) - margin, hi.max(0) + margin])
     else:
         box = np.array([np.inf] * 3 + [-np.inf] * 3)
-    boxes = np.array(comm.allgather(box)) if size > 1 else box[None]
+    boxes = np.array(allgather(comm, box))
     blo, bhi = _boxes(new_state["x"], glob.radius[gids], pad)
     out = []
     for r in range(size):
@@ -114,8 +86,8 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
             out.append(None)
             continue
         hit = np.all(blo <= boxes[r, 3:], axis=1) & np.all(bhi >= boxes[r, :3], axis=1)
-        out.append({"gid": gids[hit], **{k: new_state[k][hit] for k in DYNAMIC_FIELDS}})
-    got = comm.alltoall(out) if size > 1 else out
+        out.append({"gid": gids[hit], **{k: new_state[k][hit] for k in MIGRATE}})
+    got = alltoall(comm, out)
     ghost_parts = [(r, m) for r, m in enumerate(got) if m is not None and len(m["gid"])]
     g_gids = np.concatenate([m["gid"] for _, m in ghost_parts]) if ghost_parts else np.zeros(0, np.int64)
     g_from = np.concatenate([np.full(len(m["gid"]), r) for r, m in ghost_parts]) if ghost_parts \
@@ -123,13 +95,13 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
     g_order = np.argsort(g_gids, kind="stable")
     g_gids, g_from = g_gids[g_order], g_from[g_order]
     g_state = {k: (np.concatenate([m[k] for _, m in ghost_parts])[g_order] if ghost_parts
-                   else np.zeros((0, *state[k].shape[1:]))) for k in DYNAMIC_FIELDS}
+                   else np.zeros((0, *state[k].shape[1:]))) for k in MIGRATE}
 
     # 3. the local store: owned rows first, then ghosts, each in gid order
     all_gids = np.concatenate([gids, g_gids])
     owned = np.concatenate([np.ones(len(gids), np.uint8), np.zeros(len(g_gids), np.uint8)])
     blocks = take_rows(glob, all_gids, owned)
-    for k in DYNAMIC_FIELDS:
+    for k in MIGRATE:
         getattr(blocks, k)[:] = np.concatenate([new_state[k], g_state[k]])
 
     # 4. contacts this rank computes, rows renumbered

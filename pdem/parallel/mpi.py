@@ -71,24 +71,40 @@ def abort_with_message(comm, exc: BaseException) -> None:
     comm.Abort(1)
 
 
-def allreduce_max(comm, value: float) -> float:
+def allreduce_max_array(comm, values: np.ndarray) -> np.ndarray:
+    """Element-wise maximum over ranks (order-independent, so deterministic)."""
+    if comm.size == 1:
+        return values
     from mpi4py import MPI
 
-    return comm.allreduce(float(value), op=MPI.MAX)
+    comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
+    return values
 
 
-def allreduce_min(comm, value: float) -> float:
+def allreduce_sum_array(comm, values: np.ndarray) -> np.ndarray:
+    """Element-wise sum over ranks (floating-point: reproducible for a fixed rank count)."""
+    if comm.size == 1:
+        return values
     from mpi4py import MPI
 
-    return comm.allreduce(float(value), op=MPI.MIN)
+    comm.Allreduce(MPI.IN_PLACE, values, op=MPI.SUM)
+    return values
 
 
-def any_rank(comm, flag: bool) -> bool:
-    from mpi4py import MPI
+def allgather(comm, value) -> list:
+    """Every rank's ``value``, in rank order."""
+    return comm.allgather(value) if comm.size > 1 else [value]
 
-    return bool(comm.allreduce(bool(flag), op=MPI.LOR))
+
+def alltoall(comm, values: list) -> list:
+    """``values[r]`` goes to rank r; returns what each rank sent here (pickled: rare path)."""
+    return comm.alltoall(values) if comm.size > 1 else values
 
 
-def gid_ranges(n_blocks: int, size: int) -> np.ndarray:
-    """Contiguous, balanced gid ranges per rank: rank r owns [r0[r], r0[r+1])."""
-    return np.linspace(0, n_blocks, size + 1).round().astype(np.int64)
+def broadcast(comm, value, root: int = 0):
+    return comm.bcast(value, root=root) if comm.size > 1 else value
+
+
+def barrier(comm) -> None:
+    if comm.size > 1:
+        comm.Barrier()

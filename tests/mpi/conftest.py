@@ -25,7 +25,7 @@ import pytest
 from mpi4py import MPI
 
 from pdem.config import parse_scene
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MPIEXEC = os.path.join(ROOT, ".venv", "bin", "mpiexec")
@@ -94,11 +94,11 @@ def run(scene, comm, *, output: bool = True, steps: int | None = None, probe=Non
     guard = collective(comm, f"a run on {comm.size} ranks") if comm.size > 1 \
         else contextlib.nullcontext()
     with guard:
-        solver = Solver(scene, comm, output=output)
+        solver = Simulation(scene, comm, output=output)
         before = probe(solver) if probe else None
         solver.run(steps=steps)
         after = probe(solver) if probe else None
-        report = solver.load_report()
+        report = solver.state.load_report()
         solver.close()
     return solver, before, after, report
 

@@ -90,7 +90,7 @@ output:
 
 def slider_probe(solver):
     """On the slider's owner: (rank, owner_of(x), x, slider-base contact slipping?, |shear|)."""
-    i = solver._owned_row(1)
+    i = solver.state.owned_row(1)
     if i < 0:
         return None
     c = solver.contacts
@@ -101,7 +101,7 @@ def slider_probe(solver):
         slipping = bool(np.all(c.sc_state[s] & 1)) if s.stop > s.start else False
         shear = float(np.linalg.norm(c.sc_fs[s].sum(0)))
     x = solver.blocks.x[i].copy()
-    return solver.comm.rank, int(solver.decomp.owner_of(x)[0]), x, slipping, shear
+    return solver.comm.rank, int(solver.state.decomp.owner_of(x)[0]), x, slipping, shear
 
 
 def test_slider_crosses_brick_boundary(tmp_path, mpi_tools):
@@ -203,13 +203,13 @@ def test_pile_settling_matches_one_rank(tmp_path, split, mpi_tools):
     dims = "auto" if split == "auto" else [1, comm.size, 1]
     scene = t.with_parallel(pile_scene(), dims, f"{base}/pile.h5")
     solver, start, end, report = t.run(scene, comm, probe=lambda s: s.comm.allgather(owned_gids(s)))
-    before, after = owners(start, solver.glob.n), owners(end, solver.glob.n)
+    before, after = owners(start, solver.state.glob.n), owners(end, solver.state.glob.n)
     assert np.all(before >= 0) and np.all(after >= 0), "every block has exactly one owner"
     migrated = int((before != after).sum())
     # distinct contacts (one between blocks of two ranks is computed by both)
     keys = np.unique(np.concatenate(comm.allgather(solver.contacts.keys())))
     if comm.rank == 0:
-        print(f"\npile {split} on {comm.size} ranks, dims {solver.decomp.dims.tolist()}: owned "
+        print(f"\npile {split} on {comm.size} ranks, dims {solver.state.decomp.dims.tolist()}: owned "
               f"{report['owned']}, ghosts {report['ghosts']}, contacts {report['contacts']} "
               f"({len(keys)} distinct), rebuilds {report['rebuilds']}, blocks that changed owner "
               f"{migrated}")
@@ -274,12 +274,12 @@ EMPTY_CHILD = """
 import json, sys
 from mpi4py import MPI
 from pdem.config import load_scene
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 comm = MPI.COMM_WORLD
-solver = Solver(load_scene(sys.argv[1]), comm)
+solver = Simulation(load_scene(sys.argv[1]), comm)
 solver.run()
-report = solver.load_report()
+report = solver.state.load_report()
 solver.close()
 if comm.rank == 0:
     print("REPORT " + json.dumps(report), flush=True)

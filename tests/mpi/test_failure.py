@@ -36,17 +36,17 @@ output: {{every_steps: 10}}
 
 CHILD = """
 import sys
-from pdem.solver import Solver
+from pdem.stepper import Stepper
 import pdem.cli
 
-advance = Solver.advance
+advance = Stepper.advance
 
 def failing_advance(self):
-    if self.comm.rank == 1 and self.step == 5:
+    if self.s.comm.rank == 1 and self.s.step == 5:
         raise RuntimeError("boom on rank 1")
-    advance(self)
+    return advance(self)
 
-Solver.advance = failing_advance
+Stepper.advance = failing_advance
 sys.exit(pdem.cli.main(["run", sys.argv[1], "-o", sys.argv[2], "-q"]))
 """
 
@@ -82,9 +82,9 @@ def test_blow_up_stops_every_rank_with_the_same_message(tmp_path, mpi_tools):
     scene = t.with_parallel(text, [comm.size, 1, 1], f"{base}/blowup.h5")
 
     def blow_up(scene, comm):
-        from pdem.solver import Solver
+        from pdem.simulation import Simulation
 
-        solver = Solver(scene, comm, output=True)
+        solver = Simulation(scene, comm, output=True)
         try:
             with pytest.raises(SimulationError) as info:
                 solver.run()

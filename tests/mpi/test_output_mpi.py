@@ -10,6 +10,11 @@ from mpi4py import MPI
 
 from pdem.io import OutputWriter, read_xdmf
 
+
+def rows(centroid, quat, velocity, angular_velocity) -> dict:
+    return {"centroid": centroid, "orientation": quat, "velocity": velocity,
+            "angular_velocity": angular_velocity}
+
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(120, method="thread")]
 
 ATTRS = {"pdem_version": "0.1.0", "run_id": "mpi-test"}
@@ -56,7 +61,7 @@ def write_run(path, comm, n, owned, hist_owner, **kw):
     with OutputWriter(path, comm, **make_scene(n), **kw) as w:
         w.add_history("z0", 1, {"block": "block-0"})
         for step, t, c, q, v, om in make_snapshots(n):
-            w.write_snapshot(step, t, owned, c[owned], q[owned], v[owned], om[owned])
+            w.write_snapshot(step, t, owned, rows(c[owned], q[owned], v[owned], om[owned]))
             w.write_history("z0", t, c[0, 2:3] if comm.rank == hist_owner else None)
 
 
@@ -149,13 +154,13 @@ def test_bad_ownership_raises_on_every_rank(tmp_path):
             owned = np.array([0, 1, 2, 3])  # rank 1 also claims gid 0
         _, t, c, q, v, om = snap
         with pytest.raises(ValueError, match="exactly one rank"):
-            w.write_snapshot(0, t, owned, c[owned], q[owned], v[owned], om[owned])
+            w.write_snapshot(0, t, owned, rows(c[owned], q[owned], v[owned], om[owned]))
         w.add_history("h", 1)
         with pytest.raises(ValueError, match="exactly one rank"):
             w.write_history("h", t, [1.0])  # every rank claims it
         # the writer is still usable after a collective error
         owned = np.arange(n)[np.arange(n) % comm.size == comm.rank]
-        w.write_snapshot(0, t, owned, c[owned], q[owned], v[owned], om[owned])
+        w.write_snapshot(0, t, owned, rows(c[owned], q[owned], v[owned], om[owned]))
     comm.Barrier()
     if comm.rank == 0:
         with h5py.File(f"{base}/bad.h5", "r") as f:

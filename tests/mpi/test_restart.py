@@ -10,7 +10,7 @@ from mpi4py import MPI
 
 from pdem.config import parse_scene
 from pdem.io.checkpoint import read_checkpoint
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 SCENE = """
 name: restart-pile
@@ -44,7 +44,7 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     # the straight run and its checkpoint at step N, on 2 ranks
     pair = comm.Split(0 if comm.rank < 2 else MPI.UNDEFINED, comm.rank)
     if pair != MPI.COMM_NULL:
-        s = Solver(parse_scene(text), pair)
+        s = Simulation(parse_scene(text), pair)
         s.run()
         assert s.contacts.n > 0  # history matters: blocks are in contact when checkpointed
         s.close()
@@ -52,8 +52,8 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     comm.Barrier()
     ck_path = f"{d}/ck-{N:09d}.h5"
     ck = read_checkpoint(ck_path)
-    assert ck["attrs"]["n_ranks"] == 2 and len(ck["nsub"]) > 0
-    assert np.any(ck["sub"]["sc_fs"] != 0.0)  # shear-force history is in the checkpoint
+    assert ck["attrs"]["n_ranks"] == 2 and ck["contacts"].n > 0
+    assert np.any(ck["contacts"].sub["sc_fs"] != 0.0)  # shear-force history is in the checkpoint
     scene = parse_scene(ck["attrs"]["scene"])
     ref, ref_step = final_state(f"{d}/straight.h5")
     assert ref_step == 2 * N
@@ -61,7 +61,7 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     def restart(c, out):
         sc = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
                                       "checkpoint": None})
-        r = Solver(sc, c, state=ck)
+        r = Simulation(sc, c, checkpoint=ck)
         assert r.step == N
         r.run()
         r.close()

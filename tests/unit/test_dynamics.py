@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from pdem.dynamics import motion as M
+from pdem.dynamics.damping import DAMPING
 from pdem.dynamics.energy import angular_momentum, kinetic_energy, linear_momentum
 from pdem.dynamics.rotation import (
     quat_conj,
@@ -67,49 +68,17 @@ class Blocks:
         self.w[:] = w
         M.momentum_from_omega(self.q, self.w, self.inertia, self.mscale, self.scalar, self.L)
 
-    def stagger(self, dt):
-        M.stagger_start(
-            self.q,
-            self.v,
-            self.w,
-            self.L,
-            self.mass,
-            self.inertia,
-            self.mscale,
-            self.fixed,
-            self.vfix,
-            self.force,
-            self.moment,
-            self.gravity,
-            dt,
-            self.scalar,
-        )
+    def record(self):
+        return M.Motion(self.x, self.q, self.v, self.w, self.L, self.mass, self.inertia,
+                        self.fixed, self.vfix, self.force, self.moment, self.mscale,
+                        self.prev_force, self.prev_moment, self.dx, self.dtheta)
 
-    def step(self, dt, mode=M.NONE, alpha=0.0):
-        M.integrate(
-            self.x,
-            self.q,
-            self.v,
-            self.w,
-            self.L,
-            self.mass,
-            self.inertia,
-            self.fixed,
-            self.vfix,
-            self.force,
-            self.moment,
-            self.gravity,
-            dt,
-            mode,
-            alpha,
-            self.scalar,
-            self.mscale,
-            self.prev_force,
-            self.prev_moment,
-            self.dx,
-            self.dtheta,
-            self.stats,
-        )
+    def stagger(self, dt):
+        M.stagger_start(self.record(), self.gravity, dt, self.scalar)
+
+    def step(self, dt, mode="none", alpha=0.0):
+        M.integrate(self.record(), self.gravity, dt, DAMPING[mode].kernel_args(alpha),
+                    self.scalar, self.stats)
 
     def energy(self):
         et, er = kinetic_energy(
@@ -326,7 +295,7 @@ def test_fixed_block_never_moves():
     x0 = b.x[0].copy()
     q0 = b.q[0].copy()
     for _ in range(100):
-        b.step(1e-3, M.LOCAL, 0.8)
+        b.step(1e-3, "local", 0.8)
     assert np.array_equal(b.x[0], x0) and np.array_equal(b.q[0], q0)
     assert not b.v[0].any() and not b.w[0].any() and not b.L[0].any()
     assert not b.dx[0].any() and not b.dtheta[0].any()
@@ -347,7 +316,7 @@ def test_prescribed_velocity_moves_exactly():
     dt = 1e-3
     n = 500
     for _ in range(n):
-        b.step(dt, M.VISCOUS, 5.0)
+        b.step(dt, "viscous", 5.0)
     assert np.array_equal(b.v[0], vel) and np.array_equal(b.w[0], om)
     np.testing.assert_allclose(b.x[0], vel * n * dt, rtol=1e-13)
     np.testing.assert_allclose(quat_to_rotvec(b.q[0]), om * n * dt, rtol=1e-12)
@@ -377,15 +346,15 @@ def _spring_peaks(mode, alpha, drift=0.0, ncyc=8, dt=1e-3, stiffness=(2 * np.pi)
 
 
 def test_undamped_spring_keeps_amplitude():
-    p = _spring_peaks(M.NONE, 0.7)
+    p = _spring_peaks("none", 0.7)
     np.testing.assert_allclose(p / p[0], 1.0, atol=1e-5)
-    p = _spring_peaks(M.LOCAL, 0.0)
+    p = _spring_peaks("local", 0.0)
     np.testing.assert_allclose(p / p[0], 1.0, atol=1e-5)
 
 
 def test_local_damping_decay_ratio():
     alpha = 0.1
-    p = _spring_peaks(M.LOCAL, alpha)
+    p = _spring_peaks("local", alpha)
     ratio = p[1:] / p[:-1]
     assert np.all(ratio < 1.0)
     # energy argument: each half cycle the amplitude falls by sqrt((1 - a)/(1 + a))
@@ -394,16 +363,16 @@ def test_local_damping_decay_ratio():
 
 def test_viscous_damping_matches_exponential_decay():
     alpha = 0.2
-    p = _spring_peaks(M.VISCOUS, alpha)
+    p = _spring_peaks("viscous", alpha)
     np.testing.assert_allclose(p[1:] / p[:-1], math.exp(-alpha / 2), rtol=1e-2)
-    p2 = _spring_peaks(M.ADAPTIVE, alpha)  # same kernel path with a caller-set alpha
+    p2 = _spring_peaks("adaptive", alpha)  # same kernel path with a caller-set alpha
     np.testing.assert_array_equal(p, p2)
 
 
 def test_combined_damping_works_with_steady_drift():
     """Velocity never changes sign: local damping stalls, combined damping (eq. 83) decays."""
-    loc = _spring_peaks(M.LOCAL, 0.1, drift=3.0)
-    com = _spring_peaks(M.COMBINED, 0.1, drift=3.0)
+    loc = _spring_peaks("local", 0.1, drift=3.0)
+    com = _spring_peaks("combined", 0.1, drift=3.0)
     assert loc[-1] / loc[1] > 0.99
     assert np.all(np.diff(com) < 0.0) and com[-1] / com[0] < 0.5
 
@@ -418,7 +387,7 @@ def test_damping_stats_and_adaptive_servo():
     e_start = None
     for s in range(20_000):
         b.force[0, 0] = -k * b.x[0, 0]
-        b.step(dt, M.ADAPTIVE, alpha)
+        b.step(dt, "adaptive", alpha)
         assert b.stats[M.STAT_DAMP_POWER] >= 0.0
         p_sum += b.stats[M.STAT_DAMP_POWER]
         dek_sum += b.stats[M.STAT_DEK]
@@ -442,7 +411,7 @@ def test_adaptive_alpha_update_rules():
     assert M.adaptive_alpha_update(1.0, 1.0, 0.0) == 1.0  # at rest: unchanged
     assert M.adaptive_alpha_update(0.0, 0.0, 1.0, alpha_min=1e-3) > 1e-3
     assert M.adaptive_alpha_update(999.0, 0.0, 1.0, dt=0.01) == 100.0
-    assert set(M.DAMPING_MODES) == {"none", "local", "combined", "viscous", "adaptive"}
+    assert set(DAMPING) == {"none", "local", "combined", "viscous", "adaptive"}
 
 
 def test_local_damping_on_rotation():
@@ -455,7 +424,7 @@ def test_local_damping_on_rotation():
     for s in range(4000):
         ang = quat_to_rotvec(b.q[0])[2]
         b.moment[0, 2] = -kr * ang
-        b.step(dt, M.LOCAL, 0.2)
+        b.step(dt, "local", 0.2)
         cur = max(cur, abs(ang))
         if (s + 1) % 1000 == 0:
             peaks.append(cur)

@@ -9,7 +9,7 @@ from mpi4py import MPI
 from pdem.config import parse_scene
 from pdem.errors import SimulationError
 from pdem.io.checkpoint import read_checkpoint
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 UNSTABLE = """
 materials: {rock: {density: 2000.0}}
@@ -25,7 +25,7 @@ checkpoint: {every_steps: 1000, file: CK}
 
 def test_runaway_names_block_step_and_cause_after_final_checkpoint(tmp_path):
     prefix = os.path.join(tmp_path, "ck")
-    s = Solver(parse_scene(UNSTABLE.replace("CK", prefix)), MPI.COMM_SELF, output=False)
+    s = Simulation(parse_scene(UNSTABLE.replace("CK", prefix)), MPI.COMM_SELF, output=False)
     with pytest.raises(SimulationError) as info:
         s.run()
     msg = str(info.value)

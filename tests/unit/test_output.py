@@ -12,6 +12,12 @@ from mpi4py import MPI
 import pdem.io.writer as writer_mod
 from pdem.io import OutputWriter, read_xdmf, summarise
 
+
+def rows(centroid, quat, velocity, angular_velocity) -> dict:
+    """A snapshot's rows by output name, as the Snapshots plugin passes them."""
+    return {"centroid": centroid, "orientation": quat, "velocity": velocity,
+            "angular_velocity": angular_velocity}
+
 COMM = MPI.COMM_SELF
 SCENE = "name: two-shapes\nblocks: []\n"
 ATTRS = {"pdem_version": "0.1.0", "run_id": "test-run", "n_ranks": 1}
@@ -81,10 +87,9 @@ def write_file(path, snaps, order=None, **kw):
         w.add_history("top_z", 1, {"block": "cube", "quantity": "z", "units": "m"})
         w.add_history("slab_v", 3, {"block": "slab", "quantity": "velocity"})
         for s in snaps:
-            w.write_snapshot(
-                s["step"], s["time"], order, s["centroid"][order], s["quat"][order],
-                s["velocity"][order], s["angular_velocity"][order],
-            )
+            w.write_snapshot(s["step"], s["time"], order,
+                             rows(s["centroid"][order], s["quat"][order], s["velocity"][order],
+                                  s["angular_velocity"][order]))
             w.write_history("top_z", s["time"], s["centroid"][2, 2:3])
             w.write_history("slab_v", s["time"], s["velocity"][0])
     return path
@@ -257,8 +262,8 @@ def test_xdmf_written_after_every_snapshot(tmp_path, snaps):
     w = OutputWriter(path, COMM, **make_scene())
     s = snaps[0]
     for k in range(2):
-        w.write_snapshot(k, k * 0.5, np.arange(4), s["centroid"], s["quat"], s["velocity"],
-                         s["angular_velocity"])
+        w.write_snapshot(k, k * 0.5, np.arange(4), rows(s["centroid"], s["quat"], s["velocity"],
+                                                        s["angular_velocity"]))
         root = ET.parse(path.with_suffix(".xdmf")).getroot()
         assert len(root.find("Domain").find("Grid").findall("Grid")) == k + 1
     w.close()
@@ -271,14 +276,16 @@ def test_bad_input_raises(tmp_path, snaps):
     with OutputWriter(tmp_path / "bad.h5", COMM, **make_scene()) as w:
         args = (s["centroid"], s["quat"], s["velocity"], s["angular_velocity"])
         with pytest.raises(ValueError, match="exactly one rank"):
-            w.write_snapshot(0, 0.0, [0, 1, 1, 3], *args)
+            w.write_snapshot(0, 0.0, [0, 1, 1, 3], rows(*args))
         with pytest.raises(ValueError, match="exactly one rank"):
-            w.write_snapshot(0, 0.0, [0, 1, 2], *(a[:3] for a in args))
-        with pytest.raises(ValueError, match="quat has shape"):
-            w.write_snapshot(0, 0.0, [0, 1, 2, 3], s["centroid"], s["quat"][:, :3],
-                             s["velocity"], s["angular_velocity"])
+            w.write_snapshot(0, 0.0, [0, 1, 2], rows(*(a[:3] for a in args)))
+        with pytest.raises(ValueError, match="orientation has shape"):
+            w.write_snapshot(0, 0.0, [0, 1, 2, 3], rows(s["centroid"], s["quat"][:, :3],
+                                                        s["velocity"], s["angular_velocity"]))
+        with pytest.raises(ValueError, match="no orientation rows"):
+            w.write_snapshot(0, 0.0, [0, 1, 2, 3], {"centroid": s["centroid"]})
         with pytest.raises(ValueError, match="outside"):
-            w.write_snapshot(0, 0.0, [0, 1, 2, 4], *args)
+            w.write_snapshot(0, 0.0, [0, 1, 2, 4], rows(*args))
         w.add_history("h", 2)
         with pytest.raises(ValueError, match="exactly one rank"):
             w.write_history("h", 0.0, None)
@@ -330,8 +337,8 @@ def test_summarise_many_blocks(tmp_path):
     vel[3] = [3.0, 4.0, 0.0]
     q = np.tile([1.0, 0, 0, 0], (n, 1))
     with OutputWriter(tmp_path / "many.h5", COMM, **scene) as w:
-        w.write_snapshot(0, 0.0, np.arange(n), c0, q, vel * 0, vel * 0)
-        w.write_snapshot(10, 1.0, np.arange(n), c1, q, vel, vel * 0)
+        w.write_snapshot(0, 0.0, np.arange(n), rows(c0, q, vel * 0, vel * 0))
+        w.write_snapshot(10, 1.0, np.arange(n), rows(c1, q, vel, vel * 0))
     text = summarise(tmp_path / "many.h5")
     assert "blocks:      25" in text and "snapshots:   2" in text
     assert "max 2 m (b7)" in text

@@ -6,7 +6,7 @@ from mpi4py import MPI
 
 from pdem.config import ConfigError, parse_scene
 from pdem.model.build import block_store, expand_blocks, quat_from_matrix
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 HEAD = """
 materials: {rock: {density: 2000.0}}
@@ -18,7 +18,7 @@ blocks:
 
 
 def build(extra):
-    return Solver(parse_scene(HEAD + extra), MPI.COMM_SELF, output=False)
+    return Simulation(parse_scene(HEAD + extra), MPI.COMM_SELF, output=False)
 
 
 def test_non_convex_polyhedron_rejected_with_block_name():

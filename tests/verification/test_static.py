@@ -12,7 +12,7 @@ import pytest
 from mpi4py import MPI
 
 from pdem.config import parse_scene
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 RHO, KN, G = 2500.0, 1.0e9, 9.81
 
@@ -31,7 +31,7 @@ solve: {{ratio: 1.0e-5, max_steps: 200000, damping: DAMP, mass_scaling: SCALE}}
 @pytest.mark.parametrize("damping,scaling", [("local", False), ("local", True),
                                              ("combined", False), ("adaptive", False)])
 def test_stack_relaxes_to_elastic_equilibrium(damping, scaling):
-    s = Solver(parse_scene(SCENE.replace("DAMP", damping).replace("SCALE", str(scaling).lower())),
+    s = Simulation(parse_scene(SCENE.replace("DAMP", damping).replace("SCALE", str(scaling).lower())),
                MPI.COMM_SELF, output=False)
     s.run()
     assert s.ratio <= 1e-5, f"did not converge: ratio {s.ratio:.3g} after {s.step} steps"

@@ -9,12 +9,12 @@ import numpy as np
 from mpi4py import MPI
 
 from pdem.config import parse_scene
-from pdem.solver import Solver
+from pdem.simulation import Simulation
 
 
-def make_solver(text: str) -> Solver:
+def make_solver(text: str) -> Simulation:
     """A single-rank solver without output files for the scene in ``text`` (YAML)."""
-    return Solver(parse_scene(text), MPI.COMM_SELF, output=False)
+    return Simulation(parse_scene(text), MPI.COMM_SELF, output=False)
 
 
 def vec(v) -> str:

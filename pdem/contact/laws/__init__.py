@@ -1,0 +1,108 @@
+"""Joint laws: the registry, the scene's joint table and the statically dispatched update.
+
+A joint law is one module exposing ``LAW = JointLaw(name, params, history, table, update)``
+plus one line in :data:`JOINT_LAWS` below. ``update`` is a numba kernel with the signature
+
+    update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state)
+        -> (fn, dil, state, fx, fy, fz)
+
+``p`` is the law's table (a namedtuple of per-joint arrays) and ``j`` the contact's row in it;
+``s`` the sub-contact index and ``hist`` the ``sc_hist`` columns (the law's ``history`` names,
+in order, from column 0); ``un`` the overlap (+ closing), ``dil`` the dilation; ``fx, fy, fz``
+the shear force on B carried from the last step, already turned into the current plane;
+``dx, dy, dz`` this step's shear displacement increment and ``ux, uy, uz`` the total; ``area``
+the sub-contact's area; ``state`` its bits (:mod:`.base`). It returns the new normal force
+(> 0 compression), dilation, state and shear force. Laws never see block kinematics.
+
+A scene compiles only the laws its joints use: the force kernel receives a tuple of the used
+laws' tables and :func:`apply_law` is resolved per tuple type at compile time (no runtime
+dispatch on names, numba's disk cache keyed on that type).
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba.extending import overload
+
+from ...registry import Registry
+from . import coulomb
+from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
+
+__all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams", "JointTable",
+           "apply_law", "joint_table"]
+
+JOINT_LAWS: Registry[JointLaw] = Registry("joint law")
+JOINT_LAWS.register("coulomb", coulomb.LAW)
+
+# What the force kernel reads: for each scene joint (row), the slot of its law in ``laws`` and
+# its row in that law's table.
+Joints = namedtuple("Joints", "slot row laws")
+
+
+class JointTable:
+    """The scene's joints resolved: per-law tables, stiffnesses, the group-pair map."""
+
+    def __init__(self, names, params, pair):
+        self.names = list(names)
+        self.params = list(params)
+        self.pair = pair
+        used = [law for law in JOINT_LAWS.values()
+                if any(p.model == law.name for p in self.params)]
+        self.laws = tuple(used)
+        slot = np.zeros(len(self.params), np.int32)
+        row = np.zeros(len(self.params), np.int32)
+        tables = []
+        for k, law in enumerate(used):
+            mine = [i for i, p in enumerate(self.params) if p.model == law.name]
+            slot[mine] = k
+            row[mine] = np.arange(len(mine), dtype=np.int32)
+            tables.append(law.table([self.params[i] for i in mine]))
+        self.kernel_args = Joints(slot, row, tuple(tables))
+        self.kn = np.array([p.kn for p in self.params], float)
+        self.ks = np.array([p.ks for p in self.params], float)
+        self.hist_width = max((len(law.history) for law in used), default=0)
+
+
+def joint_table(scene, group_names: list[str]) -> JointTable:
+    """The scene's joints (rows in ``scene.joints`` order) and the group-pair -> row map."""
+    names = list(scene.joints)
+    rows = {name: i for i, name in enumerate(names)}
+    ng = len(group_names)
+    pair = np.full((ng, ng), rows.get("default", 0), dtype=np.int32)
+    gidx = {g: i for i, g in enumerate(group_names)}
+    for jp in scene.joint_pairs:
+        a, b = gidx[jp.groups[0]], gidx[jp.groups[1]]
+        pair[a, b] = pair[b, a] = rows[jp.joint]
+    return JointTable(names, [scene.joints[k] for k in names], pair)
+
+
+def apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,
+              state):
+    """Update one sub-contact with the law in ``laws[slot]`` (compiled, see module doc)."""
+    raise NotImplementedError("apply_law is only callable from numba kernels")
+
+
+_BY_TABLE = {}
+
+
+def _update_of(table_type):
+    if not _BY_TABLE:
+        for law in JOINT_LAWS.values():
+            _BY_TABLE[law.table([]).__class__] = law.update
+    return _BY_TABLE[table_type.instance_class]
+
+
+@overload(apply_law)
+def _apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,
+               state):
+    kernels = [_update_of(t) for t in laws.types]
+    args = "j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state"
+    src = [f"def impl(laws, slot, {args}):"]
+    for k in range(1, len(kernels)):
+        src.append(f"    if slot == {k}:\n        return k{k}(laws[{k}], {args})")
+    src.append(f"    return k0(laws[0], {args})")
+    scope = {f"k{k}": fn for k, fn in enumerate(kernels)}
+    exec("\n".join(src), scope)  # one branch per used law, resolved at compile time
+    return scope["impl"]

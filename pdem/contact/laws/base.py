@@ -1,0 +1,39 @@
+"""What every joint law has: its registry entry type, shared parameters and state bits."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import PositiveFloat
+
+from ...strict import Strict
+
+# sub-contact state bits, shared by every law (output and tests read them)
+SLIPPING = 1  # at the shear limit this step
+FAILED = 2  # tension and cohesion lost, for good
+OPEN = 4  # normal force zero: separated
+
+
+class JointParams(Strict):
+    """Parameters every law has: normal and shear stiffness (Pa/m), for the timestep."""
+
+    kn: PositiveFloat
+    ks: PositiveFloat
+
+
+@dataclass(frozen=True)
+class JointLaw:
+    """A registered joint law.
+
+    ``params``: pydantic model of a ``joints.X`` entry (its ``model`` literal is the name);
+    ``history``: names of extra per-sub-contact history columns (``sc_hist``);
+    ``table``: list of params -> namedtuple of per-joint arrays (the kernel's ``p``);
+    ``update``: the numba kernel, signature documented in :mod:`pdem.contact.laws`.
+    """
+
+    name: str
+    params: type[JointParams]
+    history: tuple[str, ...]
+    table: Any
+    update: Any

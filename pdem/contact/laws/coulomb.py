@@ -1,0 +1,111 @@
+"""The Coulomb-slip joint of 3DEC (eqs. 34-43): elastic, tension and cohesion until the
+first failure, frictional slip with dilation."""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, NonNegativeFloat, PositiveFloat
+
+from ...jit import kernel
+from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
+
+
+class Params(JointParams):
+    """Joint (contact) properties in 3DEC units: stiffness in Pa/m, strengths in Pa, angles in
+    degrees. ``dilation_limit`` is the shear displacement beyond which dilation stops (eq. 43
+    text); null means no limit."""
+
+    model: Literal["coulomb"] = "coulomb"
+    friction: Annotated[float, Field(ge=0.0, lt=90.0)] = 30.0
+    dilation: Annotated[float, Field(ge=0.0, lt=90.0)] = 0.0
+    cohesion: NonNegativeFloat = 0.0
+    tension: NonNegativeFloat = 0.0
+    dilation_limit: PositiveFloat | None = None
+
+
+Table = namedtuple("CoulombTable", "kn ks tan_phi tan_psi cohesion tension us_lim")
+
+
+def table(joints: list[Params]) -> Table:
+    """Per-joint arrays; angles become tangents here, once, so kernels never see degrees."""
+    return Table(
+        np.array([x.kn for x in joints], float),
+        np.array([x.ks for x in joints], float),
+        np.array([math.tan(math.radians(x.friction)) for x in joints], float),
+        np.array([math.tan(math.radians(x.dilation)) for x in joints], float),
+        np.array([x.cohesion for x in joints], float),
+        np.array([x.tension for x in joints], float),
+        np.array([x.dilation_limit or np.inf for x in joints], float),
+    )
+
+
+@kernel
+def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state):
+    """Update one sub-contact's normal and shear force (eqs. 24-27, 34-43).
+
+    Scalars only, so the force loop keeps everything in registers.
+
+    Parameters
+    ----------
+    p, j : the law's table (:data:`Table`) and this contact's joint row.
+    s, hist : sub-contact index and the history columns (unused: Coulomb keeps none).
+    un : overlap of the surfaces (+ closing); normal force is ``kn * area * (un + dil)``, the
+        total form of eqs. 24, 26, 43.
+    dil : accumulated dilation (eq. 42).
+    fx, fy, fz : shear force on block B carried from the last step, turned into the plane.
+    dx, dy, dz : this step's shear displacement increment (eq. 22), for dilation (eq. 41).
+    ux, uy, uz : total shear displacement after this step, for the dilation limit.
+    state : state bits (SLIPPING, FAILED, OPEN).
+
+    Returns
+    -------
+    (fn, dil, state, fx, fy, fz)
+    """
+    kn = p.kn[j]
+    tan_phi = p.tan_phi[j]
+    tan_psi = p.tan_psi[j]
+    tension = p.tension[j]
+    cohesion = p.cohesion[j]
+    us_lim = p.us_lim[j]
+    kss = p.ks[j] * area
+    fx = fx - kss * dx  # eqs. 25, 27: elastic trial
+    fy = fy - kss * dy
+    fz = fz - kss * dz
+    state = state & FAILED
+    fn = kn * area * (un + dil)
+    t_max = 0.0 if state & FAILED else tension * area  # eq. 34, 36
+    c_area = 0.0 if state & FAILED else cohesion * area
+    if fn < -t_max:  # eq. 38: tensile failure
+        if t_max > 0.0 or c_area > 0.0:
+            state |= FAILED
+        return 0.0, dil, state | OPEN, 0.0, 0.0, 0.0
+    fs_max = c_area + max(fn, 0.0) * tan_phi  # eq. 35, 37
+    fs_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if fs_mag > fs_max:  # eq. 39
+        scale = fs_max / fs_mag
+        fx *= scale
+        fy *= scale
+        fz *= scale
+        state |= SLIPPING
+        if t_max > 0.0 or c_area > 0.0:
+            state |= FAILED
+        if tan_psi > 0.0:
+            # Dilation only while slipping (eq. 41-42), growing when the increment follows the
+            # accumulated shear and shrinking when it reverses; none past the limit.
+            dus_mag = math.sqrt(dx * dx + dy * dy + dz * dz)
+            us_mag = math.sqrt(ux * ux + uy * uy + uz * uz)
+            if us_mag < us_lim:
+                sign = 1.0 if dx * ux + dy * uy + dz * uz >= 0.0 else -1.0
+                dil = max(dil + sign * dus_mag * tan_psi, 0.0)
+                fn = kn * area * (un + dil)  # eq. 43
+    if fn <= 0.0:
+        state |= OPEN
+        fn = min(fn, 0.0)
+    return fn, dil, state, fx, fy, fz
+
+
+LAW = JointLaw("coulomb", Params, (), table, update)

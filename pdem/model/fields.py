@@ -1,0 +1,155 @@
+"""The one declaration of pdem's state: every block, contact and sub-contact field.
+
+Each field says its trailing shape, dtype, units and where it travels:
+
+* ``static``     rebuilt from the scene by gid on every rank that holds the block;
+* ``migrate``    moves with a block (or contact) to its new owner at a rebuild;
+* ``checkpoint`` stored in checkpoints (always a subset of what migrates or is static);
+* ``halo``       sent from a block's owner to its ghost copies every step;
+* ``output``     the snapshot dataset name in the output file (``blocks/<output>``).
+
+A field with none of these is per-rank scratch, (re)allocated with the store. The stores, the
+halo, migration, checkpoints and snapshots are all driven by these tables: adding a field is
+one line here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    shape: tuple[int, ...]
+    dtype: type
+    units: str
+    doc: str
+    static: bool = False
+    migrate: bool = False
+    checkpoint: bool = False
+    halo: bool = False
+    output: str | None = None
+
+    @property
+    def width(self) -> int:
+        """Number of scalars per row."""
+        return int(np.prod(self.shape, dtype=np.int64))
+
+
+F, I64, I32, U8 = np.float64, np.int64, np.int32, np.uint8
+_S = {"static": True}
+_D = {"migrate": True, "checkpoint": True}
+
+BLOCK: tuple[Field, ...] = (
+    Field("gid", (), I64, "1", "global id: index of the block in the expanded scene", **_S),
+    Field("owned", (), U8, "1", "1 for blocks this rank owns (rows [0, n_owned)), 0 for ghosts"),
+    Field("x", (3,), F, "m", "centroid (world)", **_D, halo=True, output="centroid"),
+    Field("q", (4,), F, "1", "orientation quaternion (w, x, y, z), body -> world", **_D,
+          halo=True, output="orientation"),
+    Field("v", (3,), F, "m/s", "velocity at t - dt/2", **_D, halo=True, output="velocity"),
+    Field("w", (3,), F, "rad/s", "angular velocity (world) at t - dt/2", **_D, halo=True,
+          output="angular_velocity"),
+    Field("L", (3,), F, "kg m2/s", "angular momentum (world) at t - dt/2", **_D),
+    Field("mass", (), F, "kg", "mass", **_S),
+    Field("inertia", (3,), F, "kg m2", "principal moments (body frame = principal axes)", **_S),
+    Field("mscale", (), F, "1", "inertial mass scale (static solves), 1 otherwise", **_S),
+    Field("fixed", (), U8, "1", "1: the block never moves", **_S),
+    Field("vfix", (), U8, "1", "1: velocity prescribed", **_S),
+    Field("material", (), I32, "1", "row in the scene's materials", **_S),
+    Field("group", (), I32, "1", "row in the sorted group names", **_S),
+    Field("applied_force", (3,), F, "N", "constant applied force", **_S),
+    Field("radius", (), F, "m", "largest centroid-to-vertex distance", **_S),
+    Field("x0", (3,), F, "m", "centroid at start (displacements)", **_S),
+    Field("force", (3,), F, "N", "contact force sum of the current step", **_D),
+    Field("moment", (3,), F, "N m", "contact moment sum about the centroid", **_D),
+    Field("prev_force", (3,), F, "N", "last step's unbalanced force (combined damping)", **_D),
+    Field("prev_moment", (3,), F, "N m", "last step's unbalanced moment", **_D),
+    Field("u_acc", (), F, "m", "motion since the last remap (eq. 1)", **_D, halo=True),
+    Field("u_geo", (), F, "m", "motion since the last periodic geometry update", **_D,
+          halo=True),
+    Field("u_mig", (), F, "m", "motion since the last ghost rebuild", **_D),
+    # scratch: per-rank working arrays, derived from the state above
+    Field("dtheta", (3,), F, "rad", "this step's rotation increment (contact planes turn)",
+          halo=True),
+    Field("dx", (3,), F, "m", "this step's centroid displacement"),
+    Field("R", (3, 3), F, "1", "rotation matrix of q"),
+    Field("lo", (3,), F, "m", "envelope lower corner (padded by CTOL/2)"),
+    Field("hi", (3,), F, "m", "envelope upper corner"),
+    Field("point_area", (), F, "m2", "area of a vertex/edge sub-contact of this block", **_S),
+)
+
+CONTACT: tuple[Field, ...] = (
+    Field("ia", (), I64, "1", "row of block A in the block store (local)"),
+    Field("ib", (), I64, "1", "row of block B in the block store (local)"),
+    Field("ga", (), I64, "1", "gid of A (ga < gb)", **_D),
+    Field("gb", (), I64, "1", "gid of B", **_D),
+    Field("joint", (), I32, "1", "row in the joint table", **_D),
+    Field("normal", (3,), F, "1", "common-plane unit normal, A -> B", **_D),
+    Field("point", (3,), F, "m", "common-plane reference point", **_D),
+    Field("gap", (), F, "m", "common-plane gap", **_D),
+    Field("ctype", (), I32, "1", "contact type code (Table 1)", **_D),
+    Field("warm", (), U8, "1", "common plane known (warm start)", **_D),
+    Field("moved", (), F, "m", "motion of the two blocks since the last geometry update", **_D),
+)
+
+SUB: tuple[Field, ...] = (
+    Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D),
+    Field("sc_area", (), F, "m2", "area carried", **_D),
+    Field("sc_un", (), F, "m", "overlap, + closing", **_D),
+    Field("sc_fn", (), F, "N", "normal force", **_D),
+    Field("sc_fs", (3,), F, "N", "shear force on B", **_D),
+    Field("sc_us", (3,), F, "m", "total shear displacement", **_D),
+    Field("sc_dil", (), F, "m", "accumulated dilation", **_D),
+    Field("sc_state", (), I64, "1", "state bits (SLIPPING, FAILED, OPEN)", **_D),
+)
+
+# Joint laws may keep history of their own: ``sc_hist`` has one column per history field of
+# the laws a scene uses (width 0 when none), see pdem.contact.laws.
+SUB_HIST = Field("sc_hist", (0,), F, "law-defined", "joint-law history columns", **_D)
+
+
+def select(fields: tuple[Field, ...], **flags) -> tuple[Field, ...]:
+    """The fields with every given flag set, e.g. ``select(BLOCK, halo=True)``."""
+    return tuple(f for f in fields if all(bool(getattr(f, k)) == v for k, v in flags.items()))
+
+
+def names(fields: tuple[Field, ...], **flags) -> tuple[str, ...]:
+    return tuple(f.name for f in select(fields, **flags))
+
+
+def allocate(fields: tuple[Field, ...], n: int) -> dict[str, np.ndarray]:
+    """Zeroed arrays of ``n`` rows for ``fields``."""
+    return {f.name: np.zeros((n, *f.shape), f.dtype) for f in fields}
+
+
+def pack(arrays: dict[str, np.ndarray], fields: tuple[Field, ...], rows, out: np.ndarray):
+    """Rows ``rows`` of ``fields`` side by side into the float64 matrix ``out``."""
+    col = 0
+    for f in fields:
+        w = f.width
+        out[:, col:col + w] = arrays[f.name][rows].reshape(-1, w)
+        col += w
+
+
+def unpack(arrays: dict[str, np.ndarray], fields: tuple[Field, ...], rows, buf: np.ndarray):
+    """Inverse of :func:`pack`."""
+    col = 0
+    for f in fields:
+        w = f.width
+        arrays[f.name][rows] = buf[:, col:col + w].reshape(-1, *f.shape)
+        col += w
+
+
+def row_width(fields: tuple[Field, ...]) -> int:
+    return sum(f.width for f in fields)
+
+
+BLOCK_BY_NAME = {f.name: f for f in BLOCK}
+STATIC = names(BLOCK, static=True)
+MIGRATE = names(BLOCK, migrate=True)
+CHECKPOINT = names(BLOCK, checkpoint=True)
+HALO = select(BLOCK, halo=True)
+OUTPUT = tuple(f for f in BLOCK if f.output)

@@ -1,0 +1,27 @@
+"""Run plugins: what happens between steps (output, histories, checkpoints, progress).
+
+Each plugin owns its interval, its scene section and its restart state; the run calls its
+hooks (:class:`Plugin`). To add one, write a class here and add it in :func:`default_plugins`.
+"""
+
+from __future__ import annotations
+
+from .base import Plugin, interval_steps
+from .checkpoints import Checkpoints
+from .output import Histories, Snapshots
+from .progress import LoadReport, Progress
+
+__all__ = ["Checkpoints", "Histories", "LoadReport", "Plugin", "Progress", "Snapshots",
+           "default_plugins", "interval_steps"]
+
+
+def default_plugins(state, output: bool = True) -> list[Plugin]:
+    """The plugins a scene asks for, in the order their hooks run after a step."""
+    plugins: list[Plugin] = []
+    if state.scene.checkpoint is not None:
+        plugins.append(Checkpoints(state))
+    if output:
+        snaps = Snapshots(state)
+        plugins += [snaps, LoadReport(state, snaps.every), Histories(state, snaps)]
+    plugins.append(Progress(state))
+    return plugins

@@ -1,0 +1,50 @@
+"""The plugin interface and the interval rule shared by the plugins."""
+
+from __future__ import annotations
+
+import math
+
+
+class Plugin:
+    """Hooks called by :class:`pdem.run.Run`; every hook is collective over the ranks.
+
+    ``restart_state`` returns attributes stored in checkpoints (str/int/float) and
+    ``restore`` receives them back, so a restarted run behaves as the straight one.
+    """
+
+    name = "plugin"
+
+    def start(self, run) -> None:
+        """Before the first step of a march (also after a restart)."""
+
+    def after_step(self, run) -> None:
+        """After every step."""
+
+    def before_migration(self, run) -> None:
+        """Before blocks change owner (flush what is buffered by owner)."""
+
+    def finish(self, run) -> None:
+        """After the last step of a march."""
+
+    def on_failure(self, run) -> None:
+        """The march stopped with a SimulationError raised on every rank."""
+
+    def restart_state(self) -> dict:
+        return {}
+
+    def restore(self, attrs: dict) -> None:
+        """Restart state from a checkpoint's attributes (keys of ``restart_state``)."""
+
+    def close(self) -> None:
+        """Release files (idempotent)."""
+
+
+def interval_steps(state, every_steps, every) -> int:
+    """Steps between events: given, or from model seconds, or 100 per scene run."""
+    if every_steps:
+        return int(every_steps)
+    if every:
+        return max(1, int(round(every / state.dt)))
+    sv = state.scene.solve
+    total = sv.steps or (int(math.ceil(sv.time / state.dt)) if sv.time else 100_000)
+    return max(1, total // 100)

@@ -1,0 +1,135 @@
+"""Snapshots of the blocks and block histories in the run's output file (``output:``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .. import __version__
+from ..io.writer import OutputWriter
+from ..model.fields import OUTPUT
+from .base import Plugin, interval_steps
+
+
+class Snapshots(Plugin):
+    """Every ``output.every`` model seconds (or ``every_steps``) the owned blocks' output
+    fields (pdem.model.fields, ``output=``) go to the HDF5 file; opened at construction."""
+
+    name = "snapshots"
+
+    def __init__(self, state):
+        self.state = state
+        out = state.scene.output
+        self.every = interval_steps(state, out.every_steps, out.every)
+        self.after_write = []  # callbacks run after each snapshot (histories flush)
+        shapes = [s.shape.principal_frame()[0] for s in state.specs]
+        faces = [[list(sh.face_verts[sh.face_start[f]:sh.face_start[f + 1]])
+                  for f in range(sh.n_faces)] for sh in shapes]
+        r = state.resolved
+        self.writer = OutputWriter(
+            out.file, state.comm, block_names=[s.name for s in state.specs],
+            body_vertices=[sh.vertices for sh in shapes], body_faces=faces,
+            scene_yaml=state.scene_yaml,
+            attrs={"pdem_version": __version__, "scene_name": state.scene.name, "dt": state.dt,
+                   "ctol": r.ctol, "run_id": state.run_id, "first_step": state.step,
+                   "resolved": r.to_json()})
+
+    def write(self):
+        s = self.state
+        b, n = s.blocks, s.n_owned
+        with s.timers.phase("io"):
+            self.writer.write_snapshot(s.step, s.time, b.gid[:n],
+                                       {f.output: getattr(b, f.name)[:n] for f in OUTPUT})
+        for callback in self.after_write:
+            callback()
+
+    def start(self, run):
+        if self.state.step == 0:
+            self.write()
+
+    def after_step(self, run):
+        if self.state.step % self.every == 0:
+            self.write()
+
+    def finish(self, run):
+        if self.state.step % self.every != 0:
+            self.write()
+
+    def close(self):
+        self.writer.close()
+
+
+class Histories(Plugin):
+    """``output.histories``: one block's quantity sampled every ``every`` model seconds (or
+    every step), buffered by the block's owner and written with the snapshots."""
+
+    name = "histories"
+    QUANTITIES = {
+        "displacement": lambda b, i: b.x[i] - b.x0[i],
+        "position": lambda b, i: b.x[i],
+        "velocity": lambda b, i: b.v[i],
+        "angular_velocity": lambda b, i: b.w[i],
+    }
+
+    def __init__(self, state, snapshots: Snapshots):
+        self.state = state
+        self.writer = snapshots.writer
+        names = {s.name: i for i, s in enumerate(state.specs)}
+        self.items = []
+        for h in state.scene.output.histories:
+            name = f"{h.block}.{h.quantity}"
+            self.writer.add_history(name, 3, {"block": h.block, "quantity": h.quantity})
+            self.items.append((name, names[h.block], h.quantity, h.every))
+        self.next_time = {it[0]: 0.0 for it in self.items}
+        self.buffer = {it[0]: ([], []) for it in self.items}
+        self.restored = False
+        snapshots.after_write.append(self.flush)
+
+    def sample(self, force: bool = False):
+        """Buffer the samples that are due."""
+        s = self.state
+        eps = 1e-9 * s.dt
+        for name, gid, qty, every in self.items:
+            if not (force or every is None or s.time >= self.next_time[name] - eps):
+                continue
+            if every is not None:
+                while self.next_time[name] <= s.time + eps:
+                    self.next_time[name] += every
+            row = s.owned_row(gid)
+            if row < 0:
+                continue
+            times, values = self.buffer[name]
+            times.append(s.time)
+            values.append(self.QUANTITIES[qty](s.blocks, row).copy())
+
+    def flush(self):
+        """Collective: the owner of each history's block writes its buffered rows."""
+        for name, gid, _, _ in self.items:
+            times, values = self.buffer[name]
+            mine = self.state.owned_row(gid) >= 0
+            self.writer.write_history(name, np.array(times), np.array(values).reshape(-1, 3)
+                                      if mine else None)
+            times.clear()
+            values.clear()
+
+    def start(self, run):
+        if self.state.step == 0:
+            self.sample(force=True)
+
+    def after_step(self, run):
+        self.sample()
+
+    def before_migration(self, run):
+        self.flush()
+
+    def finish(self, run):
+        self.flush()
+
+    def restart_state(self) -> dict:
+        return {"history_next_time": json.dumps(self.next_time)}
+
+    def restore(self, attrs: dict):
+        if "history_next_time" in attrs:
+            saved = json.loads(attrs["history_next_time"])
+            self.next_time.update({k: v for k, v in saved.items() if k in self.next_time})

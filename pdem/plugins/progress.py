@@ -1,0 +1,61 @@
+"""Progress lines (``solve.progress_every`` wall seconds) and the per-rank load report."""
+
+from __future__ import annotations
+
+import logging
+import time as wallclock
+
+from .base import Plugin
+
+log = logging.getLogger("pdem")
+
+
+class Progress(Plugin):
+    """Rank 0 logs step, time, ratio, contacts, rate and ETA every ``progress_every`` s."""
+
+    name = "progress"
+
+    def __init__(self, state):
+        self.state = state
+        self.every = state.scene.solve.progress_every
+
+    def start(self, run):
+        self.t0 = self.last = wallclock.perf_counter()
+        self.s0 = self.state.step
+
+    def after_step(self, run):
+        now = wallclock.perf_counter()
+        s = self.state
+        if now - self.last < self.every or s.comm.rank != 0:
+            return
+        self.last = now
+        rate = (s.step - self.s0) / (now - self.t0)
+        n_est = run.n_estimate
+        left = (n_est - (s.step - self.s0)) / rate if rate > 0 and n_est else float("nan")
+        log.info("step %d  t=%.5g s  ratio=%.3g  contacts=%d  %.0f steps/s  ETA %.0f s",
+                 s.step, s.time, s.ratio, s.contacts.n, rate, left)
+
+
+class LoadReport(Plugin):
+    """Blocks, ghosts, contacts and halo bytes per rank, logged with each snapshot (MPI)."""
+
+    name = "load-report"
+
+    def __init__(self, state, every: int):
+        self.state = state
+        self.every = every
+
+    def log(self):
+        s = self.state
+        r = s.load_report()
+        if s.comm.size > 1:
+            log.info("load: owned %s ghosts %s contacts %s halo B/step %s; imbalance %.2f; "
+                     "rebuilds %d", r["owned"], r["ghosts"], r["contacts"], r["halo_bytes"],
+                     r["imbalance"], r["rebuilds"])
+
+    def start(self, run):
+        self.log()
+
+    def after_step(self, run):
+        if self.state.step % self.every == 0:
+            self.log()

@@ -1,0 +1,99 @@
+"""Run: march a model to its end condition, calling the plugins between steps."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time as wallclock
+
+from .errors import SimulationError
+
+log = logging.getLogger("pdem")
+
+
+class Run:
+    """The driver: a stepper, its state and the plugins (:mod:`pdem.plugins`)."""
+
+    def __init__(self, state, stepper, plugins):
+        self.state = state
+        self.stepper = stepper
+        self.plugins = list(plugins)
+        self.n_estimate = None
+
+    def plugin(self, name: str):
+        """The plugin called ``name``, or None."""
+        return next((p for p in self.plugins if p.name == name), None)
+
+    def advance(self):
+        """One step; blocks migrate after it when they moved far enough (collective)."""
+        if self.stepper.advance():
+            for p in self.plugins:
+                p.before_migration(self)
+            self.state.redistribute()
+
+    def _end(self, time, steps):
+        s = self.state
+        sv = s.scene.solve
+        if time is None and steps is None:
+            # the scene's end condition is absolute, so a restart runs to the same end
+            end_step, end_time, ratio_target = sv.steps, sv.time, sv.ratio
+        else:
+            end_step = s.step + steps if steps is not None else None
+            end_time = s.time + time if time is not None else None
+            ratio_target = None
+        max_steps = sv.max_steps or (10_000_000 if ratio_target else None)
+        if end_time is not None:
+            self.n_estimate = int(math.ceil((end_time - s.time) / s.dt))
+        elif end_step is not None:
+            self.n_estimate = end_step - s.step
+        else:
+            self.n_estimate = max_steps
+        return end_step, end_time, ratio_target, max_steps
+
+    def run(self, *, time: float | None = None, steps: int | None = None) -> dict:
+        """March until the scene's end condition (or the given model time / step count)."""
+        s = self.state
+        end_step, end_time, ratio_target, max_steps = self._end(time, steps)
+        log.info("%s: %d blocks, %d contacts, dt=%.4g s, ctol=%.4g m, %s damping; %d steps",
+                 s.scene.name, s.glob.n, s.contacts.n, s.dt, s.ctol, s.scene.solve.damping.mode,
+                 self.n_estimate)
+        if s.comm.size > 1:
+            log.info("decomposition: %s ranks on a %s grid, ghost margin %.3g m",
+                     s.comm.size, "x".join(map(str, s.decomp.dims)), s.resolved.margin)
+        for p in self.plugins:
+            p.start(self)
+        t0 = wallclock.perf_counter()
+        s0 = s.step
+        while True:
+            if end_step is not None and s.step >= end_step:
+                break
+            if end_time is not None and s.time >= end_time - 1e-9 * s.dt:
+                break
+            if ratio_target is not None and s.ratio <= ratio_target:
+                break
+            if max_steps is not None and s.step - s0 >= max_steps:
+                log.warning("stopped at solve.max_steps=%d before reaching the target",
+                            max_steps)
+                break
+            try:
+                self.advance()
+            except SimulationError:
+                for p in self.plugins:  # raised on every rank alike, so this is collective
+                    p.on_failure(self)
+                raise
+            for p in self.plugins:
+                p.after_step(self)
+        for p in self.plugins:
+            p.finish(self)
+        elapsed = wallclock.perf_counter() - t0
+        summary = {"steps": s.step - s0, "time": s.time, "ratio": s.ratio, "wall": elapsed,
+                   "contacts": s.contacts.n}
+        log.info("time per phase (rank 0): %s", s.timers.report())
+        log.info("done: %d steps in %.1f s (%.0f steps/s, %.3g block-steps/s), t=%.5g s, "
+                 "ratio=%.3g", summary["steps"], elapsed, summary["steps"] / max(elapsed, 1e-9),
+                 summary["steps"] * s.glob.n / max(elapsed, 1e-9), s.time, s.ratio)
+        return summary
+
+    def close(self):
+        for p in self.plugins:
+            p.close()

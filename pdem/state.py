@@ -1,0 +1,174 @@
+"""ModelState: one rank's share of the model (blocks, contacts, halo, cell space, clock).
+
+Built from a scene (or a checkpoint) on every rank alike. The static model (shapes, masses,
+initial state) is built on every rank from the scene, keyed by gid; a rank holds rows of it
+(owned + ghosts) in ``blocks``. Everything the cycle reads and writes lives here; the stepper
+(:mod:`pdem.stepper`) changes it, plugins (:mod:`pdem.plugins`) observe it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .config import ConfigError, Scene
+from .config.load import dump_scene
+from .config.resolve import TOUCH_FRACTION, Resolved, resolve
+from .contact.algorithms import ALGORITHMS
+from .contact.cellspace import CellSpace
+from .contact.detect import Planes, refresh_contacts
+from .contact.laws import joint_table
+from .dynamics.damping import DAMPING
+from .dynamics.kinematics import refresh_pose
+from .io.checkpoint import new_run_id
+from .model.build import block_store, expand_blocks
+from .model.contacts import ContactStore
+from .model.fields import MIGRATE
+from .parallel.decomposition import Decomposition
+from .parallel.migrate import rebuild
+from .timers import Timers
+
+
+class ModelState:
+    """The model on one rank; construct with :meth:`create` (collective)."""
+
+    def __init__(self, scene: Scene, comm, specs, glob, group_names, joints, resolved: Resolved):
+        self.scene = scene
+        self.scene_yaml = dump_scene(scene)
+        self.comm = comm
+        self.specs = specs
+        self.glob = glob
+        self.group_names = group_names
+        self.joints = joints
+        self.resolved = resolved
+        self.timers = Timers()
+        self.run_id = comm.bcast(new_run_id() if comm.rank == 0 else None, root=0)
+        self.step = 0
+        self.time = 0.0
+        self.dt = resolved.dt
+        self.alpha = resolved.alpha
+        self.ratio = math.inf
+        self.gravity = np.array(scene.gravity, float)
+        self.damping = DAMPING[scene.solve.damping.mode]
+        self.scalar_inertia = scene.solve.inertia == "scalar"
+        self.algorithm = ALGORITHMS[scene.contact.algorithm](resolved.ctol, resolved.snap_tol)
+        self.decomp = Decomposition(comm, np.array(resolved.domain_lo),
+                                    np.array(resolved.domain_hi), list(resolved.dims))
+        self.n_rebuilds = 0
+        self.blocks = None
+        self.n_owned = 0
+        self.contacts = ContactStore.empty(joints.hist_width)
+        self.halo = None
+        self.cells = None
+
+    @staticmethod
+    def create(scene: Scene, comm, *, check_overlaps: bool = True) -> ModelState:
+        """Build the blocks, resolve the scene's ``auto`` values and check the start."""
+        specs = expand_blocks(scene)
+        glob, group_names = block_store(scene, specs)
+        joints = joint_table(scene, group_names)
+        resolved = resolve(scene, comm.size, specs, glob, joints)
+        state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
+        if check_overlaps:
+            state.check_initial_overlaps()
+        return state
+
+    @property
+    def ctol(self) -> float:
+        return self.resolved.ctol
+
+    def damping_args(self):
+        """The damping kernel's constants now (alpha changes under adaptive damping)."""
+        return self.damping.kernel_args(self.alpha)
+
+    # ------------------------------------------------------------------ ownership
+    def distribute(self, owned_gids, state: dict, contacts: ContactStore):
+        """(Re)build this rank's blocks, contacts and halo (collective), see parallel.migrate."""
+        with self.timers.phase("migrate"):
+            r = self.resolved
+            self.blocks, self.n_owned, self.contacts, self.halo = rebuild(
+                self.comm, self.decomp, self.glob, owned_gids, state, contacts, 0.5 * r.ctol,
+                r.margin)
+            b = self.blocks
+            refresh_pose(b, 0.5 * r.ctol)
+            # a rank whose brick holds no block has no cell space until blocks arrive
+            self.cells = CellSpace(b.lo, b.hi, r.cell_size) if b.n else None
+            self.n_rebuilds += 1
+
+    def distribute_initial(self):
+        """Every rank takes the blocks whose centroid lies in its brick (collective)."""
+        g = self.glob
+        owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
+        self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE},
+                        ContactStore.empty(self.joints.hist_width))
+
+    def redistribute(self):
+        """Migrate blocks whose centroid left the brick and rebuild ghosts (collective)."""
+        n = self.n_owned
+        b = self.blocks
+        self.distribute(b.gid[:n].copy(), {k: getattr(b, k)[:n].copy() for k in MIGRATE},
+                        self.contacts)
+
+    def owned_gids(self) -> np.ndarray:
+        return self.blocks.gid[:self.n_owned]
+
+    def owned_row(self, gid: int) -> int:
+        """Row of block ``gid`` if this rank owns it, else -1."""
+        owned = self.owned_gids()
+        i = int(np.searchsorted(owned, gid))
+        return i if i < len(owned) and owned[i] == gid else -1
+
+    def restore(self, ck: dict):
+        """Continue from a checkpoint's state (any rank count; see pdem.io.checkpoint)."""
+        a = ck["attrs"]
+        self.step = int(a["step"])
+        self.time = float(a["time"])
+        self.dt = float(a["dt"])
+        self.alpha = float(a["alpha"])
+        self.ratio = float(a["ratio"]) if a["ratio"] >= 0 else math.inf
+        self.run_id = str(a["run_id"])
+        self.resolved = dataclasses.replace(self.resolved, dt=self.dt)
+        blocks = ck["blocks"]
+        owned = np.nonzero(self.decomp.owner_of(blocks["x"]) == self.comm.rank)[0]
+        self.distribute(owned, {k: blocks[k][owned] for k in MIGRATE}, ck["contacts"])
+
+    # ------------------------------------------------------------------ start checks
+    def check_initial_overlaps(self):
+        """Blocks interpenetrating at start are an input error, named by block."""
+        g = self.glob
+        tol = self.resolved.overlap_tolerance
+        cells = CellSpace(g.lo, g.hi, self.resolved.cell_size)
+        pi, pj = cells.candidates(g.lo, g.hi, np.ones(g.n, np.uint8))
+        if len(pi) == 0:
+            return
+        probe = ContactStore.empty(self.joints.hist_width).with_new_pairs(
+            pi, pj, g.gid[pi], g.gid[pj], np.zeros(len(pi), np.int32))
+        a = probe.arrays
+        planes = Planes(a["ia"], a["ib"], a["normal"], a["point"], a["gap"], a["ctype"],
+                        a["warm"])
+        shapes = g.shapes()._replace(point_area=np.ones(g.n))
+        keep = refresh_contacts(g.x, g.R, shapes, planes, np.zeros(probe.n + 1, np.int64),
+                                probe.subs(), np.ones(probe.n, np.uint8), 1e300, TOUCH_FRACTION,
+                                self.algorithm)[0]
+        bad = keep.astype(bool) & (a["gap"] < -tol)
+        if bad.any():
+            msgs = []
+            for c in np.nonzero(bad)[0][:10]:
+                na, nb = self.specs[a["ga"][c]].name, self.specs[a["gb"][c]].name
+                msgs.append(f"blocks {na!r} and {nb!r} overlap by {-a['gap'][c]:.4g} m at start "
+                            f"(tolerance {tol:.3g} m: contact.overlap_tolerance)")
+            raise ConfigError(msgs)
+
+    # ------------------------------------------------------------------ reports
+    def load_report(self) -> dict:
+        """Blocks, ghosts and contacts per rank and the imbalance (collective)."""
+        mine = (self.n_owned, self.blocks.n - self.n_owned, self.contacts.n,
+                self.halo.bytes_per_step)
+        rows = np.array(self.comm.allgather(mine)) if self.comm.size > 1 else np.array([mine])
+        owned = rows[:, 0]
+        imbalance = float(owned.max() / owned.mean()) if owned.mean() > 0 else 1.0
+        return {"owned": rows[:, 0].tolist(), "ghosts": rows[:, 1].tolist(),
+                "contacts": rows[:, 2].tolist(), "halo_bytes": rows[:, 3].tolist(),
+                "imbalance": imbalance, "rebuilds": self.n_rebuilds}

@@ -1,0 +1,203 @@
+"""The calculation cycle: one step of the model held in a :class:`pdem.state.ModelState`.
+
+One step (``Stepper.advance``):
+1. motion of every free block by central differences (eqs. 44-52) from the forces at t;
+2. forward halo: ghosts receive their owners' new pose and velocities;
+3. sub-contact forces at t + dt from the relative motion of the step (eqs. 15-43);
+4. accumulated motion u_acc (eq. 1); blocks past the trigger are remapped into the cell space
+   and searched for new neighbours; every ``detect_every`` steps (or when contacts were
+   created) the contact geometry is updated (common planes, types, sub-contacts);
+5. one small reduction: the unbalanced force, trouble, and whether blocks must migrate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config.resolve import TOUCH_FRACTION
+from .contact.detect import Planes, refresh_contacts
+from .contact.forces import contact_forces
+from .contact.rigid import Bodies
+from .dynamics import motion
+from .dynamics.kinematics import envelopes, rotation_matrices, world_vertices
+from .errors import SimulationError
+from .model.contacts import ContactStore
+from .model.csr import pair_key
+from .parallel import mpi
+
+# u_acc trigger as a fraction of CTOL. 3DEC remaps at CTOL; at CTOL/2 no pair can close a gap
+# larger than CTOL unseen (each block moves less than CTOL/2 between searches), so a contact
+# always exists before two blocks touch.
+REMAP_FRACTION = 0.5
+
+
+def motion_record(b, n: int, force: np.ndarray) -> motion.Motion:
+    """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`."""
+    return motion.Motion(b.x[:n], b.q[:n], b.v[:n], b.w[:n], b.L[:n], b.mass[:n],
+                         b.inertia[:n], b.fixed[:n], b.vfix[:n], force[:n], b.moment[:n],
+                         b.mscale[:n], b.prev_force[:n], b.prev_moment[:n], b.dx[:n],
+                         b.dtheta[:n])
+
+
+class Stepper:
+    """Advances a ModelState by steps; every method is collective over the state's ranks."""
+
+    def __init__(self, state):
+        self.s = state
+        self.stats = motion.new_stats()
+
+    # ------------------------------------------------------------------ start
+    def start(self):
+        """Contacts of the initial state, its forces, and the staggered start velocities."""
+        s = self.s
+        s.distribute_initial()
+        self.search(np.ones(s.blocks.n, bool))
+        self.refresh(all_contacts=True)
+        self.compute_forces(0.0)
+        b = s.blocks
+        motion.stagger_start(motion_record(b, s.n_owned, self.total_force()), s.gravity, s.dt,
+                             s.scalar_inertia)
+        s.halo.forward(b)
+
+    # ------------------------------------------------------------------ contacts
+    def search(self, active: np.ndarray) -> int:
+        """Remap ``active`` blocks and create contacts with new neighbours (gap <= CTOL is
+        decided by the next refresh; pairs found farther apart are dropped there)."""
+        s = self.s
+        b = s.blocks
+        if b.n == 0:
+            return 0
+        envelopes(b.vert_start, b.verts_world, 0.5 * s.ctol, b.lo, b.hi)
+        # Every search maps all blocks afresh, so a grown cell space needs no extra remap; which
+        # pairs are found depends only on the envelopes, never on the cell layout (a rank's
+        # cell space differs from another's, the contacts they create must not).
+        s.cells.grow_to(b.lo, b.hi)
+        moving = active & (b.fixed == 0) if s.step > 0 else active
+        pi, pj = s.cells.candidates(b.lo, b.hi, moving.astype(np.uint8))
+        b.u_acc[active] = 0.0
+        if len(pi) == 0:
+            return 0
+        gi, gj = b.gid[pi], b.gid[pj]
+        # this rank computes the contacts in which it owns a free block
+        mine = ((b.owned[pi] == 1) & (b.fixed[pi] == 0)) | ((b.owned[pj] == 1) & (b.fixed[pj] == 0))
+        new = ~np.isin(pair_key(gi, gj), s.contacts.keys()) & mine
+        if not new.any():
+            return 0
+        pi, pj, gi, gj = pi[new], pj[new], gi[new], gj[new]
+        swap = gi > gj
+        ia = np.where(swap, pj, pi)
+        ib = np.where(swap, pi, pj)
+        ga, gb = b.gid[ia], b.gid[ib]
+        _, first = np.unique(pair_key(ga, gb), return_index=True)
+        ia, ib, ga, gb = ia[first], ib[first], ga[first], gb[first]
+        joint = s.joints.pair[b.group[ia], b.group[ib]].astype(np.int32)
+        before = s.contacts.n
+        s.contacts = s.contacts.with_new_pairs(ia, ib, ga, gb, joint)
+        return s.contacts.n - before
+
+    def refresh(self, all_contacts: bool, periodic: bool = False):
+        """Geometry update of contacts: all, or those not yet detected plus (periodically) those
+        whose blocks moved more than the refresh tolerance since their last update. Like 3DEC's
+        "no time wasted on relatively inactive blocks": a resting contact keeps its plane and
+        sub-contacts (its overlaps still follow the motion every step)."""
+        s = self.s
+        b = s.blocks
+        c = s.contacts
+        if periodic:
+            c.moved[:] += b.u_geo[c.ia] + b.u_geo[c.ib]
+            b.u_geo[:] = 0.0
+        if c.n == 0:
+            return
+        todo = (c.warm == 0) | all_contacts
+        if periodic:
+            todo |= c.moved > s.resolved.refresh_tolerance
+        c.moved[todo] = 0.0
+        a = c.arrays
+        planes = Planes(a["ia"], a["ib"], a["normal"], a["point"], a["gap"], a["ctype"],
+                        a["warm"])
+        res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
+                               todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm)
+        keep, start, pa, area, un, fs, us, dil, state, hist = res
+        # normal forces of refreshed sub-contacts are recomputed by the next force update
+        sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fn": np.zeros(len(area)),
+               "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
+        s.contacts = ContactStore(c.arrays, sub, start).select(keep.astype(bool))
+
+    def compute_forces(self, dt: float):
+        b = self.s.blocks
+        c = self.s.contacts
+        b.force[:] = 0.0
+        b.moment[:] = 0.0
+        bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment)
+        contact_forces(dt, bodies, c.pairs(), c.subs(), self.s.joints.kernel_args)
+
+    def total_force(self) -> np.ndarray:
+        """Contact + applied force (gravity is added by the integrator with the true mass)."""
+        return self.s.blocks.force + self.s.blocks.applied_force
+
+    # ------------------------------------------------------------------ the step
+    def advance(self):
+        """One calculation cycle (docs/architecture.md, docs/parallel.md)."""
+        s = self.s
+        b = s.blocks
+        n = s.n_owned
+        tm = s.timers
+        self.stats[:] = 0.0
+        with tm.phase("motion"):
+            motion.integrate(motion_record(b, n, self.total_force()), s.gravity, s.dt,
+                             s.damping_args(), s.scalar_inertia, self.stats)
+            s.step += 1
+            s.time += s.dt
+            # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
+            # state check and the ghost-rebuild measure, in one kernel
+            r = s.resolved
+            bad, u_mig_max = motion.motion_bookkeeping(
+                b.dx[:n], b.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n], b.u_geo[:n],
+                b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time)
+        with tm.phase("halo"):
+            s.halo.forward(b)
+        rotation_matrices(b.q, b.R)
+        with tm.phase("forces"):
+            self.compute_forces(s.dt)
+        with tm.phase("search"):
+            active = b.u_acc > REMAP_FRACTION * s.ctol
+            periodic = s.step % s.scene.contact.detect_every == 0
+            created = 0
+            if active.any() or periodic:
+                world_vertices(b.x, b.R, b.vert_start, b.verts_local, b.verts_world)
+                created = self.search(active) if active.any() else 0
+        with tm.phase("contacts"):
+            if periodic:
+                self.refresh(all_contacts=False, periodic=True)
+            elif created:
+                self.refresh(all_contacts=False)
+        with tm.phase("halo"):
+            # one small reduction a step: max unbalanced force, trouble, rebuild needed
+            rebuild = bool(n) and u_mig_max > 0.5 * r.margin
+            flags = mpi.allreduce_max_array(s.comm, np.array(
+                [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild)]))
+        if flags[1]:
+            self._raise_non_finite(bad)
+        if s.damping.adaptive and s.step % 10 == 0:
+            sums = mpi.allreduce_sum_array(s.comm, np.array(
+                [self.stats[motion.STAT_DAMP_POWER], self.stats[motion.STAT_DEK]]))
+            s.alpha = motion.adaptive_alpha_update(
+                s.alpha or 1e-3, sums[0], sums[1], s.scene.solve.damping.ratio, dt=s.dt)
+        s.ratio = float(flags[0]) / r.ref_force
+        return bool(flags[2]) and s.comm.size > 1
+
+    def _raise_non_finite(self, row: int):
+        """Every rank raises the same SimulationError, naming the first bad block (by gid)."""
+        s = self.s
+        b = s.blocks
+        mine = (int(b.gid[row]), float(np.sqrt((b.v[row] ** 2).sum()))) if row >= 0 else None
+        found = [m for m in mpi.allgather(s.comm, mine) if m]
+        gid, speed = min(found)
+        what = "non-finite state" if not math.isfinite(speed) else f"runaway speed {speed:.3g} m/s"
+        raise SimulationError(
+            f"step {s.step} (t={s.time:.6g} s): block {s.specs[gid].name!r} has a "
+            f"{what}. Probable cause: timestep {s.dt:.3g} s too large for the joint stiffness "
+            f"(lower solve.timestep.frac or give a smaller dt) or blocks created deeply "
+            f"overlapping.")
