@@ -1,0 +1,100 @@
+"""The registries are the extension points: a joint law added from outside pdem's tree is
+selected by a scene and runs, with history columns that travel with the sub-contacts."""
+
+from __future__ import annotations
+
+from collections import namedtuple
+from typing import Literal
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from pdem.config import ConfigError, parse_scene
+from pdem.contact.laws import JOINT_LAWS, JointLaw, JointParams
+from pdem.jit import kernel
+from pdem.registry import Registry
+from pdem.simulation import Simulation
+
+# --- a complete joint law: parameters, history, table, kernel (what a new law file holds) ---
+
+
+class GlueParams(JointParams):
+    """A linear elastic joint that never slips or opens; counts its loaded steps."""
+
+    model: Literal["glue"] = "glue"
+
+
+GlueTable = namedtuple("GlueTable", "kn ks")
+
+
+def glue_table(joints):
+    return GlueTable(np.array([j.kn for j in joints], float),
+                     np.array([j.ks for j in joints], float))
+
+
+@kernel
+def glue_update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state):
+    hist[s, 0] += 1.0  # steps this sub-contact carried load
+    kss = p.ks[j] * area
+    return p.kn[j] * area * un, dil, state, fx - kss * dx, fy - kss * dy, fz - kss * dz
+
+
+GLUE = JointLaw("glue", GlueParams, ("loaded_steps",), glue_table, glue_update)
+
+SCENE = """
+name: glued
+materials: {rock: {density: 2000.0}}
+joints:
+  default: {model: MODEL, kn: 1.0e9, ks: 1.0e9}
+blocks:
+  - {name: floor, box: {min: [-2, -2, -1], max: [2, 2, 0]}, material: rock, fixed: true}
+  - {name: cube, box: {min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}, material: rock}
+gravity: [0.0, -9.81, 0.0]
+solve: {steps: 300}
+"""
+
+
+@pytest.fixture
+def glue_registered(monkeypatch):
+    """Register the law for one test (the registry line a new law file adds)."""
+    monkeypatch.setitem(JOINT_LAWS._entries, "glue", GLUE)
+    import pdem.config.schema as schema
+
+    union = schema._joint_law_union()
+    monkeypatch.setattr(schema.Scene.model_fields["joints"], "annotation", dict[str, union])
+    schema.Scene.model_rebuild(force=True)
+    yield
+    monkeypatch.undo()
+    schema.Scene.model_rebuild(force=True)
+
+
+def test_a_new_joint_law_is_selected_by_the_scene_and_keeps_history(glue_registered):
+    # gravity along the floor: a Coulomb joint would slide (friction 30 deg < 90), glue holds
+    sim = Simulation(parse_scene(SCENE.replace("MODEL", "glue")), MPI.COMM_SELF, output=False)
+    assert sim.contacts.hist_width == 1
+    sim.run()
+    cube = sim.blocks.x[1] - sim.blocks.x0[1]
+    # elastic shear: 4 corner sub-contacts of 1/4 m2 each carry m g: u = m g / (ks A)
+    m_g = 2000.0 * 9.81
+    assert abs(cube[1]) < 3 * m_g / 1.0e9  # held (static shear displacement ~2e-5 m)
+    hist = sim.contacts.sub["sc_hist"]
+    assert hist.shape[1] == 1 and hist[:, 0].max() > 100  # the law's own history advanced
+
+
+def test_coulomb_is_the_default_model_and_unknown_models_are_refused():
+    sim = Simulation(parse_scene(SCENE.replace("model: MODEL, ", "")), MPI.COMM_SELF,
+                     output=False)
+    assert [law.name for law in sim.state.joints.laws] == ["coulomb"]
+    assert sim.contacts.hist_width == 0
+    with pytest.raises(ConfigError, match="joints.default"):
+        parse_scene(SCENE.replace("MODEL", "glue"))
+
+
+def test_registry_names_unknown_entries():
+    r: Registry[int] = Registry("thing")
+    r.register("alpha", 1)
+    with pytest.raises(KeyError, match="unknown thing 'alhpa'.*did you mean 'alpha'"):
+        r["alhpa"]
+    with pytest.raises(ValueError, match="twice"):
+        r.register("alpha", 2)
