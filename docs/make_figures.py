@@ -7,8 +7,9 @@ and is not installed by ``pip install -e .[test]``; nothing in pdem/ or tests/ i
     .venv/bin/python -m pip install matplotlib
     .venv/bin/python docs/make_figures.py            # from the repository root, ~1-3 min
 
-The scenes, constants and closed forms are imported from the test modules
-(tests/verification/test_*.py), so the figures show exactly the set-ups the tests assert on.
+The scenes, constants and closed forms come from the case library pdem.cases, which the tests
+(tests/verification/test_*.py) use too, so the figures show exactly the set-ups the tests
+assert on.
 Single rank (MPI.COMM_SELF), no output files. Each case also prints its key numbers, which
 docs/validation.md quotes.
 """
@@ -24,7 +25,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS", "MK
     os.environ.setdefault(_var, "1")
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "tests", "verification"))
 FIG = os.path.join(ROOT, "docs", "figures")
 
 import matplotlib  # noqa: E402
@@ -32,19 +32,22 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import test_common_plane_motion as tcp  # noqa: E402
-import test_incline as tin  # noqa: E402
-import test_oscillator as tos  # noqa: E402
-import test_static as tst  # noqa: E402
-import test_tumbling as ttu  # noqa: E402
-import test_wedge as twe  # noqa: E402
-from vhelpers import crossing_times, fit_acceleration, make_solver  # noqa: E402
+
+import pdem.cases.incline as tin  # noqa: E402
+import pdem.cases.oscillator as tos  # noqa: E402
+import pdem.cases.static as tst  # noqa: E402
+import pdem.cases.tipping as tcp  # noqa: E402
+import pdem.cases.tumbling as ttu  # noqa: E402
+import pdem.cases.wedge as twe  # noqa: E402
+from pdem.cases import (  # noqa: E402
+    crossing_times,
+    fit_acceleration,
+    free_row,
+    make_simulation,
+    rotation_matrix,
+)
 
 G = 9.81
-
-
-def free_row(s) -> int:
-    return int(np.nonzero(s.blocks.fixed == 0)[0][0])
 
 
 def save(fig, name: str):
@@ -57,7 +60,7 @@ def save(fig, name: str):
 
 # --------------------------------------------------------------------------- incline
 def incline_run(phi: float, algorithm: str = "fast", time_: float = 1.0):
-    s = make_solver(tin.incline_scene(phi, algorithm, f"time: {time_}"))
+    s = make_simulation(tin.incline_scene(phi, algorithm, f"time: {time_}"))
     b = s.blocks
     i = free_row(s)
     n = int(round(time_ / s.dt))
@@ -71,8 +74,7 @@ def incline_run(phi: float, algorithm: str = "fast", time_: float = 1.0):
 
 
 def a_incline(phi: float) -> float:
-    psi, ph = math.radians(tin.PSI), math.radians(phi)
-    return max(0.0, G * (math.sin(psi) - math.cos(psi) * math.tan(ph)))
+    return max(0.0, tin.sliding_acceleration(phi))
 
 
 def incline():
@@ -135,14 +137,14 @@ def incline():
 # --------------------------------------------------------------------------- oscillator
 def oscillator_run(kn: float, periods: float = 30.0):
     m = tos.RHO
-    delta = m * G / kn
+    delta = tos.static_overlap(m, kn)
     text = tos.cube_on_floor(-2.0 * delta).replace(f"kn: {tos.KN}, ks: {tos.KN}",
                                                      f"kn: {kn!r}, ks: {kn!r}")
     assert f"kn: {kn!r}" in text
-    s = make_solver(text)
+    s = make_simulation(text)
     b = s.blocks
     i = free_row(s)
-    period = 2.0 * math.pi * math.sqrt(m / kn)
+    period = tos.period(m, kn)
     n = int(periods * period / s.dt)
     t = np.empty(n)
     z = np.empty(n)
@@ -206,13 +208,13 @@ def bounce():
     print("elastic bounce (h = 1 cm)")
     h = 0.01
     m = tos.RHO
-    s = make_solver(tos.cube_on_floor(h, end="time: 1.0"))
+    s = make_simulation(tos.cube_on_floor(h, end="time: 1.0"))
     b = s.blocks
     i = free_row(s)
 
     def elastic() -> float:
         c = s.contacts
-        kn = s.joints["kn"][np.repeat(c.joint, np.diff(c.sc_start))]
+        kn = s.state.joints.kn[np.repeat(c.joint, np.diff(c.sc_start))]
         un = np.maximum(c.sc_un, 0.0)
         return 0.5 * float(np.sum(kn * c.sc_area * un * un))
 
@@ -252,7 +254,7 @@ def bounce():
     ax.set_title("Whole drop and rebound", fontsize=10)
     ax.legend(fontsize=8, loc="center right")
     t_touch = math.sqrt(2.0 * h / G)
-    half = math.pi * math.sqrt(m / tos.KN)
+    half = tos.contact_duration(m, tos.KN)
     az.set_xlim((t_touch - 0.3 * half) * 1e3, (t_touch + 1.3 * half) * 1e3)
     az.axvspan(t_touch * 1e3, (t_touch + half) * 1e3, color="0.9", zorder=0)
     az.set_title(r"Zoom on the contact: analytical duration $\pi\sqrt{m/(k_n A)}$"
@@ -265,19 +267,7 @@ def tumbling():
     print("free tumbling")
     fig, (ah, ak) = plt.subplots(1, 2, figsize=(13, 4.6))
     for shape, col in (("box123", "C0"), ("random", "C1")):
-        text = f"""
-gravity: [0, 0, 0]
-materials: {{rock: {{density: 2500}}}}
-joints: {{default: {{kn: 1.0e9, ks: 1.0e9}}}}
-blocks:
-  - name: tumbler
-    {ttu.SHAPES[shape][0]}
-    material: rock
-    velocity: [0.3, -0.2, 0.5]
-    angular_velocity: {ttu.vec(ttu.SHAPES[shape][1])}
-solve: {{steps: 5000, damping: none}}
-"""
-        s = make_solver(text)
+        s = make_simulation(ttu.tumbling_scene(shape))
         b = s.blocks
         m = float(b.mass[0])
 
@@ -332,13 +322,11 @@ solve: {{steps: 5000, damping: none}}
 def wedge():
     print("DDA wedge")
     phi_c = twe.critical_friction()
-    na, nb = twe.reactions(np.array([0.0, 0.0, -G]))
-    wd = float(np.array([0.0, 0.0, -G]) @ twe.D)
 
     def a_exact(phi):
-        return max(0.0, wd - (na + nb) * math.tan(math.radians(phi)))
+        return max(0.0, twe.sliding_acceleration(phi))
 
-    t, u, _ = twe.run_wedge(15.0, "fast", time=0.5)
+    t, u = twe.displacement_history(twe.wedge_simulation(15.0, "fast"), 0.5)
     late = t >= 0.1
     a_num = fit_acceleration(t[late], u[late])
     print(f"  phi_c = {phi_c:.4f} deg; phi=15: a_num={a_num:.6f} exact={a_exact(15.0):.6f} "
@@ -347,7 +335,7 @@ def wedge():
 
     def u_end_of(phi):
         if phi not in cache:
-            _, uu, _ = twe.run_wedge(phi, "fast", time=0.5)
+            _, uu = twe.displacement_history(twe.wedge_simulation(phi, "fast"), 0.5)
             cache[phi] = float(uu[-1])
             print(f"  phi={phi:7.4f}: u(0.5 s) = {uu[-1]:.3e} m (rigid, from rest: "
                   f"{0.5 * a_exact(phi) * 0.25:.3e} m)")
@@ -394,43 +382,28 @@ def wedge():
 # --------------------------------------------------------------------------- tipping cube
 def tipping():
     print("tipping cube")
-    E = tcp.E
-    text = f"""
-name: tipping
-gravity: [0, 0, {-G}]
-materials: {{rock: {{density: {tcp.RHO}}}}}
-joints: {{default: {{kn: {tcp.KN}, ks: {tcp.KN}, friction: 60.0}}}}
-contact: {{algorithm: fast, point_area: 0.1}}
-blocks:
-  - {{name: floor, box: {{min: [-2, -2, -1], max: [0, 2, 0]}}, material: rock, fixed: true}}
-  - {{name: cube, box: {{min: [{E - 0.5}, -0.5, 0], max: [{E + 0.5}, 0.5, 1]}}, material: rock}}
-solve: {{time: 1.0, damping: none}}
-"""
-    s = make_solver(text)
+    s = make_simulation(tcp.tipping_scene("fast"))
     b = s.blocks
     i = free_row(s)
     m = float(b.mass[i])
-    ip = m / 6.0 + m * (E * E + 0.25)
     theta, omega, tt = [], [], []
     for _ in range(20000):
         s.advance()
-        up = tcp._rotation(b.q[i]) @ np.array([0.0, 0.0, 1.0])
+        up = rotation_matrix(b.q[i]) @ np.array([0.0, 0.0, 1.0])
         theta.append(math.atan2(up[0], up[2]))
         omega.append(b.w[i, 1])
         tt.append(s.time)
         if theta[-1] > math.radians(40.0):
             break
     theta, omega = np.array(theta), np.array(omega)
-    zc = 0.5 * np.cos(theta) - E * np.sin(theta)
-    w_ex = np.sqrt(2.0 * m * G * (0.5 - zc) / ip)
+    w_ex = tcp.angular_velocity(theta, m)
     late = theta > math.radians(10.0)
     err = float(np.abs(omega[late] / w_ex[late] - 1.0).max())
     print(f"  {len(theta)} steps to 40 deg (t = {tt[-1]:.3f} s); max |omega/exact - 1| "
           f"(theta > 10 deg) {err:.3f}")
     fig, ax = plt.subplots(figsize=(8.5, 5))
     th = np.linspace(0.0, math.radians(40.0), 400)
-    zz = 0.5 * np.cos(th) - E * np.sin(th)
-    ax.plot(np.degrees(th), np.sqrt(2.0 * m * G * (0.5 - zz) / ip), "k-", lw=1,
+    ax.plot(np.degrees(th), tcp.angular_velocity(th, m), "k-", lw=1,
             label=r"rigid pivot: $\omega = \sqrt{2 m g (z_c(0) - z_c(\theta)) / I_p}$")
     ax.plot(np.degrees(theta), omega, color="C0", lw=2, alpha=0.6, label="pdem (fast common plane)")
     ax.axvline(10.0, color="0.6", ls=":", lw=1)
@@ -447,23 +420,22 @@ solve: {{time: 1.0, damping: none}}
 # --------------------------------------------------------------------------- static relaxation
 def static():
     print("static relaxation of a two-cube stack")
-    m, kn = tst.RHO * 1.0, tst.KN
-    d1, d2 = 2.0 * m * G / kn, m * G / kn
+    d1, d2 = tst.overlaps()
     fig, ax = plt.subplots(figsize=(8.5, 5))
     for damping, scaling in (("local", False), ("local", True), ("combined", False),
                              ("adaptive", False)):
-        s = make_solver(tst.SCENE.replace("DAMP", damping).replace("SCALE", str(scaling).lower()))
+        s = make_simulation(tst.stack_scene(damping, scaling))
         ratio = []
         while s.step < 200000:
             s.advance()
-            ratio.append(s.ratio)
-            if s.ratio <= 1e-5:
+            ratio.append(s.state.ratio)
+            if s.state.ratio <= 1e-5:
                 break
         z = {s.specs[g].name: s.blocks.x[i, 2] for i, g in enumerate(s.blocks.gid)}
         e1 = (0.5 - z["low"]) / d1 - 1.0
         e2 = ((1.5 - z["top"]) - (0.5 - z["low"])) / d2 - 1.0
         lab = f"{damping}{' + mass scaling' if scaling else ''}"
-        print(f"  {lab}: {s.step} steps (dt {s.dt:.2e} s), ratio {s.ratio:.2e}, overlap errors "
+        print(f"  {lab}: {s.step} steps (dt {s.dt:.2e} s), ratio {s.state.ratio:.2e}, overlap errors "
               f"lower {e1:+.2e} upper {e2:+.2e}, max |v| {np.abs(s.blocks.v).max():.1e} m/s")
         ax.semilogy(np.arange(1, len(ratio) + 1), ratio, lw=1, ls="--" if scaling else "-",
                     label=f"{lab}: {s.step} steps, overlap errors {e1:+.1e} / {e2:+.1e}")

@@ -28,6 +28,7 @@ from .model.contacts import ContactStore
 from .model.fields import MIGRATE
 from .parallel.decomposition import Decomposition
 from .parallel.migrate import rebuild
+from .parallel.mpi import allgather, broadcast
 from .timers import Timers
 
 
@@ -44,7 +45,7 @@ class ModelState:
         self.joints = joints
         self.resolved = resolved
         self.timers = Timers()
-        self.run_id = comm.bcast(new_run_id() if comm.rank == 0 else None, root=0)
+        self.run_id = broadcast(comm, new_run_id() if comm.rank == 0 else None)
         self.step = 0
         self.time = 0.0
         self.dt = resolved.dt
@@ -166,7 +167,7 @@ class ModelState:
         """Blocks, ghosts and contacts per rank and the imbalance (collective)."""
         mine = (self.n_owned, self.blocks.n - self.n_owned, self.contacts.n,
                 self.halo.bytes_per_step)
-        rows = np.array(self.comm.allgather(mine)) if self.comm.size > 1 else np.array([mine])
+        rows = np.array(allgather(self.comm, mine))
         owned = rows[:, 0]
         imbalance = float(owned.max() / owned.mean()) if owned.mean() > 0 else 1.0
         return {"owned": rows[:, 0].tolist(), "ghosts": rows[:, 1].tolist(),

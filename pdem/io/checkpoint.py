@@ -21,7 +21,7 @@ import numpy as np
 from ..model import csr
 from ..model.contacts import ContactStore
 from ..model.fields import BLOCK_BY_NAME, CHECKPOINT, CONTACT, SUB, SUB_HIST, select
-from ..parallel.mpi import allgather, barrier
+from ..parallel.mpi import allgather, barrier, gather
 
 FORMAT = "checkpoint"
 # 2: contact rows (ia, ib) no longer stored, joint-law history columns (subcontacts/sc_hist),
@@ -79,7 +79,7 @@ def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = 
     attrs, rows, contacts, nsub = checkpoint_payload(state, extra_attrs or {})
     parallel = comm.size > 1 and h5py.get_config().mpi
     if not parallel and comm.size > 1:
-        parts = comm.gather((rows, contacts, nsub), root=0)
+        parts = gather(comm, (rows, contacts, nsub))
         if comm.rank == 0:
             rows = {k: np.concatenate([p[0][k] for p in parts]) for k in rows}
             contacts = {k: np.concatenate([p[1][k] for p in parts]) for k in contacts}

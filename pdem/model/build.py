@@ -18,6 +18,7 @@ from ..geometry import (
     from_vertices,
     prism,
 )
+from ..registry import Registry
 from .blocks import BlockStore
 from .fields import BLOCK, allocate
 
@@ -83,56 +84,94 @@ def _lattice(region: BoxShape, count: int, cell: float):
     return sites[:count]
 
 
+def _box(p):
+    yield None, box(p.min, p.max)
+
+
+def _polyhedron(p):
+    pts = np.asarray(p.vertices, float)
+    inside = check_convex(pts, boundary=True)
+    if len(inside):
+        raise GeometryError(
+            f"vertices {list(map(int, inside))} are not on the convex hull: the "
+            "polyhedron is not convex (split a concave block into convex pieces)"
+        )
+    yield None, from_vertices(pts)
+
+
+def _prism(p):
+    yield None, prism(np.asarray(p.base, float), np.asarray(p.extrude, float))
+
+
+def _planes(p):
+    yield None, from_planes(np.asarray(p.normals, float), np.asarray(p.offsets, float))
+
+
+def _array(a):
+    base = box(a.box.min, a.box.max)
+    k = 0
+    for iz in range(a.count[2]):
+        for iy in range(a.count[1]):
+            for ix in range(a.count[0]):
+                off = np.array([ix, iy, iz], float) * np.array(a.spacing)
+                yield k, base.transformed(np.eye(3), off)
+                k += 1
+
+
+def _random(r):
+    rng = np.random.default_rng(r.seed)
+    for k, site in enumerate(_lattice(r.region, r.count, r.size[1])):
+        d = rng.uniform(r.size[0], r.size[1])
+        shape = _random_hull(rng, d, r.vertices)
+        yield k, shape.transformed(np.eye(3), site - shape.centroid)
+
+
+# Block shapes by scene key: each builder yields (member index or None, world-frame shape) for
+# its entry's parameters; a family (index given) names its members ``NAME[k]``. A new shape is
+# its schema model (config/schema.py, SHAPE_KEYS) plus a builder and a line here.
+SHAPES: Registry = Registry("block shape")
+for _name, _builder in (("box", _box), ("polyhedron", _polyhedron), ("prism", _prism),
+                        ("planes", _planes), ("array", _array), ("random", _random)):
+    SHAPES.register(_name, _builder)
+
+
 def expand_blocks(scene: Scene) -> list[BlockSpec]:
     """Every block of the scene in gid order, shapes in the world frame."""
     out: list[BlockSpec] = []
     errors: list[str] = []
     for i, b in enumerate(scene.blocks):
-        where = f"blocks[{i}] ({b.name!r})"
+        kind = b.shape_kind
         try:
-            kind = b.shape_kind
-            if kind == "box":
-                out.append(BlockSpec(b.name, i, box(b.box.min, b.box.max), b))
-            elif kind == "polyhedron":
-                pts = np.asarray(b.polyhedron.vertices, float)
-                inside = check_convex(pts, boundary=True)
-                if len(inside):
-                    raise GeometryError(
-                        f"vertices {list(map(int, inside))} are not on the convex hull: the "
-                        "polyhedron is not convex (split a concave block into convex pieces)"
-                    )
-                out.append(BlockSpec(b.name, i, from_vertices(pts), b))
-            elif kind == "prism":
-                shape = prism(np.asarray(b.prism.base, float), np.asarray(b.prism.extrude, float))
-                out.append(BlockSpec(b.name, i, shape, b))
-            elif kind == "planes":
-                shape = from_planes(np.asarray(b.planes.normals, float),
-                                    np.asarray(b.planes.offsets, float))
-                out.append(BlockSpec(b.name, i, shape, b))
-            elif kind == "array":
-                a = b.array
-                base = box(a.box.min, a.box.max)
-                k = 0
-                for iz in range(a.count[2]):
-                    for iy in range(a.count[1]):
-                        for ix in range(a.count[0]):
-                            off = np.array([ix, iy, iz], float) * np.array(a.spacing)
-                            out.append(BlockSpec(f"{b.name}[{k}]", i,
-                                                 base.transformed(np.eye(3), off), b))
-                            k += 1
-            elif kind == "random":
-                r = b.random
-                rng = np.random.default_rng(r.seed)
-                for k, site in enumerate(_lattice(r.region, r.count, r.size[1])):
-                    d = rng.uniform(r.size[0], r.size[1])
-                    shape = _random_hull(rng, d, r.vertices)
-                    shape = shape.transformed(np.eye(3), site - shape.centroid)
-                    out.append(BlockSpec(f"{b.name}[{k}]", i, shape, b))
+            for k, shape in SHAPES[kind](getattr(b, kind)):
+                out.append(BlockSpec(b.name if k is None else f"{b.name}[{k}]", i, shape, b))
         except (GeometryError, ValueError) as exc:
-            errors.append(f"{where}.{b.shape_kind}: {exc}")
+            errors.append(f"blocks[{i}] ({b.name!r}).{kind}: {exc}")
     if errors:
         raise ConfigError(errors)
     return out
+
+
+def _fixed(spec, arr, r):
+    arr["fixed"][r] = spec.fixed
+
+
+def _velocity(spec, arr, r):
+    # a fixed block has no velocity; a prescribed one keeps it (velocity_fixed)
+    arr["vfix"][r] = spec.velocity_fixed
+    if not spec.fixed:
+        arr["v"][r] = spec.velocity
+        arr["w"][r] = spec.angular_velocity
+
+
+def _force(spec, arr, r):
+    arr["applied_force"][r] = spec.force
+
+
+# Conditions on blocks by scene key: each sets the block's static fields (pdem.model.fields)
+# from its ``blocks[i]`` entry; the motion kernel reads those fields.
+BLOCK_CONDITIONS: Registry = Registry("block condition")
+for _name, _apply in (("fixed", _fixed), ("velocity", _velocity), ("force", _force)):
+    BLOCK_CONDITIONS.register(_name, _apply)
 
 
 def block_store(scene: Scene, specs: list[BlockSpec]):
@@ -161,14 +200,10 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
         arr["mass"][r] = rho * s.shape.volume
         arr["inertia"][r] = rho * moments
         arr["mscale"][r] = 1.0
-        arr["fixed"][r] = s.spec.fixed
-        arr["vfix"][r] = s.spec.velocity_fixed
         arr["material"][r] = mats.index(s.spec.material)
         arr["group"][r] = groups.index(s.spec.group)
-        if not s.spec.fixed:
-            arr["v"][r] = s.spec.velocity
-            arr["w"][r] = s.spec.angular_velocity
-        arr["applied_force"][r] = s.spec.force
+        for apply in BLOCK_CONDITIONS.values():
+            apply(s.spec, arr, r)
         arr["radius"][r] = np.linalg.norm(body.vertices, axis=1).max()
         v0 = vert_start[-1]
         vl.append(body.vertices)

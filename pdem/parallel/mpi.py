@@ -101,6 +101,11 @@ def alltoall(comm, values: list) -> list:
     return comm.alltoall(values) if comm.size > 1 else values
 
 
+def gather(comm, value, root: int = 0):
+    """Every rank's ``value`` on ``root`` (a list), None elsewhere (pickled: rare path)."""
+    return comm.gather(value, root=root) if comm.size > 1 else [value]
+
+
 def broadcast(comm, value, root: int = 0):
     return comm.bcast(value, root=root) if comm.size > 1 else value
 
