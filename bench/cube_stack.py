@@ -13,23 +13,9 @@ import time
 
 from mpi4py import MPI
 
+from pdem.cases.stacks import cube_stack_scene
 from pdem.config import parse_scene
 from pdem.simulation import Simulation
-
-
-def scene_text(n: int, algorithm: str, damping: str = "local") -> str:
-    return f"""
-name: cube-stack-{n}
-materials: {{rock: {{density: 2500.0}}}}
-joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 30.0}}}}
-contact: {{algorithm: {algorithm}}}
-blocks:
-  - {{name: floor, box: {{min: [-1, -1, -1], max: [{n + 1}, {n + 1}, 0]}}, material: rock, fixed: true}}
-  - name: cube
-    array: {{box: {{min: [0, 0, 0], max: [1, 1, 1]}}, count: [{n}, {n}, {n}], spacing: [1, 1, 1]}}
-    material: rock
-solve: {{steps: 1, damping: {damping}}}
-"""
 
 
 def main():
@@ -39,7 +25,7 @@ def main():
     ap.add_argument("--algorithm", default="fast")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    solver = Simulation(parse_scene(scene_text(args.n, args.algorithm)), MPI.COMM_SELF, output=False)
+    solver = Simulation(parse_scene(cube_stack_scene(args.n, args.algorithm)), MPI.COMM_SELF, output=False)
     t_setup = time.perf_counter() - t0
     solver.run(steps=20)  # warm-up (compilation is cached after the first run)
     solver.state.timers.reset()

@@ -35,11 +35,9 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
+from pdem.cases.stacks import cube_stack_scene
 
-from cube_stack import scene_text  # noqa: E402
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 ROW_BYTES = 18 * 8  # pdem.parallel.halo.ROW float64 per ghosted free block per step
 CUBE_RADIUS = math.sqrt(3.0) / 2.0  # unit cube: centroid to vertex
@@ -56,7 +54,7 @@ def worker(args) -> None:
     from pdem.simulation import Simulation
 
     comm = MPI.COMM_WORLD
-    text = scene_text(args.n, "fast")
+    text = cube_stack_scene(args.n, "fast")
     dims = "auto" if args.dims == "auto" else f"[{comm.size}, 1, 1]"
     text += f"parallel: {{dims: {dims}}}\n"
     t0 = time.perf_counter()

@@ -16,6 +16,7 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
+from support import compare_on_rank0, launch_job, on_rank0, reference, run, shared_dir, with_parallel
 
 import pdem.cli
 
@@ -104,14 +105,13 @@ def slider_probe(solver):
     return solver.comm.rank, int(solver.state.decomp.owner_of(x)[0]), x, slipping, shear
 
 
-def test_slider_crosses_brick_boundary(tmp_path, mpi_tools):
-    t = mpi_tools
+def test_slider_crosses_brick_boundary(tmp_path):
     comm = MPI.COMM_WORLD
-    base = t.shared_dir(comm, tmp_path)
+    base = shared_dir(comm, tmp_path)
     t_end = 0.6
     text, x0 = incline_scene(comm.size, t_end)
-    scene = t.with_parallel(text, [comm.size, 1, 1], f"{base}/slide.h5")
-    solver, start, end, report = t.run(scene, comm, probe=lambda s: gathered(s.comm, slider_probe(s)))
+    scene = with_parallel(text, [comm.size, 1, 1], f"{base}/slide.h5")
+    solver, start, end, report = run(scene, comm, probe=lambda s: gathered(s.comm, slider_probe(s)))
     # it started on one rank and ended, still sliding with its contact, on another
     assert start[0] == start[1] == 0 and end[0] == end[1], (start, end)
     assert end[0] != start[0], f"the slider did not migrate: {start[:3]} -> {end[:3]}"
@@ -119,13 +119,13 @@ def test_slider_crosses_brick_boundary(tmp_path, mpi_tools):
     assert end[3] is True, "the slider's contact on its new owner is not slipping"
     assert end[4] > 0.0
     assert end[2][0] - x0 > 0.25
-    t.compare_on_rank0(comm, f"{base}/slide.h5", scene, f"{base}/slide-ref.h5")
+    compare_on_rank0(comm, f"{base}/slide.h5", scene, f"{base}/slide-ref.h5")
 
     def history():
         with h5py.File(f"{base}/slide.h5", "r") as f:
             return f["histories/slider.position/time"][()], f["histories/slider.position/value"][:, 0]
 
-    time, x = t.on_rank0(comm, history)
+    time, x = on_rank0(comm, history)
     assert len(time) == solver.step + 1 and time[-1] >= t_end - 1e-9
     # after the start-up transient of the unloaded shear spring (tests/verification/test_incline)
     late = time >= 0.1
@@ -196,13 +196,12 @@ def owners(gids_per_rank, n) -> np.ndarray:
 
 
 @pytest.mark.parametrize("split", ["auto", "y"])
-def test_pile_settling_matches_one_rank(tmp_path, split, mpi_tools):
-    t = mpi_tools
+def test_pile_settling_matches_one_rank(tmp_path, split):
     comm = MPI.COMM_WORLD
-    base = t.shared_dir(comm, tmp_path)
+    base = shared_dir(comm, tmp_path)
     dims = "auto" if split == "auto" else [1, comm.size, 1]
-    scene = t.with_parallel(pile_scene(), dims, f"{base}/pile.h5")
-    solver, start, end, report = t.run(scene, comm, probe=lambda s: s.comm.allgather(owned_gids(s)))
+    scene = with_parallel(pile_scene(), dims, f"{base}/pile.h5")
+    solver, start, end, report = run(scene, comm, probe=lambda s: s.comm.allgather(owned_gids(s)))
     before, after = owners(start, solver.state.glob.n), owners(end, solver.state.glob.n)
     assert np.all(before >= 0) and np.all(after >= 0), "every block has exactly one owner"
     migrated = int((before != after).sum())
@@ -216,16 +215,15 @@ def test_pile_settling_matches_one_rank(tmp_path, split, mpi_tools):
     assert len(keys) > 100
     assert max_rebuilds(comm, report) > 1
     assert migrated > 0
-    t.compare_on_rank0(comm, f"{base}/pile.h5", scene, f"{base}/pile-ref.h5")
+    compare_on_rank0(comm, f"{base}/pile.h5", scene, f"{base}/pile-ref.h5")
     # and the 1-rank run ends with the same contacts
-    ref_keys = t.on_rank0(comm, lambda: t.reference(scene, None)[0].contacts.keys())
+    ref_keys = on_rank0(comm, lambda: reference(scene, None)[0].contacts.keys())
     assert np.array_equal(keys, ref_keys)
 
 
-def test_cli_run_matches_one_rank(tmp_path, mpi_tools):
-    t = mpi_tools
+def test_cli_run_matches_one_rank(tmp_path):
     comm = MPI.COMM_WORLD
-    base = t.shared_dir(comm, tmp_path)
+    base = shared_dir(comm, tmp_path)
     path = f"{base}/pile.yaml"
     if comm.rank == 0:
         with open(path, "w") as f:
@@ -237,7 +235,7 @@ def test_cli_run_matches_one_rank(tmp_path, mpi_tools):
     from pdem.config import load_scene
 
     scene = load_scene(path)
-    t.compare_on_rank0(comm, f"{base}/cli.h5", scene, f"{base}/cli-ref.h5")
+    compare_on_rank0(comm, f"{base}/cli.h5", scene, f"{base}/cli-ref.h5")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -286,12 +284,11 @@ if comm.rank == 0:
 """
 
 
-def test_rank_owning_nothing(tmp_path, mpi_tools):
+def test_rank_owning_nothing(tmp_path):
     """Runs as a job of its own (``mpiexec -n size``, launched by rank 0, python -m mpi4py so a
     failing rank aborts it): a crash of an empty rank fails this test, not the whole session."""
-    t = mpi_tools
     comm = MPI.COMM_WORLD
-    base = t.shared_dir(comm, tmp_path)
+    base = shared_dir(comm, tmp_path)
     text = empty_rank_scene(comm.size, f"{base}/empty.h5")
 
     def child():
@@ -299,21 +296,21 @@ def test_rank_owning_nothing(tmp_path, mpi_tools):
             f.write(text)
         with open(f"{base}/empty_child.py", "w") as f:
             f.write(EMPTY_CHILD)
-        return t.launch_job(comm.size, ["-m", "mpi4py", f"{base}/empty_child.py",
+        return launch_job(comm.size, ["-m", "mpi4py", f"{base}/empty_child.py",
                                         f"{base}/empty.yaml"], timeout=120.0)
 
-    rc, out, err, seconds = t.on_rank0(comm, child)
+    rc, out, err, seconds = on_rank0(comm, child)
     assert rc == 0, f"the {comm.size}-rank job failed (exit {rc}, {seconds:.0f} s):\n{err[-4000:]}"
     report = json.loads(next(ln for ln in out.splitlines() if ln.startswith("REPORT "))[7:])
     assert report["owned"][-1] == 0 and report["ghosts"][-1] == 0, report
-    scene = t.with_parallel(text, [1, 1, comm.size], f"{base}/empty.h5")
-    t.compare_on_rank0(comm, f"{base}/empty.h5", scene, f"{base}/empty-ref.h5")
+    scene = with_parallel(text, [1, 1, comm.size], f"{base}/empty.h5")
+    compare_on_rank0(comm, f"{base}/empty.h5", scene, f"{base}/empty-ref.h5")
 
     def snapshots():
         with h5py.File(f"{base}/empty.h5", "r") as f:
             return f["blocks/centroid"].shape, f["step"][()].tolist()
 
-    shape, steps = t.on_rank0(comm, snapshots)
+    shape, steps = on_rank0(comm, snapshots)
     assert shape == (5, 20, 3) and steps == [0, 100, 200, 300, 400]
 
 
@@ -351,22 +348,21 @@ output: {{every_steps: 100}}
 
 
 @pytest.mark.mpi(min_size=3)
-def test_block_ghosted_on_several_ranks(tmp_path, mpi_tools):
-    t = mpi_tools
+def test_block_ghosted_on_several_ranks(tmp_path):
     comm = MPI.COMM_WORLD
-    base = t.shared_dir(comm, tmp_path)
+    base = shared_dir(comm, tmp_path)
     dims = [2, 2, 1] if comm.size == 4 else [comm.size, 1, 1]
-    scene = t.with_parallel(crossroads_scene(comm.size), dims, f"{base}/cross.h5")
+    scene = with_parallel(crossroads_scene(comm.size), dims, f"{base}/cross.h5")
 
     def holders(solver):
         b, n = solver.blocks, solver.n_owned
         mine = [(int(g in b.gid[:n]), int(g in b.gid[n:])) for g in (0, 1)]  # floor, big
         return np.array(solver.comm.allgather(mine))  # (rank, block, owned|ghost)
 
-    _, start, end, _ = t.run(scene, comm, probe=holders)
+    _, start, end, _ = run(scene, comm, probe=holders)
     for held in (start, end):
         assert np.all(held[:, :, 0].sum(0) == 1), "floor and big block each have one owner"
         # the floor and the big block are on every rank: owned by one, a ghost on all others
         assert np.all(held[:, :, 1].sum(0) == comm.size - 1), held[:, :, 1]
         assert held[:, 1, 1].sum() >= min(3, comm.size - 1)
-    t.compare_on_rank0(comm, f"{base}/cross.h5", scene, f"{base}/cross-ref.h5")
+    compare_on_rank0(comm, f"{base}/cross.h5", scene, f"{base}/cross-ref.h5")

@@ -9,6 +9,7 @@ import textwrap
 
 import pytest
 from mpi4py import MPI
+from support import collective, launch_job, on_rank0, shared_dir, with_parallel
 
 from pdem.errors import SimulationError
 
@@ -61,25 +62,24 @@ def run_child_job(launch_job, tmp: str):
     return launch_job(2, [script, scene, os.path.join(tmp, "row.h5")], timeout=60.0)
 
 
-def test_error_on_one_rank_aborts_all(tmp_path, mpi_tools):
+def test_error_on_one_rank_aborts_all(tmp_path):
     """RuntimeError on rank 1 only, in step 6 of ``pdem run``: the job ends (rank 0 was waiting
     in the step's reduction) with a non-zero code and rank 1's message on stderr."""
     comm = MPI.COMM_WORLD
-    rc, _, err, seconds = mpi_tools.on_rank0(comm, run_child_job, mpi_tools.launch_job, str(tmp_path))
+    rc, _, err, seconds = on_rank0(comm, run_child_job, launch_job, str(tmp_path))
     assert rc is not None, f"the 2-rank job hung (killed after {seconds:.0f} s); stderr:\n{err}"
     assert rc != 0, err
     assert "boom on rank 1" in err, err
     assert "rank 1" in err.replace("boom on rank 1", ""), err
 
 
-def test_blow_up_stops_every_rank_with_the_same_message(tmp_path, mpi_tools):
+def test_blow_up_stops_every_rank_with_the_same_message(tmp_path):
     """dt = 0.1 s with kn = 1e9 Pa/m: the cubes resting on the floor explode within a few steps.
     Every rank raises the SimulationError, with the message of the 1-rank run."""
-    t = mpi_tools
     comm = MPI.COMM_WORLD
-    base = t.shared_dir(comm, tmp_path)
+    base = shared_dir(comm, tmp_path)
     text = row_of_cubes(2 * comm.size, f"[{comm.size}, 1, 1]", dt=0.1)
-    scene = t.with_parallel(text, [comm.size, 1, 1], f"{base}/blowup.h5")
+    scene = with_parallel(text, [comm.size, 1, 1], f"{base}/blowup.h5")
 
     def blow_up(scene, comm):
         from pdem.simulation import Simulation
@@ -92,13 +92,13 @@ def test_blow_up_stops_every_rank_with_the_same_message(tmp_path, mpi_tools):
             solver.close()
         return str(info.value), solver.step
 
-    with t.collective(comm, "the blow-up run"):
+    with collective(comm, "the blow-up run"):
         message, step = blow_up(scene, comm)
     messages = comm.allgather(message)
     assert messages == [message] * comm.size, messages
     assert f"step {step}" in message and step < 50
     assert "block 'cube[" in message and "timestep" in message, message
 
-    ref = t.with_parallel(text, [1, 1, 1], f"{base}/blowup-ref.h5")
-    ref_message, _ = t.on_rank0(comm, blow_up, ref, MPI.COMM_SELF)
+    ref = with_parallel(text, [1, 1, 1], f"{base}/blowup-ref.h5")
+    ref_message, _ = on_rank0(comm, blow_up, ref, MPI.COMM_SELF)
     assert message == ref_message

@@ -34,53 +34,29 @@ import math
 
 import numpy as np
 import pytest
-from vhelpers import make_solver
 
-G = 9.81
-RHO = 2000.0
-KN = 1.0e9
-E = 0.1  # centroid overhang beyond the floor edge
-
-
-def _rotation(q) -> np.ndarray:
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+from pdem.cases import make_simulation, rotation_matrix
+from pdem.cases.tipping import G, angular_velocity, centroid_height, tipping_scene
 
 
 @pytest.mark.parametrize("algorithm", ["fast", "cundall"])
 def test_cube_tipping_over_floor_edge(algorithm):
-    text = f"""
-name: tipping
-gravity: [0, 0, {-G}]
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: 60.0}}}}
-contact: {{algorithm: {algorithm}, point_area: 0.1}}
-blocks:
-  - {{name: floor, box: {{min: [-2, -2, -1], max: [0, 2, 0]}}, material: rock, fixed: true}}
-  - {{name: cube, box: {{min: [{E - 0.5}, -0.5, 0], max: [{E + 0.5}, 0.5, 1]}}, material: rock}}
-solve: {{time: 1.0, damping: none}}
-"""
-    s = make_solver(text)
+    s = make_simulation(tipping_scene(algorithm))
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
     m = float(b.mass[i])
-    ip = m / 6.0 + m * (E * E + 0.25)
-    joints = s.joints
+    joints = s.state.joints
 
     def spring_energy() -> float:
         c = s.contacts
         row = np.repeat(c.joint, np.diff(c.sc_start))
-        kn, ks = joints["kn"][row], joints["ks"][row]
+        kn, ks = joints.kn[row], joints.ks[row]
         un = np.maximum(c.sc_un, 0.0)
         area = c.sc_area
         shear = np.where(area > 0.0, (c.sc_fs**2).sum(1) / (2.0 * ks * np.maximum(area, 1e-300)), 0.0)
         return float(np.sum(0.5 * kn * area * un * un) + np.sum(shear))
 
-    pivot_body = _rotation(b.q[i]).T @ (np.zeros(3) - b.x[i])  # material point on the edge
+    pivot_body = rotation_matrix(b.q[i]).T @ (np.zeros(3) - b.x[i])  # material point on the edge
     energy, theta, omega, pivot, normal, face, step = [], [], [], [], [], [], []
     for _ in range(20000):
         v_minus, w_minus = b.v[i].copy(), b.w[i].copy()
@@ -88,7 +64,7 @@ solve: {{time: 1.0, damping: none}}
         s.advance()
         # leapfrog time-centred kinetic energy (see test_oscillator.test_elastic_bounce)
         energy.append(0.5 * m * float(v_minus @ b.v[i]) + 0.5 * float(w_minus @ b.L[i]) + pot)
-        R = _rotation(b.q[i])
+        R = rotation_matrix(b.q[i])
         up = R @ np.array([0.0, 0.0, 1.0])  # outward normal of the floor = -(cube bottom face)
         theta.append(math.atan2(up[0], up[2]))
         omega.append(b.w[i, 1])
@@ -104,16 +80,16 @@ solve: {{time: 1.0, damping: none}}
     omega = np.array(omega)
     normal, face, step = np.array(normal), np.array(face), np.array(step)
 
-    zc = 0.5 * np.cos(theta) - E * np.sin(theta)
+    zc = centroid_height(theta)
     released = m * G * (0.5 - zc[-1])
     drift = (max(energy) - min(energy)) / released
-    omega_exact = np.sqrt(2.0 * m * G * (0.5 - zc) / ip)
+    omega_exact = angular_velocity(theta, m)
     late = theta > math.radians(10.0)
     w_err = float(np.abs(omega[late] / omega_exact[late] - 1.0).max())
     pivot_move = float(np.linalg.norm(np.array(pivot), axis=1).max())
     lag = np.linalg.norm(np.cross(normal, face), axis=1)
     tipped = theta > math.radians(1.0)  # edge-to-face by then
-    refreshed = tipped & (step % s.detect_every == 0)
+    refreshed = tipped & (step % s.state.scene.contact.detect_every == 0)
     wdt = np.abs(omega) * s.dt
     jump = np.linalg.norm(normal[1:] - normal[:-1], axis=1)
     print(f"{algorithm}: {len(theta)} steps, energy variation {drift:.2e} of released, "
@@ -124,5 +100,5 @@ solve: {{time: 1.0, damping: none}}
     assert w_err < 0.03
     assert pivot_move < 1e-3
     assert lag[refreshed].max() < 1e-6
-    assert np.all(lag[tipped] <= 0.5 * s.detect_every * wdt[tipped] * 1.1 + 1e-9)
-    assert jump.max() < s.detect_every * wdt.max()
+    assert np.all(lag[tipped] <= 0.5 * s.state.scene.contact.detect_every * wdt[tipped] * 1.1 + 1e-9)
+    assert jump.max() < s.state.scene.contact.detect_every * wdt.max()

@@ -23,35 +23,11 @@ origin would be biased by ~0.25 % by that offset.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
-from vhelpers import fit_acceleration, make_solver, vec
 
-G = 9.81
-RHO = 2000.0
-KN = 1.0e9
-PSI = 20.0  # incline angle, degrees
-
-
-def incline_scene(phi: float, algorithm: str, end: str) -> str:
-    psi = math.radians(PSI)
-    g = (G * math.sin(psi), 0.0, -G * math.cos(psi))
-    delta = RHO * 1.0 * G * math.cos(psi) / KN  # m g cos(psi) / (kn A), A = 1 m^2, m = RHO
-    return f"""
-name: incline
-gravity: {vec(g)}
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: {phi}}}}}
-contact: {{algorithm: {algorithm}}}
-blocks:
-  - {{name: base, box: {{min: [-5, -2, -1], max: [5, 2, 0]}}, material: rock, fixed: true}}
-  - name: slider
-    box: {{min: {vec((-0.5, -0.5, -delta))}, max: {vec((0.5, 0.5, 1.0 - delta))}}}
-    material: rock
-solve: {{{end}, damping: none}}
-"""
+from pdem.cases import fit_acceleration, make_simulation
+from pdem.cases.incline import PSI, incline_scene, sliding_acceleration
 
 
 @pytest.mark.parametrize("algorithm", ["fast", "cundall"])
@@ -59,7 +35,7 @@ solve: {{{end}, damping: none}}
 def test_sliding_acceleration(phi, algorithm):
     """Sliding acceleration ``a = g (sin psi - cos psi tan phi)`` within 0.5 % (no damping),
     from a fit of the slider's x-displacement over 1 s of sliding."""
-    s = make_solver(incline_scene(phi, algorithm, "time: 1.0"))
+    s = make_simulation(incline_scene(phi, algorithm, "time: 1.0"))
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
     n = int(round(1.0 / s.dt))
@@ -69,8 +45,7 @@ def test_sliding_acceleration(phi, algorithm):
         s.advance()
         t[k] = s.time
         x[k] = b.x[i, 0] - b.x0[i, 0]
-    psi, ph = math.radians(PSI), math.radians(phi)
-    a_exact = G * (math.sin(psi) - math.cos(psi) * math.tan(ph))
+    a_exact = sliding_acceleration(phi)
     late = t >= 0.1
     a_num = fit_acceleration(t[late], x[late])
     err = abs(a_num / a_exact - 1.0)
@@ -85,7 +60,7 @@ def run_stable(algorithm: str, damping: str) -> np.ndarray:
     """Displacement history of the slider over 10^4 steps at phi = psi + 1 deg."""
     text = incline_scene(PSI + 1.0, algorithm, "steps: 10000").replace(
         "damping: none", f"damping: {damping}")
-    s = make_solver(text)
+    s = make_simulation(text)
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
     u = np.empty((10000, 3))

@@ -11,30 +11,18 @@ import math
 
 import numpy as np
 import pytest
-from vhelpers import crossing_times, make_solver, vec
 
-G = 9.81
-RHO = 2000.0
-KN = 1.0e9
-
-
-def cube_on_floor(z0: float, gravity=(0.0, 0.0, -G), velocity=(0.0, 0.0, 0.0), end="time: 1.0",
-                  algorithm="fast") -> str:
-    """The cube with its bottom face at height ``z0`` (negative: pre-penetrated)."""
-    return f"""
-name: oscillator
-gravity: {vec(gravity)}
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: 60.0}}}}
-contact: {{algorithm: {algorithm}}}
-blocks:
-  - {{name: floor, box: {{min: [-2, -2, -1], max: [2, 2, 0]}}, material: rock, fixed: true}}
-  - name: cube
-    box: {{min: {vec((-0.5, -0.5, z0))}, max: {vec((0.5, 0.5, z0 + 1.0))}}}
-    material: rock
-    velocity: {vec(velocity)}
-solve: {{{end}, damping: none}}
-"""
+from pdem.cases import crossing_times, make_simulation
+from pdem.cases.oscillator import (
+    KN,
+    RHO,
+    G,
+    contact_duration,
+    cube_on_floor,
+    free_fall_scene,
+    period,
+    static_overlap,
+)
 
 
 @pytest.mark.parametrize("algorithm", ["fast", "cundall"])
@@ -45,12 +33,12 @@ def test_vertical_period(algorithm):
     zero crossings of the vertical velocity over ~30 periods; tolerance 1 %. (The leapfrog
     itself shortens the period by (omega dt)^2 / 24 ~ 0.02 % at the automatic step.)"""
     m = RHO
-    delta = m * G / KN
-    s = make_solver(cube_on_floor(-2.0 * delta, algorithm=algorithm))
+    delta = static_overlap(m, KN)
+    s = make_simulation(cube_on_floor(-2.0 * delta, algorithm=algorithm))
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
-    period = 2.0 * math.pi * math.sqrt(m / KN)
-    n = int(30 * period / s.dt)
+    T = period(m, KN)
+    n = int(30 * T / s.dt)
     t = np.empty(n)
     vz = np.empty(n)
     for k in range(n):
@@ -60,10 +48,10 @@ def test_vertical_period(algorithm):
     tc = crossing_times(t, vz)
     assert len(tc) >= 25
     measured = (tc[-1] - tc[0]) / (len(tc) - 1)
-    err = abs(measured / period - 1.0)
+    err = abs(measured / T - 1.0)
     # amplitude: max speed omega * delta
     v_amp = math.sqrt(KN / m) * delta
-    print(f"{algorithm}: period {measured:.6e} s, exact {period:.6e} s, rel.err {err:.2e}; "
+    print(f"{algorithm}: period {measured:.6e} s, exact {T:.6e} s, rel.err {err:.2e}; "
           f"speed amplitude {vz.max():.4e} vs {v_amp:.4e}")
     assert err < 1e-2
     assert abs(vz.max() / v_amp - 1.0) < 1e-2
@@ -76,10 +64,10 @@ def test_contact_duration_zero_gravity():
     velocity +v0 (1 %)."""
     m = RHO
     v0 = 0.05
-    s = make_solver(cube_on_floor(1e-4, gravity=(0, 0, 0), velocity=(0, 0, -v0)))
+    s = make_simulation(cube_on_floor(1e-4, gravity=(0, 0, 0), velocity=(0, 0, -v0)))
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
-    half = math.pi * math.sqrt(m / KN)
+    half = contact_duration(m, KN)
     bottom = b.x[i, 2] - 0.5  # bottom face height (the cube does not turn)
     touch = 1e-4 / v0
     n = int((touch + 2.0 * half) / s.dt)
@@ -108,15 +96,7 @@ def test_free_fall_exact():
     and the half-step velocity is ``v0 + g (t - dt/2)``."""
     g = np.array([1.5, -2.0, -G])
     v0 = np.array([0.7, 0.3, 4.0])
-    text = f"""
-gravity: {vec(g)}
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}}}}}
-blocks:
-  - {{name: stone, box: {{min: [0, 0, 10], max: [1, 2, 11]}}, material: rock, velocity: {vec(v0)}}}
-solve: {{steps: 3000, damping: none}}
-"""
-    s = make_solver(text)
+    s = make_simulation(free_fall_scene(g, v0))
     b = s.blocks
     x0 = b.x0[0].copy()
     worst_x = 0.0
@@ -140,7 +120,7 @@ def test_static_start_stays_at_rest():
     """The cube placed at its static overlap ``m g / (kn A)`` with zero velocity is in
     equilibrium at t = 0 and must stay at rest: |v| < 1e-9 m/s over 2000 steps (the
     stagger bug gives it g dt / 2 ~ 5e-4 m/s)."""
-    s = make_solver(cube_on_floor(-RHO * G / KN))
+    s = make_simulation(cube_on_floor(-RHO * G / KN))
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
     vmax = 0.0
@@ -165,14 +145,14 @@ def test_elastic_bounce():
     """
     h = 0.01
     m = RHO
-    s = make_solver(cube_on_floor(h, end="time: 1.0"))
+    s = make_simulation(cube_on_floor(h, end="time: 1.0"))
     b = s.blocks
     i = int(np.nonzero(b.fixed == 0)[0][0])
-    assert np.all(s.joints["kn"] == KN)
+    assert np.all(s.state.joints.kn == KN)
 
     def elastic() -> float:
         c = s.contacts
-        kn = s.joints["kn"][np.repeat(c.joint, np.diff(c.sc_start))]
+        kn = s.state.joints.kn[np.repeat(c.joint, np.diff(c.sc_start))]
         un = np.maximum(c.sc_un, 0.0)
         return 0.5 * float(np.sum(kn * c.sc_area * un * un))
 

@@ -9,35 +9,18 @@ without mass scaling.
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
-from pdem.config import parse_scene
-from pdem.simulation import Simulation
-
-RHO, KN, G = 2500.0, 1.0e9, 9.81
-
-SCENE = f"""
-gravity: [0, 0, -{G}]
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: 30.0}}}}
-blocks:
-  - {{name: floor, box: {{min: [-2, -2, -1], max: [2, 2, 0]}}, material: rock, fixed: true}}
-  - {{name: low, box: {{min: [-0.5, -0.5, 0], max: [0.5, 0.5, 1]}}, material: rock}}
-  - {{name: top, box: {{min: [-0.5, -0.5, 1], max: [0.5, 0.5, 2]}}, material: rock}}
-solve: {{ratio: 1.0e-5, max_steps: 200000, damping: DAMP, mass_scaling: SCALE}}
-"""
+from pdem.cases import make_simulation
+from pdem.cases.static import overlaps, stack_scene
 
 
 @pytest.mark.parametrize("damping,scaling", [("local", False), ("local", True),
                                              ("combined", False), ("adaptive", False)])
 def test_stack_relaxes_to_elastic_equilibrium(damping, scaling):
-    s = Simulation(parse_scene(SCENE.replace("DAMP", damping).replace("SCALE", str(scaling).lower())),
-               MPI.COMM_SELF, output=False)
+    s = make_simulation(stack_scene(damping, scaling))
     s.run()
-    assert s.ratio <= 1e-5, f"did not converge: ratio {s.ratio:.3g} after {s.step} steps"
-    m = RHO * 1.0
-    d1 = 2 * m * G / KN
-    d2 = m * G / KN
+    assert s.state.ratio <= 1e-5, f"did not converge: ratio {s.state.ratio:.3g} after {s.step} steps"
+    d1, d2 = overlaps()
     z = {s.specs[g].name: s.blocks.x[i, 2] for i, g in enumerate(s.blocks.gid)}
     sink_low = 0.5 - z["low"]
     sink_top = 1.5 - z["top"]

@@ -45,110 +45,31 @@ import math
 
 import numpy as np
 import pytest
-from vhelpers import dip_normal, fit_acceleration, make_solver, vec
 
+from pdem.cases import fit_acceleration
+from pdem.cases.wedge import (
+    N_A,
+    N_B,
+    WEDGE_D,
+    WEDGE_N,
+    D,
+    critical_friction,
+    displacement_history,
+    sliding_acceleration,
+    wedge_simulation,
+)
 from pdem.geometry.builders import from_planes
-
-G = 9.81
-RHO = 2600.0
-KN = 1.0e9
-H = 1.0
-
-N_A = dip_normal(45.0, 5.0)
-N_B = dip_normal(55.0, 135.0)
-
-
-def intersection_line() -> np.ndarray:
-    d = np.cross(N_A, N_B)
-    d /= np.linalg.norm(d)
-    return -d if d[2] > 0.0 else d
-
-
-D = intersection_line()
-N_S = dip_normal(65.0, math.degrees(math.atan2(D[0], D[1])))  # slope face
-WEDGE_N = [-N_A, -N_B, N_S, np.array([0.0, 0.0, 1.0])]
-WEDGE_D = [0.0, 0.0, 0.0, H]
-
-
-def reactions(weight: np.ndarray) -> tuple[float, float]:
-    """Normal reactions N_A, N_B of the two planes for sliding along D (see module doc)."""
-    w_perp = weight - (weight @ D) * D
-    c = float(N_A @ N_B)
-    a, b = -float(w_perp @ N_A), -float(w_perp @ N_B)
-    na = (a - c * b) / (1.0 - c * c)
-    nb = (b - c * a) / (1.0 - c * c)
-    return na, nb
-
-
-def critical_friction() -> float:
-    """Limit-equilibrium critical friction angle (degrees)."""
-    w = np.array([0.0, 0.0, -1.0])
-    na, nb = reactions(w)
-    assert na > 0.0 and nb > 0.0  # sliding on both planes, not on one
-    return math.degrees(math.atan(float(w @ D) / (na + nb)))
-
-
-def wedge_scene(phi: float, algorithm: str = "fast") -> str:
-    """Two fixed joint blocks and the wedge, pre-penetrated by the frictionless static
-    overlaps ``N / (kn A_face)`` on each plane."""
-    shape = from_planes(WEDGE_N, WEDGE_D)
-    m = RHO * shape.volume
-    na, nb = reactions(np.array([0.0, 0.0, -m * G]))
-
-    def face_area(n):
-        f = int(np.argmax(shape.normals @ n))
-        assert shape.normals[f] @ n > 1.0 - 1e-9
-        return shape.face_area(f)
-
-    overlap = np.array([na / (KN * face_area(-N_A)), nb / (KN * face_area(-N_B))])
-    shift = np.linalg.lstsq(np.array([N_A, N_B]), -overlap, rcond=None)[0]  # into both planes
-    offsets = [d + float(n @ shift) for n, d in zip(WEDGE_N, WEDGE_D, strict=True)]
-    box_n = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
-    box_d = [1.5, 3.0, 1.5, 2.0, 1.5, 1.5]  # x in [-3, 1.5], y in [-2, 1.5], z in [-1.5, 1.5]
-
-    def planes(normals, offs) -> str:
-        return (f"{{normals: [{', '.join(vec(n) for n in normals)}], "
-                f"offsets: {vec(offs)}}}")
-
-    return f"""
-name: dda-wedge
-gravity: [0, 0, {-G}]
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: {phi!r}}}}}
-contact: {{algorithm: {algorithm}}}
-blocks:
-  - name: below_A
-    planes: {planes([N_A, *box_n], [0.0, *box_d])}
-    material: rock
-    fixed: true
-  - name: below_B
-    planes: {planes([-N_A, N_B, *box_n], [0.0, 0.0, *box_d])}
-    material: rock
-    fixed: true
-  - name: wedge
-    planes: {planes(WEDGE_N, offsets)}
-    material: rock
-solve: {{time: 0.5, damping: none}}
-"""
 
 
 def run_wedge(phi: float, algorithm: str, time: float = 0.5):
     """(times, displacement along D) of the wedge over ``time`` seconds; also returns the
     solver."""
-    s = make_solver(wedge_scene(phi, algorithm))
-    b = s.blocks
-    i = int(np.nonzero(b.fixed == 0)[0][0])
+    s = wedge_simulation(phi, algorithm)
     # exactly two contacts, one per joint plane, each a face-to-face triangle
     assert s.contacts.n == 2
     assert sorted(np.abs(s.contacts.normal @ np.array([N_A, N_B]).T).max(axis=1)) == \
         pytest.approx([1.0, 1.0], abs=1e-9)
-    n = int(round(time / s.dt))
-    t = np.empty(n)
-    u = np.empty(n)
-    for k in range(n):
-        s.advance()
-        t[k] = s.time
-        u[k] = (b.x[i] - b.x0[i]) @ D
+    t, u = displacement_history(s, time)
     return t, u, s
 
 
@@ -176,8 +97,7 @@ def test_wedge_sliding_acceleration(algorithm):
     ``a = (W.d - (N_A + N_B) tan(phi)) / m`` (0.5 %), without leaving either plane."""
     phi = 15.0
     t, u, s = run_wedge(phi, algorithm, time=0.5)
-    na, nb = reactions(np.array([0.0, 0.0, -G]))  # per unit mass
-    a_exact = float(np.array([0.0, 0.0, -G]) @ D) - (na + nb) * math.tan(math.radians(phi))
+    a_exact = sliding_acceleration(phi)
     late = t >= 0.1
     a_num = fit_acceleration(t[late], u[late])
     b = s.blocks
