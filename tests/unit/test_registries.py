@@ -98,3 +98,22 @@ def test_registry_names_unknown_entries():
         r["alhpa"]
     with pytest.raises(ValueError, match="twice"):
         r.register("alpha", 2)
+
+
+def test_kernel_records_pickle_by_reference():
+    """numba keys its disk cache on argument types; a record type that does not pickle by
+    reference (class name != module attribute) silently recompiles the kernel in every
+    process (~30 s per rank)."""
+    import pickle
+
+    from pdem.contact import algorithms, detect, rigid
+    from pdem.contact import laws as L
+    from pdem.dynamics import damping, motion
+    from pdem.model import blocks, contacts
+
+    records = [rigid.Bodies, contacts.Pairs, contacts.Subs, blocks.Shapes, detect.Planes,
+               motion.Motion, L.Joints, algorithms.CundallPlane, algorithms.FastPlane]
+    records += [law.table([]).__class__ for law in L.JOINT_LAWS.values()]
+    records += [mode.kernel_args for mode in damping.DAMPING.values()]
+    for cls in records:
+        assert pickle.loads(pickle.dumps(cls)) is cls, cls

@@ -27,7 +27,7 @@ class Params(JointParams):
     dilation_limit: PositiveFloat | None = None
 
 
-Table = namedtuple("CoulombTable", "kn ks tan_phi tan_psi cohesion tension us_lim")
+Table = namedtuple("Table", "kn ks tan_phi tan_psi cohesion tension us_lim")
 
 
 def table(joints: list[Params]) -> Table:
