@@ -371,7 +371,10 @@ def _cut_one(poly, n, offsets, tags, tol) -> list[ConvexPolyhedron]:
     """Pieces of one block cut by parallel planes with ascending offsets, in offset order."""
     out = []
     rest = _tagged(poly)
-    for d, t in zip(offsets, tags, strict=True):
+    # Planes outside the block's extent along n cannot cut it: skip them without a split.
+    proj = poly.vertices @ n
+    window = slice(*np.searchsorted(offsets, [proj.min(), proj.max()], side="right"))
+    for d, t in zip(offsets[window], tags[window], strict=True):
         below, above = split_by_plane(rest, n, d, tol, t)
         if above is None:  # this plane, and every later (higher) one, is above what is left
             break
