@@ -86,6 +86,10 @@ class ConvexPolyhedron:
     inertia : (3, 3) float64
         Inertia tensor about the centroid per unit density (multiply by density for mass
         moments).
+    face_tag : (nf,) int64 or None
+        Optional per-face integer label recording where each face came from (e.g. the joint
+        set whose cut made it, see :mod:`pdem.geometry.cutting`); ``None`` if never set.
+        Rigid transforms keep it, since they keep the face order.
     """
 
     vertices: np.ndarray
@@ -102,6 +106,7 @@ class ConvexPolyhedron:
     volume: float
     centroid: np.ndarray
     inertia: np.ndarray
+    face_tag: np.ndarray | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -188,6 +193,24 @@ class ConvexPolyhedron:
             centroid=_readonly(centroid, np.float64),
             inertia=_readonly(inertia, np.float64),
         )
+
+    def with_face_tag(self, face_tag) -> ConvexPolyhedron:
+        """Copy of the polyhedron carrying the per-face labels ``face_tag``.
+
+        Parameters
+        ----------
+        face_tag : (nf,) array_like of int
+            One label per face, in face order.
+
+        Returns
+        -------
+        ConvexPolyhedron
+            Same geometry (arrays shared), ``face_tag`` set (read-only int64).
+        """
+        tag = np.asarray(face_tag)
+        if tag.shape != (self.n_faces,) or (tag.size and not np.issubdtype(tag.dtype, np.integer)):
+            raise GeometryError(f"face_tag must be {self.n_faces} integers, got {tag.dtype} {tag.shape}")
+        return dataclasses.replace(self, face_tag=_readonly(tag, np.int64))
 
     # ------------------------------------------------------------------ sizes
     @property
