@@ -36,10 +36,11 @@ import time
 import numpy as np
 
 from pdem.cases.stacks import cube_stack_scene
+from pdem.parallel.halo import ROW as HALO_ROW
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-ROW_BYTES = 18 * 8  # pdem.parallel.halo.ROW float64 per ghosted free block per step
+ROW_BYTES = HALO_ROW * 8  # float64 per ghosted free block per step (declared halo fields)
 CUBE_RADIUS = math.sqrt(3.0) / 2.0  # unit cube: centroid to vertex
 CTOL = 0.02  # ctol "auto" = 2 % of the smallest block's equivalent size (1 m)
 GRAVITY = np.array([0.0, 0.0, -9.81])

@@ -40,3 +40,14 @@ njit = numba.njit(cache=True, fastmath=False, nogil=True)
 def kernel(fn):
     """Compile ``fn`` as a pdem kernel (pure function over arrays, no Python objects)."""
     return njit(fn)
+
+
+# Small helpers called in the inner loops (per sub-contact, per block) with records or many
+# scalars: inlined into the caller at numba's IR level, so a call never passes the records'
+# array structs through memory (LLVM would not always inline them by itself).
+inline_njit = numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
+
+
+def inline_kernel(fn):
+    """A kernel inlined into every kernel that calls it (see ``inline_njit``)."""
+    return inline_njit(fn)

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import math
 
-from ..jit import kernel
+from ..jit import inline_kernel, kernel
 from .laws import apply_law
 from .rigid import add_point_force, apply_pair, pair_motion, point_motion
 
 
-@kernel
+@inline_kernel
 def turn_normal(normal, dtheta, c, a, b):
     """Turn contact c's plane normal with the mean incremental rotation of its blocks."""
     nx, ny, nz = normal[c, 0], normal[c, 1], normal[c, 2]
@@ -25,7 +25,7 @@ def turn_normal(normal, dtheta, c, a, b):
     return nx, ny, nz
 
 
-@kernel
+@inline_kernel
 def carry_shear(fx, fy, fz, nx, ny, nz):
     """Eq. 23: keep the shear force in the (turned) plane, magnitude preserved."""
     fdn = fx * nx + fy * ny + fz * nz

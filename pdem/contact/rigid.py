@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from collections import namedtuple
 
-from ..jit import kernel
+from ..jit import inline_kernel
 
 # The block arrays the contact loop reads (pose, velocities, rotation increment) and writes.
 Bodies = namedtuple("Bodies", "x R v w dtheta force moment")
 
 
-@kernel
+@inline_kernel
 def pair_motion(bodies, a, b):
     """Per-contact constants of the motion of B relative to A: A's rotation (9), the centroid
     offset d = x_a - x_b (3), V0 = v_b - v_a + w_b x d (3) and w_b - w_a (3)."""
@@ -36,7 +36,7 @@ def pair_motion(bodies, a, b):
     return ra, (ddx, ddy, ddz), v0, dw
 
 
-@kernel
+@inline_kernel
 def point_motion(rel, p0, p1, p2):
     """Arm r_a (world) of the body-frame point p of A, and the velocity of B relative to A
     there (eq. 15)."""
@@ -50,7 +50,7 @@ def point_motion(rel, p0, p1, p2):
     return rax, ray, raz, vx, vy, vz
 
 
-@kernel
+@inline_kernel
 def add_point_force(acc, rax, ray, raz, fx, fy, fz):
     """Sum a force on B at arm r_a: (force, moment about A's centroid)."""
     return (acc[0] + fx, acc[1] + fy, acc[2] + fz,
@@ -59,7 +59,7 @@ def add_point_force(acc, rax, ray, raz, fx, fy, fz):
             acc[5] + (rax * fy - ray * fx))
 
 
-@kernel
+@inline_kernel
 def apply_pair(bodies, a, b, rel, acc):
     """Force and moment sums of one contact onto both blocks (eqs. 28-32): the force on A is
     the opposite of B's; B's moment about its centroid is r_a x f + d x f."""

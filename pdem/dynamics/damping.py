@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from numba.extending import overload
 
-from ..jit import kernel
+from ..jit import inline_kernel
 from ..registry import Registry
 
 NoDamping = namedtuple("NoDamping", "alpha")
@@ -40,7 +40,7 @@ DAMPING.register("viscous", DampingMode(ViscousDamping, None))
 DAMPING.register("adaptive", DampingMode(ViscousDamping, 0.0, adaptive=True))
 
 
-@kernel
+@inline_kernel
 def _sgn(a):
     if a > 0.0:
         return 1.0
@@ -59,12 +59,12 @@ def damped_momentum(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     raise NotImplementedError("damped_momentum is only callable from numba kernels")
 
 
-@kernel
+@inline_kernel
 def _sgn3(a):
     return _sgn(a[0]), _sgn(a[1]), _sgn(a[2])
 
 
-@kernel
+@inline_kernel
 def _applied(mi, dt, v0, l0, ft, m, fd, md):
     """Momentum update with the damping force and moment subtracted (eq. 78)."""
     c = dt / mi
@@ -73,13 +73,13 @@ def _applied(mi, dt, v0, l0, ft, m, fd, md):
     return v, lm, fd, md
 
 
-@kernel
+@inline_kernel
 def _against(a, f, s):
     """alpha |f| s per component."""
     return a * abs(f[0]) * s[0], a * abs(f[1]) * s[1], a * abs(f[2]) * s[2]
 
 
-@kernel
+@inline_kernel
 def _free(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     c = dt / mi
     v = (v0[0] + ft[0] * c, v0[1] + ft[1] * c, v0[2] + ft[2] * c)
@@ -88,14 +88,14 @@ def _free(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     return v, lm, zero, zero
 
 
-@kernel
+@inline_kernel
 def _local(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     # eqs. 78-79: F_d = alpha |F| sgn(v(t - dt/2)) per component; the moment with sgn(w)
     return _applied(mi, dt, v0, l0, ft, m, _against(d.alpha, ft, _sgn3(v0)),
                     _against(d.alpha, m, _sgn3(w0)))
 
 
-@kernel
+@inline_kernel
 def _combined(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     # eq. 83 in the sign of (78): F_d = alpha |F| (sgn(v) - sgn(dF/dt)) / 2
     sv = _sgn3(v0)
@@ -107,7 +107,7 @@ def _combined(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     return _applied(mi, dt, v0, l0, ft, m, _against(d.alpha, ft, sf), _against(d.alpha, m, sm))
 
 
-@kernel
+@inline_kernel
 def _viscous(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     # eq. 49: v+ = (D1 v- + a dt) D2; the same on L
     alpha = d.alpha
@@ -130,7 +130,7 @@ _KERNELS = {NoDamping: _free, LocalDamping: _local, CombinedDamping: _combined,
             ViscousDamping: _viscous}
 
 
-@overload(damped_momentum)
+@overload(damped_momentum, inline="always")
 def _damped_momentum(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     k = _KERNELS[d.instance_class]
 

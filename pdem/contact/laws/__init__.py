@@ -94,7 +94,7 @@ def _update_of(table_type):
     return _BY_TABLE[table_type.instance_class]
 
 
-@overload(apply_law)
+@overload(apply_law, inline="always")
 def _apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,
                state):
     kernels = [_update_of(t) for t in laws.types]

@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, NonNegativeFloat, PositiveFloat
 
-from ...jit import kernel
+from ...jit import inline_kernel
 from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
 
 
@@ -43,7 +43,7 @@ def table(joints: list[Params]) -> Table:
     )
 
 
-@kernel
+@inline_kernel
 def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state):
     """Update one sub-contact's normal and shear force (eqs. 24-27, 34-43).
 
