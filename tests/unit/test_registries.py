@@ -57,7 +57,15 @@ solve: {steps: 300}
 
 @pytest.fixture
 def glue_registered(monkeypatch):
-    """Register the law for one test (the registry line a new law file adds)."""
+    """Register the law for one test (the registry line a new law file adds).
+
+    The force kernel compiled for it is not written to numba's disk cache: the cache index
+    would then name this test module, which other processes (MPI ranks) cannot import."""
+    from numba.core.caching import NullCache
+
+    from pdem.contact import forces
+
+    monkeypatch.setattr(forces.contact_forces, "_cache", NullCache())
     monkeypatch.setitem(JOINT_LAWS._entries, "glue", GLUE)
     import pdem.config.schema as schema
 
