@@ -424,7 +424,8 @@ class Solver:
         self.writer = OutputWriter(
             out.file, self.comm, block_names=[s.name for s in self.specs],
             body_vertices=[sh.vertices for sh in shapes], body_faces=faces,
-            scene_yaml=self.scene_yaml,
+            scene_yaml=self.scene_yaml, initial_centroid=self.glob.x0, group=self.glob.group,
+            group_names=self.group_names, fixed=self.glob.fixed,
             attrs={"pdem_version": __version__, "scene_name": self.scene.name, "dt": self.dt,
                    "ctol": self.ctol, "run_id": self.run_id, "first_step": self.step})
         self.histories = []

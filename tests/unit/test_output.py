@@ -168,7 +168,7 @@ def test_values_round_trip(out, snaps):
         assert np.array_equal(f["blocks/gid"][()], np.arange(4))
         assert list(f["blocks/name"].asstr()[()]) == ["slab", "tet-a", "cube", "tét-β"]
         assert f.attrs["pdem_format"] == "output"
-        assert f.attrs["format_version"] == 1
+        assert f.attrs["format_version"] == 2
         assert f.attrs["scene"] == SCENE
         for k, v in ATTRS.items():
             assert f.attrs[k] == v
