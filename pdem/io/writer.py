@@ -470,8 +470,11 @@ class OutputWriter:
         for name, width, units in CELL_FIELDS:
             tail = (nt, width) if width > 1 else (nt,)
             chunk = (1, min(max(nt, 1), _CHUNK_ROWS), *tail[1:])
+            # A block's value repeats on each of its triangles: deflate takes most of that back
+            # (parallel HDF5 writes filtered datasets collectively, as all writes here are).
             d = f.create_dataset(
-                f"surface/{name}", (0, *tail), maxshape=(None, *tail), chunks=chunk, dtype=np.float32
+                f"surface/{name}", (0, *tail), maxshape=(None, *tail), chunks=chunk, dtype=np.float32,
+                compression="gzip", compression_opts=4, shuffle=True,
             )
             d.attrs["units"] = units
             self._cells[name] = d
