@@ -12,6 +12,7 @@ import os
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import h5py
@@ -41,8 +42,10 @@ def pvbatch_command() -> list[str]:
         missing = "no DISPLAY and no xvfb-run to render with"
     if missing:
         why = f"{missing}: install ParaView with run/setup (apt: paraview python3-paraview xvfb)"
-        if os.environ.get("CI"):
+        if os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no"):
             pytest.fail(f"CI requires the ParaView viewer test: {why}")
+        # a skip alone hides in -q output: the warning summary shows this one too
+        warnings.warn(f"VIEWER NOT TESTED -- {why}", stacklevel=1)
         pytest.skip(f"VIEWER NOT TESTED -- {why}")
     return ([xvfb, "-a"] if not os.environ.get("DISPLAY") else []) + [pvbatch]
 
