@@ -1,4 +1,4 @@
-"""XDMF sidecar for the HDF5 output: a temporal collection ParaView opens directly."""
+"""XDMF sidecar for the HDF5 output: temporal collections every ParaView XDMF reader opens."""
 
 from __future__ import annotations
 
@@ -182,7 +182,7 @@ def _resolve(item: ET.Element, base: Path, files: dict) -> np.ndarray:
 
 
 def read_xdmf(xdmf_path: str | os.PathLike) -> dict[str, list[dict]]:
-    """Read back an XDMF file written by :func:`write_xdmf` (resolving HyperSlabs).
+    """Read back an XDMF file written by :func:`write_xdmf` (format 2 views or format 1 HyperSlabs).
 
     Meant for tests and checks: every DataItem is resolved against the HDF5 file and its
     declared Dimensions verified (``ValueError`` otherwise). Returns, per temporal collection,

@@ -303,6 +303,31 @@ def test_bad_viewer_fields_raise(tmp_path, bad):
         OutputWriter(tmp_path / "bad.h5", COMM, **make_scene(), **bad)
 
 
+def test_read_xdmf_reads_format_1_hyperslabs(out, snaps):
+    """Format 1 sidecars selected a snapshot with a HyperSlab item; read_xdmf still reads them."""
+    with h5py.File(out, "r") as f:
+        n_snap, n_pts, _ = f["surface/points"].shape
+        n_tri = len(f["surface/connectivity"])
+    i = 2
+    slab = (
+        f'<DataItem ItemType="HyperSlab" Dimensions="1 {n_pts} 3" Type="HyperSlab">'
+        f'<DataItem Dimensions="3 3" NumberType="Int" Format="XML">{i} 0 0 1 1 1 1 {n_pts} 3</DataItem>'
+        f'<DataItem Dimensions="{n_snap} {n_pts} 3" NumberType="Float" Precision="8" Format="HDF">'
+        f"run.h5:/surface/points</DataItem></DataItem>"
+    )
+    old = out.with_name("old.xdmf")
+    old.write_text(
+        '<Xdmf Version="3.0"><Domain><Grid Name="surface" GridType="Collection" '
+        'CollectionType="Temporal"><Grid Name="s" GridType="Uniform"><Time Value="0.02"/>'
+        f'<Topology TopologyType="Triangle" NumberOfElements="{n_tri}"><DataItem Dimensions="{n_tri} 3" '
+        'NumberType="Int" Format="HDF">run.h5:/surface/connectivity</DataItem></Topology>'
+        f'<Geometry GeometryType="XYZ">{slab}</Geometry></Grid></Grid></Domain></Xdmf>'
+    )
+    (step,) = read_xdmf(old)["surface"]
+    with h5py.File(out, "r") as f:
+        assert np.array_equal(step["geometry"], f["surface/points"][i])
+
+
 def test_xdmf_written_after_every_snapshot(tmp_path, snaps):
     path = tmp_path / "live.h5"
     w = OutputWriter(path, COMM, **make_scene())
