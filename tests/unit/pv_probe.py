@@ -4,9 +4,9 @@
 
 Opens the sidecar with the Xdmf3 readers S and T and the legacy XDMF reader, and writes for
 each, at the first and last time step, every leaf dataset's point and cell counts, bounds and
-arrays (components and range) to ``OUT.json``; renders the last step (Xdmf3 Reader S, cells
-coloured by ``displacement_magnitude``) to ``OUT.png`` and records how much of the image is
-not background.
+arrays (components and range), and the leaves' bounds at every step, to ``OUT.json``; renders
+the last step (Xdmf3 Reader T, cells coloured by ``displacement_magnitude``) to ``OUT.png`` and
+records how much of the image is not background.
 """
 
 import json
@@ -101,6 +101,7 @@ def main() -> None:
             "times": times,
             "first": describe(reader, times[0]),
             "last": describe(reader, times[-1]),
+            "bounds": [[x["bounds"] for x in describe(reader, t)] for t in times],
         }
         if kind == "T":  # S joins surfaces and centroids into one multi-piece mesh: no colours
             result["rendered_fraction"] = render(reader, times[-1], png)
