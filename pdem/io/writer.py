@@ -127,7 +127,8 @@ class OutputWriter:
     Parameters
     ----------
     path
-        The ``.h5`` file (overwritten). The XDMF sidecar is ``path`` with suffix ``.xdmf``.
+        The ``.h5`` file (overwritten). The XDMF sidecars are ``path`` with suffix ``.xdmf``
+        (surfaces) and ``-centroids.xdmf`` (centroid cloud).
     comm
         mpi4py communicator of the ranks that run the model.
     block_names, body_vertices, body_faces

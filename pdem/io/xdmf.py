@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_xdmf", "read_xdmf", "CELL_FIELDS", "VIEWED_SERIES", "view_path"]
+__all__ = ["write_xdmf", "read_xdmf", "centroids_path", "CELL_FIELDS", "VIEWED_SERIES", "view_path"]
 
 # Block quantities copied onto every triangle of the block's surface, as float32 series
 # ``surface/<name>`` (name, components, units). No XDMF construct that ParaView 5.11's readers
@@ -99,6 +99,12 @@ def _blocks_grid(i: int, t: float, h5: str, n_blocks: int) -> list[str]:
     ]
 
 
+def centroids_path(xdmf_path: str | os.PathLike) -> Path:
+    """The second sidecar, of the centroid cloud: ``run.xdmf`` -> ``run-centroids.xdmf``."""
+    xdmf_path = Path(xdmf_path)
+    return xdmf_path.with_name(xdmf_path.stem + "-centroids.xdmf")
+
+
 def write_xdmf(
     h5_path: str | os.PathLike,
     xdmf_path: str | os.PathLike,
@@ -110,35 +116,42 @@ def write_xdmf(
 ) -> None:
     """Write the XDMF 3 description of a pdem output file (plain text, any one process).
 
-    Two temporal collections: ``surface`` (the triangulated block surfaces, with the cell
-    attributes ``block_id``, ``group``, ``fixed`` and the :data:`CELL_FIELDS`) and ``blocks``
-    (block centroids as a Polyvertex cloud with ``gid``, ``group``, ``fixed``, ``velocity`` and
-    ``angular_velocity``). Each snapshot reads its data from the plain (virtual) datasets
-    ``/xdmf/<i>/...`` the writer makes, the one form ParaView's Xdmf3 readers (S, T) and its
-    legacy XDMF reader all read. The HDF5 file is referenced by its bare name, so the pair must
-    stay in the same directory. The file is written to a temporary name and renamed, so a
-    reader never sees half a file.
+    ``xdmf_path`` gets the temporal collection ``surface`` (the triangulated block surfaces, with
+    the cell attributes ``block_id``, ``group``, ``fixed`` and the :data:`CELL_FIELDS`);
+    :func:`centroids_path` gets ``blocks`` (the block centroids as a Polyvertex cloud with
+    ``gid``, ``group``, ``fixed``, ``velocity`` and ``angular_velocity``). One collection per
+    file: ParaView's Xdmf3 Reader S joins the top-level grids of a file into one multi-piece
+    mesh, which then cannot be coloured by arrays only the surfaces have. Each snapshot reads its
+    data from the plain (virtual) datasets ``/xdmf/<i>/...`` the writer makes, the one form the
+    Xdmf3 readers (S, T) and the legacy XDMF reader all read. The HDF5 file is referenced by its
+    bare name, so the files must stay in the same directory. Each file is written to a
+    temporary name and renamed, so a reader never sees half a file.
     """
     times = [float(t) for t in times]
     if len(times) != n_snap:
         raise ValueError(f"write_xdmf: {len(times)} times for {n_snap} snapshots")
     h5 = Path(h5_path).name
+    surface = [line for i, t in enumerate(times) for line in _surface_grid(i, t, h5, n_tri, n_points)]
+    cloud = [line for i, t in enumerate(times) for line in _blocks_grid(i, t, h5, n_blocks)]
+    _write_collection(Path(xdmf_path), "surface", surface)
+    _write_collection(centroids_path(xdmf_path), "blocks", cloud)
+
+
+def _write_collection(path: Path, name: str, grids: list[str]) -> None:
     out = [
         '<?xml version="1.0" encoding="utf-8"?>',
         '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">',
         "<Domain>",
-        '<Grid Name="surface" GridType="Collection" CollectionType="Temporal">',
+        f'<Grid Name="{name}" GridType="Collection" CollectionType="Temporal">',
+        *grids,
+        "</Grid>",
+        "</Domain>",
+        "</Xdmf>",
+        "",
     ]
-    for i, t in enumerate(times):
-        out += _surface_grid(i, t, h5, n_tri, n_points)
-    out += ["</Grid>", '<Grid Name="blocks" GridType="Collection" CollectionType="Temporal">']
-    for i, t in enumerate(times):
-        out += _blocks_grid(i, t, h5, n_blocks)
-    out += ["</Grid>", "</Domain>", "</Xdmf>", ""]
-    xdmf_path = Path(xdmf_path)
-    tmp = xdmf_path.with_name(xdmf_path.name + ".tmp")
+    tmp = path.with_name(path.name + ".tmp")
     tmp.write_text("\n".join(out), encoding="utf-8")
-    os.replace(tmp, xdmf_path)
+    os.replace(tmp, path)
 
 
 def _dims(item: ET.Element) -> tuple[int, ...]:

@@ -1,12 +1,13 @@
-"""Run by ``pvbatch`` (not by pytest): what ParaView's XDMF readers make of a pdem sidecar.
+"""Run by ``pvbatch`` (not by pytest): what ParaView's XDMF readers make of pdem's sidecars.
 
-    pvbatch pv_probe.py RUN.xdmf OUT.json OUT.png
+    pvbatch pv_probe.py RUN.xdmf RUN-centroids.xdmf OUT.json OUT_DIR
 
-Opens the sidecar with the Xdmf3 readers S and T and the legacy XDMF reader, and writes for
-each, at the first and last time step, every leaf dataset's point and cell counts, bounds and
-arrays (components and range), and the leaves' bounds at every step, to ``OUT.json``; renders
-the last step (Xdmf3 Reader T, cells coloured by ``displacement_magnitude``) to ``OUT.png`` and
-records how much of the image is not background.
+Opens both sidecars with the Xdmf3 readers S and T and the legacy XDMF reader and writes to
+``OUT.json``, for each, at the first and last time step, every leaf dataset's point and cell
+counts, bounds and arrays (components and range), and the leaves' bounds at every step. With
+each reader it also renders the surfaces' last step, cells coloured by ``displacement_magnitude``,
+to ``OUT_DIR/<reader>.png`` and records how much of the image is not background and how much
+is coloured (saturated).
 """
 
 import json
@@ -73,13 +74,14 @@ def describe(reader, t: float) -> list[dict]:
     return out
 
 
-def render(reader, t: float, png: str) -> float:
-    """Save the view at time ``t``; return the fraction of pixels that are not background."""
+def render(reader, t: float, png: str) -> dict:
+    """Save the view at time ``t``; the fractions of pixels not background, and saturated."""
     view = CreateView("RenderView")
     view.ViewSize = [640, 480]
     view.ViewTime = t
     display = Show(reader, view)
     ColorBy(display, ("CELLS", "displacement_magnitude"))
+    display.RescaleTransferFunctionToDataRange(False, True)
     ResetCamera(view)
     SaveScreenshot(png, view, ImageResolution=[640, 480])
     img = vtkPNGReader()
@@ -87,24 +89,31 @@ def render(reader, t: float, png: str) -> float:
     img.Update()
     pixels = vtk_to_numpy(img.GetOutput().GetPointData().GetScalars())[:, :3].astype(int)
     background = pixels[0]  # a corner: the camera is reset to fit the scene
-    return float((abs(pixels - background).sum(axis=1) > 30).mean())
+    drawn = abs(pixels - background).sum(axis=1) > 30
+    # grey (uncoloured) surfaces and the blue-grey background have max - min channel < 40
+    saturated = drawn & (pixels.max(axis=1) - pixels.min(axis=1) > 60)
+    return {"png": png, "drawn": float(drawn.mean()), "coloured": float(saturated.mean())}
+
+
+def probe(reader) -> dict:
+    reader.UpdatePipelineInformation()
+    times = [float(t) for t in reader.TimestepValues]
+    return {
+        "times": times,
+        "first": describe(reader, times[0]),
+        "last": describe(reader, times[-1]),
+        "bounds": [[x["bounds"] for x in describe(reader, t)] for t in times],
+    }
 
 
 def main() -> None:
-    xdmf, out_json, png = sys.argv[1:4]
+    surface, centroids, out_json, out_dir = sys.argv[1:5]
     result = {}
     for kind in ("S", "T", "legacy"):
-        reader = open_reader(kind, xdmf)
-        reader.UpdatePipelineInformation()
-        times = [float(t) for t in reader.TimestepValues]
-        result[kind] = {
-            "times": times,
-            "first": describe(reader, times[0]),
-            "last": describe(reader, times[-1]),
-            "bounds": [[x["bounds"] for x in describe(reader, t)] for t in times],
-        }
-        if kind == "T":  # S joins surfaces and centroids into one multi-piece mesh: no colours
-            result["rendered_fraction"] = render(reader, times[-1], png)
+        reader = open_reader(kind, surface)
+        result[kind] = {"surface": probe(reader), "centroids": probe(open_reader(kind, centroids))}
+        t = result[kind]["surface"]["times"][-1]
+        result[kind]["render"] = render(reader, t, f"{out_dir}/{kind}.png")
     with open(out_json, "w") as f:
         json.dump(result, f)
 

@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 import pdem.io.writer as writer_mod
-from pdem.io import OutputWriter, read_xdmf, summarise
+from pdem.io import OutputWriter, centroids_path, read_xdmf, summarise
 from pdem.io.xdmf import CELL_FIELDS, VIEWED_SERIES, view_path
 
 COMM = MPI.COMM_SELF
@@ -230,14 +230,16 @@ def test_fallback_warns_once_when_h5py_lacks_mpi(tmp_path, snaps, monkeypatch):
 
 def test_xdmf_references_resolve(out, snaps):
     xdmf = out.with_suffix(".xdmf")
-    root = ET.parse(xdmf).getroot()
-    colls = root.find("Domain").findall("Grid")
-    assert [c.get("CollectionType") for c in colls] == ["Temporal", "Temporal"]
-    # the HDF5 file is referenced by its bare name so the pair can move together
-    for item in root.iter("DataItem"):
-        if item.get("Format") == "HDF":
-            assert item.text.startswith("run.h5:/")
-    grids = read_xdmf(xdmf)
+    # one temporal collection per sidecar (Xdmf3 Reader S would join two into one mesh)
+    for path, name in ((xdmf, "surface"), (out.with_name("run-centroids.xdmf"), "blocks")):
+        root = ET.parse(path).getroot()
+        colls = root.find("Domain").findall("Grid")
+        assert [(c.get("Name"), c.get("CollectionType")) for c in colls] == [(name, "Temporal")]
+        # the HDF5 file is referenced by its bare name so the files can move together
+        for item in root.iter("DataItem"):
+            if item.get("Format") == "HDF":
+                assert item.text.startswith("run.h5:/")
+    grids = {**read_xdmf(xdmf), **read_xdmf(centroids_path(xdmf))}
     with h5py.File(out, "r") as f:
         for i, step in enumerate(grids["surface"]):
             assert step["time"] == snaps[i]["time"]

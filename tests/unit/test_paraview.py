@@ -85,10 +85,10 @@ def probed(tmp_path_factory):
     command = pvbatch_command()
     d = tmp_path_factory.mktemp("paraview")
     write_scene(d / "run.h5")
-    out, png = d / "probe.json", d / "last_step.png"
+    out = d / "probe.json"
     for attempt in range(3):
         run = subprocess.run(
-            [*command, str(PROBE), str(d / "run.xdmf"), str(out), str(png)],
+            [*command, str(PROBE), str(d / "run.xdmf"), str(d / "run-centroids.xdmf"), str(out), str(d)],
             capture_output=True, text=True, timeout=300,
         )
         log = run.stdout + run.stderr
@@ -99,16 +99,14 @@ def probed(tmp_path_factory):
             break
         command = pvbatch_command()
     assert run.returncode == 0, f"pvbatch failed ({run.returncode}):\n{log[-4000:]}"
-    print(f"ParaView rendering: {png}", file=sys.stderr)
-    return json.loads(out.read_text()), log, d / "run.h5", png
+    print(f"ParaView renderings: {d}/{{S,T,legacy}}.png", file=sys.stderr)
+    return json.loads(out.read_text()), log, d / "run.h5"
 
 
-def split(leaves):
-    """The surface (has ``block_id`` cells) and the centroid cloud (has ``gid`` points)."""
-    surface = [x for x in leaves if "block_id" in x["cell_arrays"]]
-    cloud = [x for x in leaves if "gid" in x["point_arrays"]]
-    assert len(surface) == 1 and len(cloud) == 1, leaves
-    return surface[0], cloud[0]
+def leaf(leaves):
+    """The one dataset a sidecar of one collection gives."""
+    assert len(leaves) == 1, leaves
+    return leaves[0]
 
 
 def bounds(points):
@@ -116,46 +114,59 @@ def bounds(points):
 
 
 def test_paraview_logs_nothing(probed):
-    _, log, _, _ = probed
+    _, log, _ = probed
     bad = [line for line in log.splitlines() if any(b in line for b in BAD_LOG)]
     assert not bad, "ParaView complained:\n" + "\n".join(bad[:20])
 
 
 @pytest.mark.parametrize("reader", READERS)
-def test_reader_matches_hdf5(probed, reader):
-    result, _, h5, _ = probed
-    r = result[reader]
+def test_surfaces_match_hdf5(probed, reader):
+    result, _, h5 = probed
+    r = result[reader]["surface"]
     with h5py.File(h5, "r") as f:
         assert np.allclose(r["times"], f["time"][()])
         for key, i in (("first", 0), ("last", len(r["times"]) - 1)):
-            surface, cloud = split(r[key])
+            surface = leaf(r[key])
             pts = f["surface/points"][i]
             assert surface["n_points"] == len(pts)
             assert surface["n_cells"] == len(f["surface/connectivity"])
             assert np.allclose(surface["bounds"], bounds(pts), rtol=0, atol=1e-12)
-            assert cloud["n_points"] == len(f["blocks/gid"])
-            assert np.allclose(cloud["bounds"], bounds(f["blocks/centroid"][i]), rtol=0, atol=1e-12)
-            got = {k: v["components"] for k, v in surface["cell_arrays"].items()}
-            assert got == CELL_ARRAYS
-            assert {k: v["components"] for k, v in cloud["point_arrays"].items()} == POINT_ARRAYS
+            assert {k: v["components"] for k, v in surface["cell_arrays"].items()} == CELL_ARRAYS
             d = f["surface/displacement_magnitude"][i]
             assert np.allclose(surface["cell_arrays"]["displacement_magnitude"]["range"],
                                [d.min(), d.max()])
             speed = np.linalg.norm(f["blocks/velocity"][i], axis=1)
             assert np.allclose(surface["cell_arrays"]["speed"]["range"], [speed.min(), speed.max()])
             assert surface["cell_arrays"]["fixed"]["range"] == [0, 1]
-        # every step, not just the ends: surface and centroid bounds of that snapshot
-        for i, leaf_bounds in enumerate(r["bounds"]):
-            expect = [bounds(f["surface/points"][i]), bounds(f["blocks/centroid"][i])]
-            assert len(leaf_bounds) == 2
-            assert any(np.allclose(leaf_bounds, e, rtol=0, atol=1e-12) for e in (expect, expect[::-1]))
+        # every step, not just the ends
+        assert len(r["bounds"]) == len(f["time"])
+        for i, (b,) in enumerate(r["bounds"]):
+            assert np.allclose(b, bounds(f["surface/points"][i]), rtol=0, atol=1e-12), i
     # the displacement is zero at the start and grows
-    first = split(r["first"])[0]["cell_arrays"]["displacement_magnitude"]["range"]
-    last = split(r["last"])[0]["cell_arrays"]["displacement_magnitude"]["range"]
+    first = leaf(r["first"])["cell_arrays"]["displacement_magnitude"]["range"]
+    last = leaf(r["last"])["cell_arrays"]["displacement_magnitude"]["range"]
     assert first == [0.0, 0.0] and last[1] > 0.5
 
 
-def test_render_shows_the_blocks(probed):
-    result, _, _, png = probed
-    assert png.stat().st_size > 1000
-    assert result["rendered_fraction"] > 0.05, "the rendered view is (almost) empty"
+@pytest.mark.parametrize("reader", READERS)
+def test_centroids_match_hdf5(probed, reader):
+    result, _, h5 = probed
+    r = result[reader]["centroids"]
+    with h5py.File(h5, "r") as f:
+        assert np.allclose(r["times"], f["time"][()])
+        for key, i in (("first", 0), ("last", len(r["times"]) - 1)):
+            cloud = leaf(r[key])
+            assert cloud["n_points"] == cloud["n_cells"] == len(f["blocks/gid"])
+            assert np.allclose(cloud["bounds"], bounds(f["blocks/centroid"][i]), rtol=0, atol=1e-12)
+            assert {k: v["components"] for k, v in cloud["point_arrays"].items()} == POINT_ARRAYS
+        for i, (b,) in enumerate(r["bounds"]):
+            assert np.allclose(b, bounds(f["blocks/centroid"][i]), rtol=0, atol=1e-12), i
+
+
+@pytest.mark.parametrize("reader", READERS)
+def test_render_shows_coloured_blocks(probed, reader):
+    """Every reader's view shows the blocks, coloured (format 1 files: empty or grey views)."""
+    render = probed[0][reader]["render"]
+    assert Path(render["png"]).stat().st_size > 1000
+    assert render["drawn"] > 0.05, f"{reader}: the rendered view is (almost) empty"
+    assert render["coloured"] > 0.02, f"{reader}: the blocks are not coloured by displacement"
