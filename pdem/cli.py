@@ -85,7 +85,8 @@ def _march(args, comm, log, scene, state=None) -> int:
         _fail_during_run(comm, exc, sim)
         return 1
     sim.close()
-    log.info("wrote %s (+ %s)", scene.output.file, os.path.splitext(scene.output.file)[0] + ".xdmf")
+    stem = os.path.splitext(scene.output.file)[0]
+    log.info("wrote %s (+ %s.xdmf, %s-centroids.xdmf)", scene.output.file, stem, stem)
     return 0
 
 

@@ -1,11 +1,12 @@
-"""pdem.io: run output (HDF5 + XDMF sidecar) and its summary."""
+"""pdem.io: run output (HDF5 + XDMF sidecars) and its summary."""
 
 from .info import summarise
 from .writer import FORMAT_VERSION, OutputWriter, quat_to_matrix
-from .xdmf import read_xdmf, write_xdmf
+from .xdmf import centroids_path, read_xdmf, write_xdmf
 
 __all__ = [
     "FORMAT_VERSION",
+    "centroids_path",
     "OutputWriter",
     "quat_to_matrix",
     "read_xdmf",

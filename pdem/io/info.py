@@ -71,6 +71,7 @@ def _output_summary(f: h5py.File) -> list[str]:
     time, step = f["time"][()], f["step"][()]
     n_snap = len(time)
     lines = [f"blocks:      {n}"]
+    lines += _viewer_lines(f)
     if "surface/connectivity" in f:
         lines.append(
             f"surface:     {f['surface/points'].shape[1]} vertices, "
@@ -119,3 +120,17 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"max {_g(speed.max())} m/s ({names[int(speed.argmax())]})"
         )
     return lines
+
+
+def _viewer_lines(f: h5py.File) -> list[str]:
+    """Groups and fixed blocks (format 2), or what a format 1 file lacks for viewing."""
+    if "blocks/group" not in f:
+        return [
+            "viewer:      format 1 file: its XDMF sidecar opens only in ParaView's legacy XDMF "
+            "reader and has no displacement/velocity cell arrays (re-run with this pdem for both)"
+        ]
+    group = f["blocks/group"]
+    names = [_text(x) for x in group.attrs.get("names", [])]
+    counts = np.bincount(group[()], minlength=len(names))
+    items = ", ".join(f"{name} ({c})" for name, c in zip(names, counts, strict=False))
+    return [f"groups:      {items}", f"fixed:       {int(f['blocks/fixed'][()].sum())} blocks"]

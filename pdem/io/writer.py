@@ -16,13 +16,14 @@ from mpi4py import MPI
 
 from ..dynamics.kinematics import rotation_matrices
 from ..model.fields import OUTPUT, row_width
-from .xdmf import write_xdmf
+from .xdmf import CELL_FIELDS, VIEWED_SERIES, view_path, write_xdmf
 
 __all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 1
+# 2: per-triangle colouring fields, blocks/group|fixed|initial_centroid, /xdmf views
+FORMAT_VERSION = 2
 # a snapshot row: the block fields declared with an output name (pdem.model.fields)
 _ROW_COLS = row_width(OUTPUT)
 _COLS = {}
@@ -31,6 +32,12 @@ for _f in OUTPUT:
     _COLS[_f.output] = (_c, _f.width)
     _c += _f.width
 _CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
+
+
+def _cols(rows: np.ndarray, name: str) -> np.ndarray:
+    """The columns of output field ``name`` in snapshot rows."""
+    col, w = _COLS[name]
+    return rows[:, col:col + w]
 
 
 def _h5py_has_mpi() -> bool:
@@ -92,13 +99,42 @@ def _starts(counts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
 
 
+def _block_fields(centroid, x0, velocity, omega) -> dict[str, np.ndarray]:
+    """Per-block values of the CELL_FIELDS.
+
+    Explicit element-wise sums (no BLAS, no reductions over blocks), so a block's values do not
+    depend on how the blocks are partitioned: bitwise the same whatever the rank count.
+    """
+    def norm(a):
+        return np.sqrt(a[:, 0] * a[:, 0] + a[:, 1] * a[:, 1] + a[:, 2] * a[:, 2])
+
+    d = centroid - x0
+    return {"displacement": d, "displacement_magnitude": norm(d), "velocity": velocity,
+            "speed": norm(velocity), "angular_velocity": omega}
+
+
+def _add_view(f: h5py.File, path: str, i: int) -> None:
+    """Virtual dataset ``view_path(path, i)`` = snapshot ``i`` of the series ``path``.
+
+    ParaView's XDMF readers disagree on how to select one snapshot of a series (the Xdmf3 readers
+    cannot read HyperSlab items, the legacy one cannot read ``|``-slabs), but all read a plain
+    dataset: the view is one, with no data copied. The source file is ``"."`` (this file), so
+    the view survives moving the file. Creating it is collective (metadata only).
+    """
+    src = f[path]
+    layout = h5py.VirtualLayout(shape=src.shape[1:], dtype=src.dtype)
+    layout[...] = h5py.VirtualSource(".", path, shape=src.shape, dtype=src.dtype)[i]
+    f.create_virtual_dataset(view_path(path, i), layout)
+
+
 class OutputWriter:
     """The HDF5 output of one run; every method is collective over ``comm``.
 
     Parameters
     ----------
     path
-        The ``.h5`` file (overwritten). The XDMF sidecar is ``path`` with suffix ``.xdmf``.
+        The ``.h5`` file (overwritten). The XDMF sidecars are ``path`` with suffix ``.xdmf``
+        (surfaces) and ``-centroids.xdmf`` (centroid cloud).
     comm
         mpi4py communicator of the ranks that run the model.
     block_names, body_vertices, body_faces
@@ -115,6 +151,10 @@ class OutputWriter:
         fallback with a warning.
     xdmf
         Refresh the XDMF sidecar (rank 0) after every snapshot and on close.
+    initial_centroid, group, group_names, fixed
+        Per block in gid order, identical on every rank: the reference centroids ``(n, 3)`` of
+        ``displacement`` (default: the first snapshot's), the group index into ``group_names``
+        (default: all 0, named ``"default"``), and whether the block is fixed (default: no).
 
     Notes
     -----
@@ -136,6 +176,10 @@ class OutputWriter:
         attrs: dict[str, Any] | None = None,
         parallel: bool | None = None,
         xdmf: bool = True,
+        initial_centroid: np.ndarray | None = None,
+        group: Sequence[int] | None = None,
+        group_names: Sequence[str] | None = None,
+        fixed: Sequence[bool] | None = None,
     ) -> None:
         self.path = Path(path)
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
@@ -191,6 +235,7 @@ class OutputWriter:
         else:
             self._my_verts = np.zeros((0, 3))
         self._my_vblock = np.repeat(np.arange(hi - lo), nv[lo:hi])
+        self._init_fields(tri_block, initial_centroid, group, group_names, fixed)
 
         self._f: h5py.File | None = None
         self._closed = False
@@ -239,6 +284,7 @@ class OutputWriter:
         self._points = series("surface/points", (self.n_points, 3), np.float64)
         self._points.attrs["units"] = "m"
         f.create_group("histories")
+        self._create_fields()
 
     # ------------------------------------------------------------------ low-level writes
     def _write(self, dset: h5py.Dataset, start: tuple[int, ...], data: np.ndarray | None):
@@ -363,12 +409,75 @@ class OutputWriter:
             self._write_row(self._step, i, np.array([step], np.int64) if root else None)
             for name, (col, w) in _COLS.items():
                 self._write_row(self._series[name], i, mine[:, col : col + w], self._lo)
-            c0, q0 = _COLS["centroid"][0], _COLS["orientation"][0]
-            pts = self._world_points(mine[:, c0:c0 + 3], mine[:, q0:q0 + 4])
+            pts = self._world_points(_cols(mine, "centroid"), _cols(mine, "orientation"))
             self._write_row(self._points, i, pts, self._vlo)
+            self._write_fields(i, mine)
             self._f.flush()
         if self.xdmf_path is not None and self.comm.rank == 0:
             self._write_xdmf()
+
+    # ------------------------------------------------------------------ viewer fields
+    def _init_fields(self, tri_block, initial_centroid, group, group_names, fixed) -> None:
+        """Check the static per-block data of the viewer fields; find this rank's triangles."""
+        n = self.n_blocks
+        group = np.zeros(n, np.int32) if group is None else np.asarray(group, np.int64).reshape(-1)
+        names = ["default"] if group_names is None else [str(g) for g in group_names]
+        fixed = np.zeros(n, bool) if fixed is None else np.asarray(fixed, bool).reshape(-1)
+        x0 = None if initial_centroid is None else np.asarray(initial_centroid, np.float64)
+        if len(group) != n or len(fixed) != n or (x0 is not None and x0.shape != (n, 3)):
+            raise ValueError(f"OutputWriter: group, fixed and initial_centroid need {n} rows")
+        if group.min() < 0 or group.max() >= len(names):
+            raise ValueError(f"OutputWriter: group ids outside [0, {len(names)}) (group_names)")
+        self._group, self._group_names = group.astype(np.int32), names
+        self._fixed, self._x0_all = fixed.astype(np.int32), x0
+        self._x0: np.ndarray | None = None  # reference centroids of this rank's gid range
+        # Triangles come in gid order, so a gid range owns a contiguous triangle range.
+        self._tri_block = tri_block
+        tstart = np.searchsorted(tri_block, np.arange(n + 1))
+        self._tlo, self._thi = int(tstart[self._lo]), int(tstart[self._hi])
+        self._my_tblock = tri_block[self._tlo : self._thi] - self._lo
+
+    def _create_fields(self) -> None:
+        """Static per-block and per-triangle data, and the per-triangle series (IO ranks)."""
+        f, n, nt = self._f, self.n_blocks, self.n_tri
+        grp = f["blocks"].create_dataset("group", (n,), np.int32)
+        grp.attrs["names"] = self._group_names
+        self._write_static(grp, self._group)
+        self._write_static(f["blocks"].create_dataset("fixed", (n,), np.int32), self._fixed)
+        x0 = f["blocks"].create_dataset("initial_centroid", (n, 3), np.float64)
+        x0.attrs["units"] = "m"
+        if self._x0_all is not None:
+            self._write_static(x0, self._x0_all)
+        for name, values in (("group", self._group), ("fixed", self._fixed)):
+            self._write_static(f["surface"].create_dataset(name, (nt,), np.int32), values[self._tri_block])
+        self._cells = {}
+        for name, width, units in CELL_FIELDS:
+            tail = (nt, width) if width > 1 else (nt,)
+            chunk = (1, min(max(nt, 1), _CHUNK_ROWS), *tail[1:])
+            # A block's value repeats on each of its triangles: deflate takes most of that back
+            # (parallel HDF5 writes filtered datasets collectively, as all writes here are).
+            d = f.create_dataset(
+                f"surface/{name}", (0, *tail), maxshape=(None, *tail), chunks=chunk, dtype=np.float32,
+                compression="gzip", compression_opts=4, shuffle=True,
+            )
+            d.attrs["units"] = units
+            self._cells[name] = d
+
+    def _write_fields(self, i: int, mine: np.ndarray) -> None:
+        """Snapshot ``i`` of the per-triangle series, and its ``/xdmf`` views (collective)."""
+        if self._x0 is None:  # first snapshot: fix the displacement reference
+            if self._x0_all is not None:
+                self._x0 = self._x0_all[self._lo : self._hi]
+            else:
+                self._x0 = _cols(mine, "centroid").copy()
+                self._write(self._f["blocks/initial_centroid"], (self._lo, 0), self._x0)
+        values = _block_fields(_cols(mine, "centroid"), self._x0, _cols(mine, "velocity"),
+                               _cols(mine, "angular_velocity"))
+        for name, d in self._cells.items():
+            d.resize(self.n_snap, axis=0)
+            self._write_row(d, i, values[name][self._my_tblock], self._tlo)
+        for path in VIEWED_SERIES:
+            _add_view(self._f, path, i)
 
     def _world_points(self, centroid: np.ndarray, quat: np.ndarray) -> np.ndarray:
         """World positions ``c + R(q) v`` of the vertices of this rank's gid range."""

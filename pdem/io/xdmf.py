@@ -1,4 +1,4 @@
-"""XDMF sidecar for the HDF5 output: a temporal collection ParaView opens directly."""
+"""XDMF sidecar for the HDF5 output: temporal collections every ParaView XDMF reader opens."""
 
 from __future__ import annotations
 
@@ -9,26 +9,100 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_xdmf", "read_xdmf"]
+__all__ = ["write_xdmf", "read_xdmf", "centroids_path", "CELL_FIELDS", "VIEWED_SERIES", "view_path"]
+
+# Block quantities copied onto every triangle of the block's surface, as float32 series
+# ``surface/<name>`` (name, components, units). No XDMF construct that ParaView 5.11's readers
+# all accept can index a per-block array by triangle (docs/output.md), hence the copies.
+CELL_FIELDS = (
+    ("displacement", 3, "m"),
+    ("displacement_magnitude", 1, "m"),
+    ("velocity", 3, "m/s"),
+    ("speed", 1, "m/s"),
+    ("angular_velocity", 3, "rad/s"),
+)
+_BLOCK_SERIES = ("velocity", "angular_velocity")  # point attributes of the centroid cloud
+
+# Time series the sidecar reads one snapshot of, through a virtual dataset per snapshot.
+VIEWED_SERIES = (
+    "/surface/points",
+    *(f"/surface/{name}" for name, _, _ in CELL_FIELDS),
+    "/blocks/centroid",
+    *(f"/blocks/{name}" for name in _BLOCK_SERIES),
+)
 
 
-def _hdf(dims: Sequence[int], number_type: str, h5_name: str, dset: str) -> str:
+def view_path(path: str, i: int) -> str:
+    """Path of the virtual dataset holding snapshot ``i`` of the series ``path``."""
+    return f"/xdmf/{i:06d}{path}"
+
+
+def _hdf(dims: Sequence[int], number_type: str, h5_name: str, dset: str, precision: int = 8) -> str:
     d = " ".join(str(int(x)) for x in dims)
     return (
-        f'<DataItem Dimensions="{d}" NumberType="{number_type}" Precision="8" '
+        f'<DataItem Dimensions="{d}" NumberType="{number_type}" Precision="{precision}" '
         f'Format="HDF">{h5_name}:{dset}</DataItem>'
     )
 
 
-def _slab(i: int, n_snap: int, n_rows: int, ncols: int, h5_name: str, dset: str) -> str:
-    """Snapshot ``i`` of a ``(n_snap, n_rows, ncols)`` dataset as a HyperSlab DataItem."""
-    return (
-        f'<DataItem ItemType="HyperSlab" Dimensions="1 {n_rows} {ncols}" Type="HyperSlab">'
-        f'<DataItem Dimensions="3 3" NumberType="Int" Format="XML">'
-        f"{i} 0 0 1 1 1 1 {n_rows} {ncols}</DataItem>"
-        + _hdf((n_snap, n_rows, ncols), "Float", h5_name, dset)
-        + "</DataItem>"
-    )
+def _attribute(name: str, center: str, width: int, item: str) -> str:
+    kind = "Vector" if width == 3 else "Scalar"
+    return f'<Attribute Name="{name}" AttributeType="{kind}" Center="{center}">{item}</Attribute>'
+
+
+def _surface_grid(i: int, t: float, h5: str, n_tri: int, n_points: int) -> list[str]:
+    static = [
+        _attribute(name, "Cell", 1, _hdf((n_tri,), "Int", h5, f"/surface/{name}", prec))
+        for name, prec in (("block_id", 8), ("group", 4), ("fixed", 4))
+    ]
+    cells = [
+        _attribute(
+            name, "Cell", w,
+            _hdf((n_tri, w) if w > 1 else (n_tri,), "Float", h5, view_path(f"/surface/{name}", i), 4),
+        )
+        for name, w, _ in CELL_FIELDS
+    ]
+    return [
+        f'<Grid Name="surface_{i:06d}" GridType="Uniform">',
+        f'<Time Value="{t!r}"/>',
+        f'<Topology TopologyType="Triangle" NumberOfElements="{n_tri}">'
+        f'{_hdf((n_tri, 3), "Int", h5, "/surface/connectivity")}</Topology>',
+        f'<Geometry GeometryType="XYZ">'
+        f'{_hdf((n_points, 3), "Float", h5, view_path("/surface/points", i))}</Geometry>',
+        *static,
+        *cells,
+        "</Grid>",
+    ]
+
+
+def _blocks_grid(i: int, t: float, h5: str, n_blocks: int) -> list[str]:
+    gid = _hdf((n_blocks,), "Int", h5, "/blocks/gid")
+    static = [
+        _attribute(name, "Node", 1, _hdf((n_blocks,), "Int", h5, f"/blocks/{name}", 4))
+        for name in ("group", "fixed")
+    ]
+    series = [
+        _attribute(name, "Node", 3, _hdf((n_blocks, 3), "Float", h5, view_path(f"/blocks/{name}", i)))
+        for name in _BLOCK_SERIES
+    ]
+    return [
+        f'<Grid Name="blocks_{i:06d}" GridType="Uniform">',
+        f'<Time Value="{t!r}"/>',
+        f'<Topology TopologyType="Polyvertex" NumberOfElements="{n_blocks}" '
+        f'NodesPerElement="1">{gid}</Topology>',
+        f'<Geometry GeometryType="XYZ">'
+        f'{_hdf((n_blocks, 3), "Float", h5, view_path("/blocks/centroid", i))}</Geometry>',
+        _attribute("gid", "Node", 1, gid),
+        *static,
+        *series,
+        "</Grid>",
+    ]
+
+
+def centroids_path(xdmf_path: str | os.PathLike) -> Path:
+    """The second sidecar, of the centroid cloud: ``run.xdmf`` -> ``run-centroids.xdmf``."""
+    xdmf_path = Path(xdmf_path)
+    return xdmf_path.with_name(xdmf_path.stem + "-centroids.xdmf")
 
 
 def write_xdmf(
@@ -42,58 +116,42 @@ def write_xdmf(
 ) -> None:
     """Write the XDMF 3 description of a pdem output file (plain text, any one process).
 
-    Two temporal collections: ``surface`` (the triangulated block surfaces, cell attribute
-    ``block_id``) and ``blocks`` (block centroids as a Polyvertex cloud with ``gid``,
-    ``velocity`` and ``angular_velocity``). Each snapshot reads its geometry as a HyperSlab of
-    ``surface/points`` / ``blocks/centroid``. The HDF5 file is referenced by its bare name, so
-    the pair must stay in the same directory. The file is written to a temporary name and
-    renamed, so a reader never sees half a file.
+    ``xdmf_path`` gets the temporal collection ``surface`` (the triangulated block surfaces, with
+    the cell attributes ``block_id``, ``group``, ``fixed`` and the :data:`CELL_FIELDS`);
+    :func:`centroids_path` gets ``blocks`` (the block centroids as a Polyvertex cloud with
+    ``gid``, ``group``, ``fixed``, ``velocity`` and ``angular_velocity``). One collection per
+    file: ParaView's Xdmf3 Reader S joins the top-level grids of a file into one multi-piece
+    mesh, which then cannot be coloured by arrays only the surfaces have. Each snapshot reads its
+    data from the plain (virtual) datasets ``/xdmf/<i>/...`` the writer makes, the one form the
+    Xdmf3 readers (S, T) and the legacy XDMF reader all read. The HDF5 file is referenced by its
+    bare name, so the files must stay in the same directory. Each file is written to a
+    temporary name and renamed, so a reader never sees half a file.
     """
     times = [float(t) for t in times]
     if len(times) != n_snap:
         raise ValueError(f"write_xdmf: {len(times)} times for {n_snap} snapshots")
     h5 = Path(h5_path).name
+    surface = [line for i, t in enumerate(times) for line in _surface_grid(i, t, h5, n_tri, n_points)]
+    cloud = [line for i, t in enumerate(times) for line in _blocks_grid(i, t, h5, n_blocks)]
+    _write_collection(Path(xdmf_path), "surface", surface)
+    _write_collection(centroids_path(xdmf_path), "blocks", cloud)
+
+
+def _write_collection(path: Path, name: str, grids: list[str]) -> None:
     out = [
         '<?xml version="1.0" encoding="utf-8"?>',
         '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">',
         "<Domain>",
-        '<Grid Name="surface" GridType="Collection" CollectionType="Temporal">',
+        f'<Grid Name="{name}" GridType="Collection" CollectionType="Temporal">',
+        *grids,
+        "</Grid>",
+        "</Domain>",
+        "</Xdmf>",
+        "",
     ]
-    conn = _hdf((n_tri, 3), "Int", h5, "/surface/connectivity")
-    bid = _hdf((n_tri,), "Int", h5, "/surface/block_id")
-    for i, t in enumerate(times):
-        out += [
-            f'<Grid Name="surface_{i:06d}" GridType="Uniform">',
-            f'<Time Value="{t!r}"/>',
-            f'<Topology TopologyType="Triangle" NumberOfElements="{n_tri}">{conn}</Topology>',
-            f'<Geometry GeometryType="XYZ">'
-            f"{_slab(i, n_snap, n_points, 3, h5, '/surface/points')}</Geometry>",
-            f'<Attribute Name="block_id" AttributeType="Scalar" Center="Cell">{bid}</Attribute>',
-            "</Grid>",
-        ]
-    out += ["</Grid>", '<Grid Name="blocks" GridType="Collection" CollectionType="Temporal">']
-    gid = _hdf((n_blocks,), "Int", h5, "/blocks/gid")
-    for i, t in enumerate(times):
-        out += [
-            f'<Grid Name="blocks_{i:06d}" GridType="Uniform">',
-            f'<Time Value="{t!r}"/>',
-            f'<Topology TopologyType="Polyvertex" NumberOfElements="{n_blocks}" '
-            f'NodesPerElement="1">{gid}</Topology>',
-            f'<Geometry GeometryType="XYZ">'
-            f"{_slab(i, n_snap, n_blocks, 3, h5, '/blocks/centroid')}</Geometry>",
-            f'<Attribute Name="gid" AttributeType="Scalar" Center="Node">{gid}</Attribute>',
-        ]
-        for name in ("velocity", "angular_velocity"):
-            out.append(
-                f'<Attribute Name="{name}" AttributeType="Vector" Center="Node">'
-                f"{_slab(i, n_snap, n_blocks, 3, h5, '/blocks/' + name)}</Attribute>"
-            )
-        out.append("</Grid>")
-    out += ["</Grid>", "</Domain>", "</Xdmf>", ""]
-    xdmf_path = Path(xdmf_path)
-    tmp = xdmf_path.with_name(xdmf_path.name + ".tmp")
+    tmp = path.with_name(path.name + ".tmp")
     tmp.write_text("\n".join(out), encoding="utf-8")
-    os.replace(tmp, xdmf_path)
+    os.replace(tmp, path)
 
 
 def _dims(item: ET.Element) -> tuple[int, ...]:
@@ -137,7 +195,7 @@ def _resolve(item: ET.Element, base: Path, files: dict) -> np.ndarray:
 
 
 def read_xdmf(xdmf_path: str | os.PathLike) -> dict[str, list[dict]]:
-    """Read back an XDMF file written by :func:`write_xdmf` (resolving HyperSlabs).
+    """Read back an XDMF file written by :func:`write_xdmf` (format 2 views or format 1 HyperSlabs).
 
     Meant for tests and checks: every DataItem is resolved against the HDF5 file and its
     declared Dimensions verified (``ValueError`` otherwise). Returns, per temporal collection,

@@ -30,7 +30,8 @@ class Snapshots(Plugin):
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
             body_vertices=[sh.vertices for sh in shapes], body_faces=faces,
-            scene_yaml=state.scene_yaml,
+            scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
+            group_names=state.group_names, fixed=state.glob.fixed,
             attrs={"pdem_version": __version__, "scene_name": state.scene.name, "dt": state.dt,
                    "ctol": r.ctol, "run_id": state.run_id, "first_step": state.step,
                    "resolved": r.to_json()})

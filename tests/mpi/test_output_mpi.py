@@ -58,7 +58,9 @@ def make_snapshots(n, n_snap=3, seed=7):
 def write_run(path, comm, n, owned, hist_owner, **kw):
     """Write a run where this rank owns the gids ``owned`` (any order)."""
     owned = np.asarray(owned, dtype=np.int64)
-    with OutputWriter(path, comm, **make_scene(n), **kw) as w:
+    # viewer fields too: group/fixed static, displacement from the first snapshot (collective)
+    viewer = {"group": np.arange(n) % 2, "group_names": ["even", "odd"], "fixed": np.arange(n) == 0}
+    with OutputWriter(path, comm, **make_scene(n), **viewer, **kw) as w:
         w.add_history("z0", 1, {"block": "block-0"})
         for step, t, c, q, v, om in make_snapshots(n):
             w.write_snapshot(step, t, owned, rows(c[owned], q[owned], v[owned], om[owned]))

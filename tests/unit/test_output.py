@@ -10,7 +10,8 @@ import pytest
 from mpi4py import MPI
 
 import pdem.io.writer as writer_mod
-from pdem.io import OutputWriter, read_xdmf, summarise
+from pdem.io import OutputWriter, centroids_path, read_xdmf, summarise
+from pdem.io.xdmf import CELL_FIELDS, VIEWED_SERIES, view_path
 
 
 def rows(centroid, quat, velocity, angular_velocity) -> dict:
@@ -173,7 +174,7 @@ def test_values_round_trip(out, snaps):
         assert np.array_equal(f["blocks/gid"][()], np.arange(4))
         assert list(f["blocks/name"].asstr()[()]) == ["slab", "tet-a", "cube", "tét-β"]
         assert f.attrs["pdem_format"] == "output"
-        assert f.attrs["format_version"] == 1
+        assert f.attrs["format_version"] == 2
         assert f.attrs["scene"] == SCENE
         for k, v in ATTRS.items():
             assert f.attrs[k] == v
@@ -234,14 +235,16 @@ def test_fallback_warns_once_when_h5py_lacks_mpi(tmp_path, snaps, monkeypatch):
 
 def test_xdmf_references_resolve(out, snaps):
     xdmf = out.with_suffix(".xdmf")
-    root = ET.parse(xdmf).getroot()
-    colls = root.find("Domain").findall("Grid")
-    assert [c.get("CollectionType") for c in colls] == ["Temporal", "Temporal"]
-    # the HDF5 file is referenced by its bare name so the pair can move together
-    for item in root.iter("DataItem"):
-        if item.get("Format") == "HDF":
-            assert item.text.startswith("run.h5:/")
-    grids = read_xdmf(xdmf)
+    # one temporal collection per sidecar (Xdmf3 Reader S would join two into one mesh)
+    for path, name in ((xdmf, "surface"), (out.with_name("run-centroids.xdmf"), "blocks")):
+        root = ET.parse(path).getroot()
+        colls = root.find("Domain").findall("Grid")
+        assert [(c.get("Name"), c.get("CollectionType")) for c in colls] == [(name, "Temporal")]
+        # the HDF5 file is referenced by its bare name so the files can move together
+        for item in root.iter("DataItem"):
+            if item.get("Format") == "HDF":
+                assert item.text.startswith("run.h5:/")
+    grids = {**read_xdmf(xdmf), **read_xdmf(centroids_path(xdmf))}
     with h5py.File(out, "r") as f:
         for i, step in enumerate(grids["surface"]):
             assert step["time"] == snaps[i]["time"]
@@ -249,12 +252,87 @@ def test_xdmf_references_resolve(out, snaps):
             assert np.array_equal(step["topology"], f["surface/connectivity"][()])
             assert np.array_equal(step["geometry"], f["surface/points"][i])
             assert np.array_equal(step["attributes"]["block_id"][1], f["surface/block_id"][()])
+            for name, _, _ in CELL_FIELDS:
+                center, value = step["attributes"][name]
+                assert center == "Cell" and np.array_equal(value.ravel(), f[f"surface/{name}"][i].ravel())
         assert len(grids["surface"]) == 3
         for i, step in enumerate(grids["blocks"]):
             assert step["topology_type"] == "Polyvertex"
             assert np.array_equal(step["geometry"], snaps[i]["centroid"])
             assert np.array_equal(step["attributes"]["velocity"][1], snaps[i]["velocity"])
         assert len(grids["blocks"]) == 3
+
+
+VIEWER = {"initial_centroid": np.arange(12.0).reshape(4, 3), "group": [1, 0, 0, 1],
+          "group_names": ["soft", "hard"], "fixed": [True, False, False, False]}
+
+
+def test_viewer_fields(tmp_path, snaps):
+    """Per-triangle copies of each block's displacement, velocity, ... and their views."""
+    path = write_file(tmp_path / "v.h5", snaps, order=[3, 1, 0, 2], **VIEWER)
+    with h5py.File(path, "r") as f:
+        tb = f["surface/block_id"][()]
+        x0 = VIEWER["initial_centroid"]
+        assert np.array_equal(f["blocks/initial_centroid"][()], x0)
+        assert np.array_equal(f["blocks/group"][()], VIEWER["group"])
+        assert list(f["blocks/group"].attrs["names"]) == ["soft", "hard"]
+        assert np.array_equal(f["surface/group"][()], np.array(VIEWER["group"])[tb])
+        assert np.array_equal(f["surface/fixed"][()], np.array(VIEWER["fixed"], int)[tb])
+        for i, s in enumerate(snaps):
+            d = s["centroid"] - x0
+            expect = {"displacement": d, "displacement_magnitude": np.linalg.norm(d, axis=1),
+                      "velocity": s["velocity"], "speed": np.linalg.norm(s["velocity"], axis=1),
+                      "angular_velocity": s["angular_velocity"]}
+            for name, _, _ in CELL_FIELDS:
+                got = f[f"surface/{name}"][i]
+                assert got.dtype == np.float32
+                assert np.allclose(got, expect[name][tb], rtol=1e-6, atol=1e-6), name
+            for path_ in VIEWED_SERIES:
+                view = f[view_path(path_, i)]
+                assert view.is_virtual and np.array_equal(view[()], f[path_][i]), path_
+
+
+def test_displacement_defaults_to_first_snapshot(out, snaps):
+    with h5py.File(out, "r") as f:
+        assert np.array_equal(f["blocks/initial_centroid"][()], snaps[0]["centroid"])
+        assert not f["surface/displacement"][0].any()
+        assert np.array_equal(f["blocks/fixed"][()], np.zeros(4))
+        assert list(f["blocks/group"].attrs["names"]) == ["default"]
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [{"group": [0, 1, 0, 0]}, {"fixed": [True]}, {"initial_centroid": np.zeros((4, 2))},
+     {"group": [0, 0, 0, 2], "group_names": ["a", "b"]}],
+)
+def test_bad_viewer_fields_raise(tmp_path, bad):
+    with pytest.raises(ValueError, match="OutputWriter"):
+        OutputWriter(tmp_path / "bad.h5", COMM, **make_scene(), **bad)
+
+
+def test_read_xdmf_reads_format_1_hyperslabs(out, snaps):
+    """Format 1 sidecars selected a snapshot with a HyperSlab item; read_xdmf still reads them."""
+    with h5py.File(out, "r") as f:
+        n_snap, n_pts, _ = f["surface/points"].shape
+        n_tri = len(f["surface/connectivity"])
+    i = 2
+    slab = (
+        f'<DataItem ItemType="HyperSlab" Dimensions="1 {n_pts} 3" Type="HyperSlab">'
+        f'<DataItem Dimensions="3 3" NumberType="Int" Format="XML">{i} 0 0 1 1 1 1 {n_pts} 3</DataItem>'
+        f'<DataItem Dimensions="{n_snap} {n_pts} 3" NumberType="Float" Precision="8" Format="HDF">'
+        f"run.h5:/surface/points</DataItem></DataItem>"
+    )
+    old = out.with_name("old.xdmf")
+    old.write_text(
+        '<Xdmf Version="3.0"><Domain><Grid Name="surface" GridType="Collection" '
+        'CollectionType="Temporal"><Grid Name="s" GridType="Uniform"><Time Value="0.02"/>'
+        f'<Topology TopologyType="Triangle" NumberOfElements="{n_tri}"><DataItem Dimensions="{n_tri} 3" '
+        'NumberType="Int" Format="HDF">run.h5:/surface/connectivity</DataItem></Topology>'
+        f'<Geometry GeometryType="XYZ">{slab}</Geometry></Grid></Grid></Domain></Xdmf>'
+    )
+    (step,) = read_xdmf(old)["surface"]
+    with h5py.File(out, "r") as f:
+        assert np.array_equal(step["geometry"], f["surface/points"][i])
 
 
 def test_xdmf_written_after_every_snapshot(tmp_path, snaps):
@@ -323,6 +401,20 @@ def test_summarise_small(out):
     assert "top_z (3 rows x 1)" in text and "slab_v (3 rows x 3)" in text
     for name in ("slab", "tet-a", "cube", "tét-β"):
         assert f"\n  {name} " in text
+
+
+def test_summarise_reads_format_1(tmp_path, snaps):
+    """A format 1 file (no viewer fields) is still summarised, with a note on viewing it."""
+    path = write_file(tmp_path / "old.h5", snaps)
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 1
+        for name in ("xdmf", "blocks/group", "blocks/fixed", "blocks/initial_centroid",
+                     "surface/group", "surface/fixed", *(f"surface/{c[0]}" for c in CELL_FIELDS)):
+            del f[name]
+    text = summarise(path)
+    assert "format 1" in text and "legacy XDMF reader" in text
+    assert "snapshots:   3" in text
+    assert "groups:      default (4)" in summarise(write_file(tmp_path / "new.h5", snaps))
 
 
 def test_summarise_many_blocks(tmp_path):
