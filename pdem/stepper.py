@@ -33,12 +33,12 @@ from .parallel import mpi
 REMAP_FRACTION = 0.5
 
 
-def motion_record(b, n: int, force: np.ndarray) -> motion.Motion:
+def motion_record(b, n: int) -> motion.Motion:
     """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`."""
     return motion.Motion(b.x[:n], b.q[:n], b.v[:n], b.w[:n], b.L[:n], b.mass[:n],
-                         b.inertia[:n], b.fixed[:n], b.vfix[:n], force[:n], b.moment[:n],
-                         b.mscale[:n], b.prev_force[:n], b.prev_moment[:n], b.dx[:n],
-                         b.dtheta[:n])
+                         b.inertia[:n], b.fixed[:n], b.vfix[:n], b.force[:n],
+                         b.applied_force[:n], b.moment[:n], b.mscale[:n], b.prev_force[:n],
+                         b.prev_moment[:n], b.dx[:n], b.dtheta[:n], b.work[:n])
 
 
 class Stepper:
@@ -57,8 +57,7 @@ class Stepper:
         self.refresh(all_contacts=True)
         self.compute_forces(0.0)
         b = s.blocks
-        motion.stagger_start(motion_record(b, s.n_owned, self.total_force()), s.gravity, s.dt,
-                             s.scalar_inertia)
+        motion.stagger_start(motion_record(b, s.n_owned), s.gravity, s.dt, s.scalar_inertia)
         s.halo.forward(b)
 
     # ------------------------------------------------------------------ contacts
@@ -130,12 +129,8 @@ class Stepper:
         c = self.s.contacts
         b.force[:] = 0.0
         b.moment[:] = 0.0
-        bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment)
+        bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
         contact_forces(dt, bodies, c.pairs(), c.subs(), self.s.joints.kernel_args)
-
-    def total_force(self) -> np.ndarray:
-        """Contact + applied force (gravity is added by the integrator with the true mass)."""
-        return self.s.blocks.force + self.s.blocks.applied_force
 
     # ------------------------------------------------------------------ the step
     def advance(self):
@@ -146,8 +141,8 @@ class Stepper:
         tm = s.timers
         self.stats[:] = 0.0
         with tm.phase("motion"):
-            motion.integrate(motion_record(b, n, self.total_force()), s.gravity, s.dt,
-                             s.damping_args(), s.scalar_inertia, self.stats)
+            motion.integrate(motion_record(b, n), s.gravity, s.dt, s.damping_args(),
+                             s.scalar_inertia, self.stats)
             s.step += 1
             s.time += s.dt
             # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the

@@ -219,9 +219,13 @@ class History(Strict):
 
 
 class Output(Strict):
+    """``energy_every``: steps between energy-budget samples (``histories/energy``); default
+    ten per snapshot interval."""
+
     file: str = "pdem-out.h5"
     every: PositiveFloat | None = None
     every_steps: PositiveInt | None = None
+    energy_every: PositiveInt | None = None
     histories: list[History] = []
 
     @model_validator(mode="after")

@@ -6,7 +6,10 @@ are rebuilt from the current contact region. History (shear force, shear displac
 dilation, failure state) moves from the old sub-contacts to the new ones by nearest position in
 A's body frame: a sub-contact that persists keeps its values exactly, a new corner takes the
 shear stress of its nearest predecessor, so the contact's shear resistance is continuous as the
-region changes (3DEC reallocates sub-contact forces for the same reason).
+region changes (3DEC reallocates sub-contact forces for the same reason). The overlaps are
+re-read from the geometry, but each contact's spring energy (normal and shear) is carried over
+unchanged (``carry_spring_energy``): a geometry update must not put energy into the springs
+that a collision would then release as block speed (issue 16).
 """
 
 from __future__ import annotations
@@ -43,6 +46,56 @@ def _grow(a, size):
     out = np.empty((size,) + a.shape[1:], a.dtype)
     out[:a.shape[0]] = a
     return out
+
+
+@kernel
+def carry_spring_energy(old_area, old_un, old_dil, old_fs, area, un, dil, fs):
+    """Scale one refreshed contact's new sub-contacts so that the geometry update neither
+    stores nor releases spring energy (issue 16).
+
+    The new sub-contacts take their overlap ``un`` from the geometry and their shear force from
+    the nearest old sub-contact. Read as is, that re-tensions the springs whenever the region
+    changes: an edge contact carried by two ``point_area`` springs that becomes a face contact
+    (twenty times the area at the same overlap), a corner that appears already overlapped, an
+    old shear force copied to several new corners, or, the other way, a compressed corner
+    dropped from the region. A collision then pays the difference out as block speed (energy
+    created) or it is lost. So the contact's normal-spring energy ``sum kn A (un + dil)^2 / 2``
+    (compressed sub-contacts) and shear-spring energy ``sum |fs|^2 / (2 ks A)`` are each set
+    back to their values before the update by scaling the compressions ``un + dil`` and the
+    shear forces uniformly: the geometry gives the distribution over the region, the history
+    its energy (``kn``, ``ks`` cancel in the ratios). A persistent sub-contact, whose geometric
+    overlap equals its tracked one, is unchanged. Energy held by sub-contacts that are all
+    open after the update cannot be carried and is released (lost).
+    """
+    en0 = 0.0
+    es0 = 0.0
+    for o in range(old_area.shape[0]):
+        a = old_area[o]
+        if a > 0.0:
+            d = old_un[o] + old_dil[o]
+            if d > 0.0:
+                en0 += a * d * d
+            es0 += (old_fs[o, 0] ** 2 + old_fs[o, 1] ** 2 + old_fs[o, 2] ** 2) / a
+    en1 = 0.0
+    es1 = 0.0
+    for s in range(area.shape[0]):
+        a = area[s]
+        if a > 0.0:
+            d = un[s] + dil[s]
+            if d > 0.0:
+                en1 += a * d * d
+            es1 += (fs[s, 0] ** 2 + fs[s, 1] ** 2 + fs[s, 2] ** 2) / a
+    if en1 > 0.0 and en1 != en0:
+        f = np.sqrt(en0 / en1)
+        for s in range(area.shape[0]):
+            d = un[s] + dil[s]
+            if d > 0.0:
+                un[s] = f * d - dil[s]
+    if es1 > 0.0 and es1 != es0:
+        f = np.sqrt(es0 / es1)
+        for s in range(area.shape[0]):
+            for m in range(3):
+                fs[s, m] *= f
 
 
 @kernel
@@ -176,6 +229,10 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
                     hist[s, m] = 0.0
                 # a joint that forms open has no bond: no tension or cohesion
                 state[s] = FAILED if ovl[i] < 0.0 else 0
+        if o1 > o0:
+            carry_spring_energy(old_area[o0:o1], old_un[o0:o1], old_dil[o0:o1], old_fs[o0:o1],
+                                area[pos:pos + k], un[pos:pos + k], dil[pos:pos + k],
+                                fs[pos:pos + k])
         counts[c] = k
         pos += k
     new_start = np.zeros(nc + 1, np.int64)

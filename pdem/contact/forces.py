@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 
 from ..jit import inline_kernel, kernel
-from .laws import apply_law
-from .rigid import add_point_force, apply_pair, pair_motion, point_motion
+from .laws import apply_law, law_energy
+from .rigid import add_point_force, apply_pair, energy_shares, pair_motion, point_motion
 
 
 @inline_kernel
@@ -73,6 +73,7 @@ def contact_forces(dt, bodies, pairs, subs, joints):
         slot = joints.slot[jrow]
         j = joints.row[jrow]
         acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        dissipated = 0.0
         for s in range(s0, s1):
             rax, ray, raz, vx, vy, vz = point_motion(rel, subs.pa[s, 0], subs.pa[s, 1],
                                                      subs.pa[s, 2])
@@ -80,20 +81,51 @@ def contact_forces(dt, bodies, pairs, subs, joints):
             dsx = vx * dt - dun * nx  # eq. 22
             dsy = vy * dt - dun * ny
             dsz = vz * dt - dun * nz
-            un = subs.un[s] - dun
+            un0 = subs.un[s]
+            un = un0 - dun
             subs.un[s] = un
             fx, fy, fz = carry_shear(subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], nx, ny, nz)
             ux = subs.us[s, 0] + dsx
             uy = subs.us[s, 1] + dsy
             uz = subs.us[s, 2] + dsz
             subs.us[s, 0], subs.us[s, 1], subs.us[s, 2] = ux, uy, uz
+            area = subs.area[s]
+            fn0, e0 = law_energy(joints.laws, slot, j, s, subs.hist, un0, subs.dil[s], fx, fy, fz,
+                                 area, subs.state[s])
+            gx, gy, gz = fx, fy, fz
             fn, dil, st, fx, fy, fz = apply_law(
                 joints.laws, slot, j, s, subs.hist, un, subs.dil[s], fx, fy, fz, dsx, dsy, dsz,
-                subs.area[s], ux, uy, uz, subs.state[s])
+                area, ux, uy, uz, subs.state[s])
             subs.fn[s] = fn
             subs.dil[s] = dil
             subs.state[s] = st
             subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2] = fx, fy, fz
+            # energy budget: work done on the joint over the step (trapezoid, exact for an
+            # elastic spring) less the change of its stored energy is what it dissipated
+            _, e1 = law_energy(joints.laws, slot, j, s, subs.hist, un, dil, fx, fy, fz, area, st)
+            dissipated += -0.5 * ((fn0 + fn) * dun + (gx + fx) * dsx + (gy + fy) * dsy
+                                  + (gz + fz) * dsz) - (e1 - e0)
             # force on B (eq. 28 with our sign) at the sub-contact
             acc = add_point_force(acc, rax, ray, raz, fx + fn * nx, fy + fn * ny, fz + fn * nz)
-        apply_pair(bodies, a, b, rel, acc)
+        apply_pair(bodies, a, b, rel, acc, dissipated)
+
+
+@kernel
+def stored_energy(bodies, pairs, subs, joints, out):
+    """Spring energy stored in every contact's joint, booked on its blocks as the dissipation
+    is (:func:`pdem.contact.rigid.energy_shares`): ``out[b] +=`` block b's share."""
+    for c in range(pairs.ia.shape[0]):
+        a = pairs.ia[c]
+        b = pairs.ib[c]
+        jrow = pairs.joint[c]
+        slot = joints.slot[jrow]
+        j = joints.row[jrow]
+        e = 0.0
+        for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
+            _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
+                               subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
+                               subs.state[s])
+            e += es
+        wa, wb = energy_shares(bodies, a, b)
+        out[a] += wa * e
+        out[b] += wb * e

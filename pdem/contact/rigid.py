@@ -13,8 +13,11 @@ from collections import namedtuple
 
 from ..jit import inline_kernel
 
-# The block arrays the contact loop reads (pose, velocities, rotation increment) and writes.
-Bodies = namedtuple("Bodies", "x R v w dtheta force moment")
+# The block arrays the contact loop reads (pose, velocities, rotation increment, fixed flag)
+# and writes (force and moment sums, the energy accumulators).
+Bodies = namedtuple("Bodies", "x R v w dtheta force moment fixed work")
+
+WORK_JOINT = 5  # column of the joint dissipation in ``work`` (pdem.dynamics.motion.WORK_*)
 
 
 @inline_kernel
@@ -60,10 +63,26 @@ def add_point_force(acc, rax, ray, raz, fx, fy, fz):
 
 
 @inline_kernel
-def apply_pair(bodies, a, b, rel, acc):
+def energy_shares(bodies, a, b):
+    """How a contact's energies are booked on its two blocks: half each, or all on the free
+    one when the other is fixed. Summing the owned rows then counts each contact once on any
+    rank count (every owner of a free block computes all its contacts)."""
+    if bodies.fixed[a]:
+        return 0.0, 1.0
+    if bodies.fixed[b]:
+        return 1.0, 0.0
+    return 0.5, 0.5
+
+
+@inline_kernel
+def apply_pair(bodies, a, b, rel, acc, dissipated):
     """Force and moment sums of one contact onto both blocks (eqs. 28-32): the force on A is
-    the opposite of B's; B's moment about its centroid is r_a x f + d x f."""
+    the opposite of B's; B's moment about its centroid is r_a x f + d x f. The energy the joint
+    dissipated this step is booked on the blocks by :func:`energy_shares`."""
     force, moment = bodies.force, bodies.moment
+    wa, wb = energy_shares(bodies, a, b)
+    bodies.work[a, WORK_JOINT] += wa * dissipated
+    bodies.work[b, WORK_JOINT] += wb * dissipated
     ddx, ddy, ddz = rel[1]
     fbx, fby, fbz, max_, may, maz = acc
     mbx = max_ + (ddy * fbz - ddz * fby)

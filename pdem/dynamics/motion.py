@@ -80,10 +80,19 @@ from pdem.dynamics.rotation import (
 )
 from pdem.jit import kernel
 
-# The block arrays integrate reads and writes (owned rows); ``force`` is the total applied
-# force without gravity (contact + applied loads).
-Motion = namedtuple("Motion", "x q v w L mass inertia fixed vfix force moment mscale "
-                              "prev_force prev_moment dx dtheta")
+# The block arrays integrate reads and writes (owned rows): ``force`` and ``moment`` are the
+# contact sums, ``applied`` the applied loads (gravity is added with the true mass); ``work``
+# the energy accumulators (pdem.dynamics.energy.WORK_*).
+Motion = namedtuple("Motion", "x q v w L mass inertia fixed vfix force applied moment mscale "
+                              "prev_force prev_moment dx dtheta work")
+
+# columns of the per-block ``work`` field
+WORK_GRAVITY = 0
+WORK_APPLIED = 1
+WORK_CONTACT = 2
+WORK_DAMPING = 3  # dissipated (>= 0 for every damping mode's intent)
+WORK_BOUNDARY = 4  # put in by prescribed velocities
+WORK_JOINT = 5  # dissipated in the joints (slip, failure; dilation counts negative)
 
 # Layout of ``out_stats`` (local to the blocks passed in; reduce over ranks yourself:
 # max for the MAX_* entries, sum for the rest).  Only free blocks (not fixed, not vfix) count.
@@ -165,6 +174,7 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
     x, q, v, w, L = m.x, m.q, m.v, m.w, m.L
     mass, inertia, fixed, vfix, mass_scale = m.mass, m.inertia, m.fixed, m.vfix, m.mscale
     force, moment, prev_force, prev_moment = m.force, m.moment, m.prev_force, m.prev_moment
+    applied, work = m.applied, m.work
     out_dx, out_dtheta = m.dx, m.dtheta
     n = x.shape[0]
     gx = gravity[0]
@@ -184,9 +194,9 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
         mb = mass[i]
         ms = mass_scale[i]
         mi = mb * ms
-        ftx = force[i, 0] + mb * gx
-        fty = force[i, 1] + mb * gy
-        ftz = force[i, 2] + mb * gz
+        ftx = (force[i, 0] + applied[i, 0]) + mb * gx
+        fty = (force[i, 1] + applied[i, 1]) + mb * gy
+        ftz = (force[i, 2] + applied[i, 2]) + mb * gz
         mx = moment[i, 0]
         my = moment[i, 1]
         mz = moment[i, 2]
@@ -226,6 +236,10 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
             hw, hx, hy, hz = quat_from_rotvec_s(wx * h, wy * h, wz * h)
             aw, ax, ay, az = quat_mul_s(hw, hx, hy, hz, qw, qx, qy, qz)
             lx, ly, lz = L_from_omega_s(aw, ax, ay, az, wx, wy, wz, i1, i2, i3)
+            # the prescribed motion takes the work the contacts do on the block out of the
+            # model (and puts the opposite in)
+            work[i, WORK_BOUNDARY] -= (force[i, 0] * vx + force[i, 1] * vy + force[i, 2] * vz
+                                       + mx * wx + my * wy + mz * wz) * dt
             L[i, 0] = lx
             L[i, 1] = ly
             L[i, 2] = lz
@@ -269,7 +283,7 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
                     max_it = it
 
             # --- adaptive-damping sums (eq. 77) and kinetic energy
-            p_damp += (
+            pd = (
                 fdx * 0.5 * (v0x + vx)
                 + fdy * 0.5 * (v0y + vy)
                 + fdz * 0.5 * (v0z + vz)
@@ -277,6 +291,21 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
                 + mdy * 0.5 * (w0y + wy)
                 + mdz * 0.5 * (w0z + wz)
             )
+            p_damp += pd
+            # --- energy budget: work over the step with the mean velocity, which makes the
+            # translational balance exact for the leap-frog (dEk = F . (v- + v+)/2 dt)
+            vbx = 0.5 * (v0x + vx)
+            vby = 0.5 * (v0y + vy)
+            vbz = 0.5 * (v0z + vz)
+            wbx = 0.5 * (w0x + wx)
+            wby = 0.5 * (w0y + wy)
+            wbz = 0.5 * (w0z + wz)
+            work[i, WORK_GRAVITY] += mb * (gx * vbx + gy * vby + gz * vbz) * dt
+            work[i, WORK_APPLIED] += (applied[i, 0] * vbx + applied[i, 1] * vby
+                                      + applied[i, 2] * vbz) * dt
+            work[i, WORK_CONTACT] += (force[i, 0] * vbx + force[i, 1] * vby + force[i, 2] * vbz
+                                      + mx * wbx + my * wby + mz * wbz) * dt
+            work[i, WORK_DAMPING] += pd * dt
             e0 = 0.5 * (
                 mi * (v0x * v0x + v0y * v0y + v0z * v0z) + w0x * l0x + w0y * l0y + w0z * l0z
             )
@@ -347,13 +376,14 @@ def stagger_start(m, gravity, dt, scalar_inertia):
     """
     q, v, w, L, mass, inertia = m.q, m.v, m.w, m.L, m.mass, m.inertia
     mass_scale, fixed, vfix, force, moment = m.mscale, m.fixed, m.vfix, m.force, m.moment
+    applied = m.applied
     for i in range(q.shape[0]):
         if fixed[i] or vfix[i]:
             continue
         mi = mass[i] * mass_scale[i]
         h = 0.5 * dt
         for k in range(3):
-            v[i, k] -= (force[i, k] + mass[i] * gravity[k]) / mi * h
+            v[i, k] -= ((force[i, k] + applied[i, k]) + mass[i] * gravity[k]) / mi * h
             L[i, k] -= moment[i, k] * h
         i1, i2, i3 = _block_inertia(inertia, i, mass_scale[i], scalar_inertia)
         r = omega_from_L_s(

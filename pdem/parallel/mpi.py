@@ -6,10 +6,13 @@ Library code receives ``comm`` explicitly; only ``pdem.cli`` names ``MPI.COMM_WO
 from __future__ import annotations
 
 import logging
+import math
 import sys
 import traceback
 
 import numpy as np
+
+from ..jit import kernel
 
 
 class RankFilter(logging.Filter):
@@ -89,6 +92,51 @@ def allreduce_sum_array(comm, values: np.ndarray) -> np.ndarray:
 
     comm.Allreduce(MPI.IN_PLACE, values, op=MPI.SUM)
     return values
+
+
+@kernel
+def _partials(x, out):
+    """Shewchuk's non-overlapping partials of sum(x) into ``out``; returns their count (the
+    exact sum of x is the exact sum of out[:count])."""
+    n = 0
+    for k in range(x.shape[0]):
+        v = x[k]
+        i = 0
+        for m in range(n):
+            y = out[m]
+            if abs(v) < abs(y):
+                v, y = y, v
+            hi = v + y
+            lo = y - (hi - v)
+            if lo != 0.0:
+                out[i] = lo
+                i += 1
+            v = hi
+        out[i] = v
+        n = i + 1
+    return n
+
+
+def exact_sum(comm, values: np.ndarray) -> np.ndarray:
+    """Column sums of ``values`` (n, k) over all ranks' rows, correctly rounded: the same bits
+    for any distribution of the rows over any number of ranks."""
+    values = np.asarray(values, np.float64).reshape(len(values), -1)
+    parts = []
+    for col in values.T:
+        if not np.isfinite(col).all():
+            parts.append(np.array([np.sum(col)]))  # inf or nan: exactness is moot
+            continue
+        out = np.empty(1100)  # partials of finite doubles never outnumber the exponent range
+        parts.append(out[:_partials(np.ascontiguousarray(col), out)].copy())
+    gathered = allgather(comm, parts)
+    out = np.empty(values.shape[1])
+    for c in range(values.shape[1]):
+        terms = np.concatenate([g[c] for g in gathered])
+        try:
+            out[c] = math.fsum(terms)
+        except (ValueError, OverflowError):  # inf - inf, or an overflowing partial
+            out[c] = float(np.sum(terms))
+    return out
 
 
 def allgather(comm, value) -> list:

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 from .base import Plugin, interval_steps
 from .checkpoints import Checkpoints
+from .energy import EnergyBudget
 from .output import Histories, Snapshots
 from .progress import LoadReport, Progress
 
-__all__ = ["Checkpoints", "Histories", "LoadReport", "Plugin", "Progress", "Snapshots",
+__all__ = ["Checkpoints", "EnergyBudget", "Histories", "LoadReport", "Plugin", "Progress", "Snapshots",
            "default_plugins", "interval_steps"]
 
 
@@ -20,8 +21,9 @@ def default_plugins(state, output: bool = True) -> list[Plugin]:
     plugins: list[Plugin] = []
     if state.scene.checkpoint is not None:
         plugins.append(Checkpoints(state))
+    snaps = None
     if output:
         snaps = Snapshots(state)
         plugins += [snaps, LoadReport(state, snaps.every), Histories(state, snaps)]
-    plugins.append(Progress(state))
+    plugins += [EnergyBudget(state, snaps), Progress(state)]
     return plugins

@@ -54,6 +54,8 @@ class Blocks:
         self.fixed = np.zeros(n, np.uint8)
         self.vfix = np.zeros(n, np.uint8)
         self.force = np.zeros((n, 3))
+        self.applied = np.zeros((n, 3))
+        self.work = np.zeros((n, 6))
         self.moment = np.zeros((n, 3))
         self.mscale = np.ones(n)
         self.prev_force = np.zeros((n, 3))
@@ -70,8 +72,9 @@ class Blocks:
 
     def record(self):
         return M.Motion(self.x, self.q, self.v, self.w, self.L, self.mass, self.inertia,
-                        self.fixed, self.vfix, self.force, self.moment, self.mscale,
-                        self.prev_force, self.prev_moment, self.dx, self.dtheta)
+                        self.fixed, self.vfix, self.force, self.applied, self.moment,
+                        self.mscale, self.prev_force, self.prev_moment, self.dx, self.dtheta,
+                        self.work)
 
     def stagger(self, dt):
         M.stagger_start(self.record(), self.gravity, dt, self.scalar)

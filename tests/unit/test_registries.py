@@ -16,7 +16,7 @@ from pdem.jit import kernel
 from pdem.registry import Registry
 from pdem.simulation import Simulation
 
-# --- a complete joint law: parameters, history, table, kernel (what a new law file holds) ---
+# --- a complete joint law: parameters, history, table, kernels (what a new law file holds) ---
 
 
 class GlueParams(JointParams):
@@ -40,7 +40,13 @@ def glue_update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz
     return p.kn[j] * area * un, dil, state, fx - kss * dx, fy - kss * dy, fz - kss * dz
 
 
-GLUE = JointLaw("glue", GlueParams, ("loaded_steps",), glue_table, glue_update)
+@kernel
+def glue_energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
+    kna = p.kn[j] * area
+    return kna * un, 0.5 * kna * un * un + 0.5 * (fx * fx + fy * fy + fz * fz) / (p.ks[j] * area)
+
+
+GLUE = JointLaw("glue", GlueParams, ("loaded_steps",), glue_table, glue_update, glue_energy)
 
 SCENE = """
 name: glued

@@ -31,7 +31,7 @@ from . import coulomb
 from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
 
 __all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams", "JointTable",
-           "apply_law", "joint_table"]
+           "apply_law", "joint_table", "law_energy"]
 
 JOINT_LAWS: Registry[JointLaw] = Registry("joint law")
 JOINT_LAWS.register("coulomb", coulomb.LAW)
@@ -84,25 +84,38 @@ def apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux,
     raise NotImplementedError("apply_law is only callable from numba kernels")
 
 
-_BY_TABLE = {}
+def law_energy(laws, slot, j, s, hist, un, dil, fx, fy, fz, area, state):
+    """(normal force, stored spring energy) of one sub-contact by the law in ``laws[slot]``."""
+    raise NotImplementedError("law_energy is only callable from numba kernels")
 
 
-def _update_of(table_type):
-    if not _BY_TABLE:
-        for law in JOINT_LAWS.values():
-            _BY_TABLE[law.table([]).__class__] = law.update
-    return _BY_TABLE[table_type.instance_class]
+def _law_of(table_type) -> JointLaw:
+    for law in JOINT_LAWS.values():
+        if law.table([]).__class__ is table_type.instance_class:
+            return law
+    raise KeyError(f"no registered joint law has the table type {table_type}")
 
 
-@overload(apply_law, inline="always")
-def _apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,
-               state):
-    kernels = [_update_of(t) for t in laws.types]
-    args = "j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state"
+def _dispatch(laws, attr: str, args: str):
+    """``impl(laws, slot, args...)`` calling ``getattr(law, attr)`` of the law in the slot:
+    one branch per used law, resolved at compile time."""
+    kernels = [getattr(_law_of(t), attr) for t in laws.types]
     src = [f"def impl(laws, slot, {args}):"]
     for k in range(1, len(kernels)):
         src.append(f"    if slot == {k}:\n        return k{k}(laws[{k}], {args})")
     src.append(f"    return k0(laws[0], {args})")
     scope = {f"k{k}": fn for k, fn in enumerate(kernels)}
-    exec("\n".join(src), scope)  # one branch per used law, resolved at compile time
+    exec("\n".join(src), scope)
     return scope["impl"]
+
+
+@overload(apply_law, inline="always")
+def _apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,
+               state):
+    return _dispatch(laws, "update", "j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, "
+                                     "uy, uz, state")
+
+
+@overload(law_energy, inline="always")
+def _law_energy(laws, slot, j, s, hist, un, dil, fx, fy, fz, area, state):
+    return _dispatch(laws, "energy", "j, s, hist, un, dil, fx, fy, fz, area, state")

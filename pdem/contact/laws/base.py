@@ -29,7 +29,9 @@ class JointLaw:
     ``params``: pydantic model of a ``joints.X`` entry (its ``model`` literal is the name);
     ``history``: names of extra per-sub-contact history columns (``sc_hist``);
     ``table``: list of params -> namedtuple of per-joint arrays (the kernel's ``p``);
-    ``update``: the numba kernel, signature documented in :mod:`pdem.contact.laws`.
+    ``update``: the numba kernel, signature documented in :mod:`pdem.contact.laws`;
+    ``energy``: the kernel giving a sub-contact's normal force and stored spring energy in a
+    given state (the energy budget, pdem.dynamics.energy).
     """
 
     name: str
@@ -37,3 +39,4 @@ class JointLaw:
     history: tuple[str, ...]
     table: Any
     update: Any
+    energy: Any

@@ -108,4 +108,17 @@ def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, sta
     return fn, dil, state, fx, fy, fz
 
 
-LAW = JointLaw("coulomb", Params, (), table, update)
+@inline_kernel
+def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
+    """Normal force and stored spring energy of a sub-contact in the given state: the normal
+    spring ``kn A (un + dil)`` in compression, or in tension while the bond holds, and the
+    shear spring ``|fs|^2 / (2 ks A)``."""
+    a = max(area, 1e-300)  # a sub-contact without area stores nothing (its forces are 0)
+    kna = p.kn[j] * a
+    # tension only while bonded; written without branches (this kernel is inlined)
+    bonded = ((state & FAILED) == 0) & (p.tension[j] > 0.0)
+    fn = max(kna * (un + dil), -1e308 * bonded)
+    return fn, 0.5 * fn * fn / kna + 0.5 * (fx * fx + fy * fy + fz * fz) / (p.ks[j] * a)
+
+
+LAW = JointLaw("coulomb", Params, (), table, update, energy)

@@ -1,0 +1,91 @@
+"""Undamped collapses for the energy budget (tests/verification/test_energy.py, issue 16):
+the semicircular masonry arch, a pile of random polyhedra dropped into a box, a row of
+toppling columns, a spinning block thrown at a wall.
+
+Closed forms: with ``damping: none`` the budget must balance, kinetic + joint spring energy +
+energy dissipated in the joints = energy at the start + work of gravity (pdem.plugins.energy);
+the limit-analysis critical thickness of a semicircular arch under its own weight is
+t/R = 0.1075 (Heyman; thinner arches form a four-hinge mechanism and fall).
+"""
+
+from __future__ import annotations
+
+import math
+
+ARCH_CRITICAL_TR = 0.1075  # limit analysis, semicircular arch, self-weight only
+
+
+def arch_scene(tr: float, *, radius: float = 5.0, n: int = 24, time: float = 2.0,
+               damping: str = "none", friction: float = 60.0, extra: str = "") -> str:
+    """Semicircle of mean radius ``radius`` in the x-z plane, ``n`` voussoirs (prisms 1 m deep)
+    of thickness ``tr * radius`` on a fixed base box (the scene of issue 16)."""
+    t = tr * radius
+    ri, ro = radius - t / 2, radius + t / 2
+    blocks = []
+    for k in range(n):
+        a0, a1 = k * math.pi / n, (k + 1) * math.pi / n
+        base = [[ri * math.cos(a0), -0.5, ri * math.sin(a0)],
+                [ro * math.cos(a0), -0.5, ro * math.sin(a0)],
+                [ro * math.cos(a1), -0.5, ro * math.sin(a1)],
+                [ri * math.cos(a1), -0.5, ri * math.sin(a1)]]
+        blocks.append(f"  - {{name: v{k}, material: stone, prism: {{base: {base!r}, "
+                      f"extrude: [0.0, 1.0, 0.0]}}}}")
+    blocks.append(f"  - {{name: base, material: stone, fixed: true, box: {{min: [{-ro - 2!r}, "
+                  f"-1.0, -1.0], max: [{ro + 2!r}, 1.0, 0.0]}}}}")
+    return f"""name: arch-{tr}
+gravity: [0.0, 0.0, -9.81]
+materials: {{stone: {{density: 2000.0}}}}
+joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: {friction}}}}}
+blocks:
+{chr(10).join(blocks)}
+solve: {{time: {time}, damping: {damping}}}
+{extra}"""
+
+
+def pile_scene(count: int = 40, time: float = 1.5, seed: int = 3) -> str:
+    """``count`` random polyhedra dropped into a walled box, undamped."""
+    return f"""name: dropped-pile
+materials: {{rock: {{density: 2600.0}}}}
+joints: {{default: {{kn: 1.0e8, ks: 5.0e7, friction: 30.0}}}}
+blocks:
+  - {{name: floor, box: {{min: [-2.5, -2.5, -0.5], max: [2.5, 2.5, 0.0]}}, material: rock, fixed: true}}
+  - {{name: wall-x0, box: {{min: [-2.5, -2.5, 0.0], max: [-2.0, 2.5, 3.0]}}, material: rock, fixed: true}}
+  - {{name: wall-x1, box: {{min: [2.0, -2.5, 0.0], max: [2.5, 2.5, 3.0]}}, material: rock, fixed: true}}
+  - {{name: wall-y0, box: {{min: [-2.0, -2.5, 0.0], max: [2.0, -2.0, 3.0]}}, material: rock, fixed: true}}
+  - {{name: wall-y1, box: {{min: [-2.0, 2.0, 0.0], max: [2.0, 2.5, 3.0]}}, material: rock, fixed: true}}
+  - name: rock
+    random: {{count: {count}, region: {{min: [-1.9, -1.9, 0.1], max: [1.9, 1.9, 2.5]}},
+             size: [0.45, 0.6], vertices: 10, seed: {seed}}}
+    material: rock
+solve: {{time: {time}, damping: none}}
+"""
+
+
+def columns_scene(n: int = 6, time: float = 1.5) -> str:
+    """A row of ``n`` slender columns (0.2 x 1 x 1.2 m, spaced 0.6 m) on a floor, the first
+    tipped by an initial spin: dominoes, undamped."""
+    blocks = [f"  - {{name: c{k}, material: rock, box: {{min: [{0.6 * k!r}, -0.5, 0.0], "
+              f"max: [{0.6 * k + 0.2!r}, 0.5, 1.2]}}"
+              + (", angular_velocity: [0.0, 2.5, 0.0]}" if k == 0 else "}") for k in range(n)]
+    return f"""name: dominoes
+materials: {{rock: {{density: 2500.0}}}}
+joints: {{default: {{kn: 5.0e9, ks: 5.0e9, friction: 35.0}}}}
+blocks:
+  - {{name: floor, box: {{min: [-1.0, -1.0, -0.5], max: [{0.6 * n + 2.0!r}, 1.0, 0.0]}}, material: rock, fixed: true}}
+{chr(10).join(blocks)}
+solve: {{time: {time}, damping: none}}
+"""
+
+
+def thrown_block_scene(time: float = 0.4) -> str:
+    """A cube spinning at 30 rad/s thrown at 5 m/s against a fixed wall, no gravity."""
+    return f"""name: thrown
+gravity: [0.0, 0.0, 0.0]
+materials: {{rock: {{density: 2500.0}}}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 30.0}}}}
+blocks:
+  - {{name: wall, box: {{min: [1.0, -2.0, -2.0], max: [1.5, 2.0, 2.0]}}, material: rock, fixed: true}}
+  - {{name: cube, box: {{min: [-0.9, -0.25, -0.25], max: [-0.4, 0.25, 0.25]}}, material: rock,
+     velocity: [5.0, 0.3, 0.0], angular_velocity: [3.0, 7.0, 30.0]}}
+solve: {{time: {time}, damping: none}}
+"""

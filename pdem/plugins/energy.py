@@ -1,0 +1,128 @@
+"""The energy budget of a run (3DEC keeps one): kinetic energy, spring energy stored in the
+joints, work of gravity, applied forces and prescribed motions, energy dissipated in the joints
+and by damping, and the balance error, sampled into the history ``energy``."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import numpy as np
+
+from ..contact.forces import stored_energy
+from ..contact.rigid import Bodies
+from ..dynamics import motion
+from ..parallel.mpi import exact_sum
+from .base import Plugin
+
+log = logging.getLogger("pdem")
+
+COLUMNS = ("kinetic", "strain", "gravity_work", "applied_work", "boundary_work",
+           "joint_dissipation", "damping_dissipation", "contact_work", "balance_error")
+
+
+def energy_totals(state) -> dict[str, float]:
+    """The model's energies now (collective; the same bits on any rank count).
+
+    ``kinetic``: free blocks at t - dt/2 (inertial mass, as integrated); ``strain``: stored in
+    the joints' springs; the rest accumulated since the start (pdem.model.fields ``work``).
+    """
+    b, n = state.blocks, state.n_owned
+    free = (b.fixed[:n] == 0) & (b.vfix[:n] == 0)
+    ke = np.where(free, 0.5 * b.mass[:n] * b.mscale[:n] * np.einsum("ij,ij->i", b.v[:n], b.v[:n])
+                  + 0.5 * np.einsum("ij,ij->i", b.w[:n], b.L[:n]), 0.0)
+    strain = np.zeros(b.n)
+    c = state.contacts
+    bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
+    stored_energy(bodies, c.pairs(), c.subs(), state.joints.kernel_args, strain)
+    w = b.work[:n]
+    per_block = np.column_stack([ke, strain[:n], w[:, motion.WORK_GRAVITY],
+                                 w[:, motion.WORK_APPLIED], w[:, motion.WORK_BOUNDARY],
+                                 w[:, motion.WORK_JOINT], w[:, motion.WORK_DAMPING],
+                                 w[:, motion.WORK_CONTACT]])
+    sums = exact_sum(state.comm, per_block)
+    return dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
+
+
+def balance(t: dict[str, float], e0: float) -> tuple[float, float]:
+    """(balance error, energy put in): what is held plus what was dissipated, less what was
+    there at the start and what was put in. Zero for an exact scheme."""
+    put_in = e0 + t["gravity_work"] + t["applied_work"] + t["boundary_work"]
+    held = t["kinetic"] + t["strain"] + t["joint_dissipation"] + t["damping_dissipation"]
+    return held - put_in, put_in
+
+
+class EnergyBudget(Plugin):
+    """Samples the budget every ``output.energy_every`` steps (default: ten per snapshot
+    interval) into ``histories/energy`` and logs it at the end of a march."""
+
+    name = "energy"
+
+    def __init__(self, state, snapshots=None):
+        self.state = state
+        self.writer = snapshots.writer if snapshots is not None else None
+        every = state.scene.output.energy_every
+        self.every = every or max(1, (snapshots.every if snapshots else 1000) // 10)
+        self.e0 = None
+        if self.writer is not None:
+            self.writer.add_history("energy", len(COLUMNS), {
+                "columns": ",".join(COLUMNS), "units": "J",
+                "balance": "kinetic + strain + joint_dissipation + damping_dissipation - "
+                           "(kinetic + strain at start) - gravity_work - applied_work - "
+                           "boundary_work"})
+        self.times: list[float] = []
+        self.rows: list[np.ndarray] = []
+        self.last = None
+
+    def sample(self):
+        s = self.state
+        t = energy_totals(s)
+        if self.e0 is None:
+            self.e0 = t["kinetic"] + t["strain"]
+        err, _ = balance(t, self.e0)
+        self.last = t | {"balance_error": err}
+        if self.writer is not None:
+            self.times.append(s.time)
+            self.rows.append(np.array([self.last[k] for k in COLUMNS]))
+
+    def flush(self):
+        if self.writer is None:
+            return
+        mine = self.state.comm.rank == 0
+        self.writer.write_history("energy", np.array(self.times),
+                                  np.array(self.rows).reshape(-1, len(COLUMNS)) if mine else None)
+        self.times.clear()
+        self.rows.clear()
+
+    def start(self, run):
+        if self.e0 is None or self.state.step == 0:
+            self.sample()
+
+    def after_step(self, run):
+        if self.state.step % self.every == 0:
+            self.sample()
+            if len(self.rows) >= 256:
+                self.flush()
+
+    def finish(self, run):
+        if self.state.step % self.every != 0:
+            self.sample()
+        self.flush()
+        t = self.last
+        err, put_in = balance(t, self.e0)
+        log.info("energy (J): kinetic %.4g, in joints %.4g; work of gravity %.4g, applied %.4g, "
+                 "prescribed motion %.4g; dissipated in joints %.4g, by damping %.4g; balance "
+                 "error %.3g (%.2g%% of %.4g put in)", t["kinetic"], t["strain"],
+                 t["gravity_work"], t["applied_work"], t["boundary_work"],
+                 t["joint_dissipation"], t["damping_dissipation"], err,
+                 100.0 * abs(err) / max(abs(put_in), 1e-300), put_in)
+
+    def on_failure(self, run):
+        self.flush()
+
+    def restart_state(self) -> dict:
+        return {"energy_start": json.dumps(self.e0)}
+
+    def restore(self, attrs: dict):
+        if "energy_start" in attrs:
+            self.e0 = json.loads(attrs["energy_start"])
