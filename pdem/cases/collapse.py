@@ -71,7 +71,8 @@ def columns_scene(n: int = 6, time: float = 1.5) -> str:
 materials: {{rock: {{density: 2500.0}}}}
 joints: {{default: {{kn: 5.0e9, ks: 5.0e9, friction: 35.0}}}}
 blocks:
-  - {{name: floor, box: {{min: [-1.0, -1.0, -0.5], max: [{0.6 * n + 2.0!r}, 1.0, 0.0]}}, material: rock, fixed: true}}
+  - {{name: floor, box: {{min: [-1.0, -1.0, -0.5], max: [{0.6 * n + 2.0!r}, 1.0, 0.0]}},
+     material: rock, fixed: true}}
 {chr(10).join(blocks)}
 solve: {{time: {time}, damping: none}}
 """
