@@ -77,12 +77,12 @@ class Run:
                 break
             try:
                 self.advance()
+                for p in self.plugins:
+                    p.after_step(self)
             except SimulationError:
                 for p in self.plugins:  # raised on every rank alike, so this is collective
                     p.on_failure(self)
                 raise
-            for p in self.plugins:
-                p.after_step(self)
         for p in self.plugins:
             p.finish(self)
         elapsed = wallclock.perf_counter() - t0

@@ -51,6 +51,7 @@ class ModelState:
         self.dt = resolved.dt
         self.alpha = resolved.alpha
         self.ratio = math.inf
+        self.energy_start = None  # (kinetic, joint spring energy) at the start, see plugins.energy
         self.gravity = np.array(scene.gravity, float)
         self.damping = DAMPING[scene.solve.damping.mode]
         self.scalar_inertia = scene.solve.inertia == "scalar"

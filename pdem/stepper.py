@@ -18,7 +18,7 @@ import numpy as np
 
 from .config.resolve import TOUCH_FRACTION
 from .contact.detect import Planes, refresh_contacts
-from .contact.forces import contact_forces
+from .contact.forces import book_geometry_jumps, contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .dynamics import motion
 from .dynamics.kinematics import envelopes, rotation_matrices, world_vertices
@@ -116,21 +116,30 @@ class Stepper:
         a = c.arrays
         planes = Planes(a["ia"], a["ib"], a["normal"], a["point"], a["gap"], a["ctype"],
                         a["warm"])
+        joints = s.joints.kernel_args
+        before = contact_energies(c.pairs(), c.subs(), joints)
         res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
                                todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm)
         keep, start, pa, area, un, fs, us, dil, state, hist = res
         # normal forces of refreshed sub-contacts are recomputed by the next force update
         sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fn": np.zeros(len(area)),
                "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
-        s.contacts = ContactStore(c.arrays, sub, start).select(keep.astype(bool))
+        refreshed = ContactStore(c.arrays, sub, start)
+        # energy budget: what the update changed in the joints' springs, with no work done
+        jump = contact_energies(refreshed.pairs(), refreshed.subs(), joints) * keep - before
+        book_geometry_jumps(self.bodies(), c.ia, c.ib, jump)
+        s.contacts = refreshed.select(keep.astype(bool))
+
+    def bodies(self) -> Bodies:
+        b = self.s.blocks
+        return Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
 
     def compute_forces(self, dt: float):
         b = self.s.blocks
         c = self.s.contacts
         b.force[:] = 0.0
         b.moment[:] = 0.0
-        bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
-        contact_forces(dt, bodies, c.pairs(), c.subs(), self.s.joints.kernel_args)
+        contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args)
 
     # ------------------------------------------------------------------ the step
     def advance(self):
@@ -184,15 +193,18 @@ class Stepper:
         return bool(flags[2]) and s.comm.size > 1
 
     def _raise_non_finite(self, row: int):
-        """Every rank raises the same SimulationError, naming the first bad block (by gid)."""
+        """Every rank raises the same SimulationError, naming the first bad block (by gid) and
+        what the energy budget says made it (pdem.dynamics.diagnosis)."""
+        from .dynamics.diagnosis import explain
+        from .plugins.energy import energy_totals
+
         s = self.s
         b = s.blocks
         mine = (int(b.gid[row]), float(np.sqrt((b.v[row] ** 2).sum()))) if row >= 0 else None
         found = [m for m in mpi.allgather(s.comm, mine) if m]
         gid, speed = min(found)
         what = "non-finite state" if not math.isfinite(speed) else f"runaway speed {speed:.3g} m/s"
+        totals = energy_totals(s) if math.isfinite(speed) else None
         raise SimulationError(
-            f"step {s.step} (t={s.time:.6g} s): block {s.specs[gid].name!r} has a "
-            f"{what}. Probable cause: timestep {s.dt:.3g} s too large for the joint stiffness "
-            f"(lower solve.timestep.frac or give a smaller dt) or blocks created deeply "
-            f"overlapping.")
+            f"step {s.step} (t={s.time:.6g} s): block {s.specs[gid].name!r} has a {what}."
+            + explain(s, totals, s.energy_start, gid))

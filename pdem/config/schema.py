@@ -163,6 +163,10 @@ class Damping(Strict):
 
 
 class Solve(Strict):
+    """The end condition (one of ``time``, ``steps``, ``ratio``) and the integration knobs.
+    ``energy_tolerance``: the run stops, naming the cause, when the energy balance error grows
+    by more than this fraction of the energy put in between two budget samples (0: never)."""
+
     time: PositiveFloat | None = None
     steps: PositiveInt | None = None
     ratio: PositiveFloat | None = None
@@ -172,6 +176,7 @@ class Solve(Strict):
     mass_scaling: bool = False
     inertia: Literal["full", "scalar"] = "full"
     progress_every: NonNegativeFloat = 2.0
+    energy_tolerance: NonNegativeFloat = 0.1
 
     @field_validator("damping", mode="before")
     @classmethod

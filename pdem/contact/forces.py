@@ -4,9 +4,18 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..jit import inline_kernel, kernel
 from .laws import apply_law, law_energy
-from .rigid import add_point_force, apply_pair, energy_shares, pair_motion, point_motion
+from .rigid import (
+    WORK_GEOMETRY,
+    add_point_force,
+    apply_pair,
+    energy_shares,
+    pair_motion,
+    point_motion,
+)
 
 
 @inline_kernel
@@ -129,3 +138,31 @@ def stored_energy(bodies, pairs, subs, joints, out):
         wa, wb = energy_shares(bodies, a, b)
         out[a] += wa * e
         out[b] += wb * e
+
+
+@kernel
+def contact_energies(pairs, subs, joints):
+    """Spring energy stored in each contact's joint (per contact)."""
+    out = np.zeros(pairs.ia.shape[0])
+    for c in range(pairs.ia.shape[0]):
+        jrow = pairs.joint[c]
+        slot = joints.slot[jrow]
+        j = joints.row[jrow]
+        for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
+            _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
+                               subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
+                               subs.state[s])
+            out[c] += es
+    return out
+
+
+@kernel
+def book_geometry_jumps(bodies, ia, ib, jump):
+    """A geometry update changed the contacts' stored energy by ``jump`` (per contact, without
+    any work done): book it on the blocks (:func:`pdem.contact.rigid.energy_shares`)."""
+    for c in range(ia.shape[0]):
+        a = ia[c]
+        b = ib[c]
+        wa, wb = energy_shares(bodies, a, b)
+        bodies.work[a, WORK_GEOMETRY] += wa * jump[c]
+        bodies.work[b, WORK_GEOMETRY] += wb * jump[c]

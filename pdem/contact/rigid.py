@@ -17,7 +17,11 @@ from ..jit import inline_kernel
 # and writes (force and moment sums, the energy accumulators).
 Bodies = namedtuple("Bodies", "x R v w dtheta force moment fixed work")
 
-WORK_JOINT = 5  # column of the joint dissipation in ``work`` (pdem.dynamics.motion.WORK_*)
+# columns of ``work`` (pdem.dynamics.motion.WORK_*): joint dissipation, and the energy a
+# contact's force update created (a step in which its joint gave back more than it took in)
+WORK_JOINT = 5
+WORK_JOINT_MADE = 6
+WORK_GEOMETRY = 7
 
 
 @inline_kernel
@@ -83,6 +87,9 @@ def apply_pair(bodies, a, b, rel, acc, dissipated):
     wa, wb = energy_shares(bodies, a, b)
     bodies.work[a, WORK_JOINT] += wa * dissipated
     bodies.work[b, WORK_JOINT] += wb * dissipated
+    made = max(-dissipated, 0.0)
+    bodies.work[a, WORK_JOINT_MADE] += wa * made
+    bodies.work[b, WORK_JOINT_MADE] += wb * made
     ddx, ddy, ddz = rel[1]
     fbx, fby, fbz, max_, may, maz = acc
     mbx = max_ + (ddy * fbz - ddz * fby)

@@ -93,6 +93,8 @@ WORK_CONTACT = 2
 WORK_DAMPING = 3  # dissipated (>= 0 for every damping mode's intent)
 WORK_BOUNDARY = 4  # put in by prescribed velocities
 WORK_JOINT = 5  # dissipated in the joints (slip, failure; dilation counts negative)
+WORK_JOINT_MADE = 6  # steps in which a contact's joint gave back more than it took (timestep)
+WORK_GEOMETRY = 7  # change of stored joint energy made by contact geometry updates
 
 # Layout of ``out_stats`` (local to the blocks passed in; reduce over ranks yourself:
 # max for the MAX_* entries, sum for the rest).  Only free blocks (not fixed, not vfix) count.

@@ -71,9 +71,11 @@ BLOCK: tuple[Field, ...] = (
     Field("u_geo", (), F, "m", "motion since the last periodic geometry update", **_D,
           halo=True),
     Field("u_mig", (), F, "m", "motion since the last ghost rebuild", **_D),
-    Field("work", (6,), F, "J", "energy budget accumulators of the block since the start: work "
+    Field("work", (8,), F, "J", "energy budget accumulators of the block since the start: work "
           "of gravity, of applied forces, of contact forces, damping dissipation, work of a "
-          "prescribed motion, joint dissipation (pdem.dynamics.energy.WORK_*)", **_D),
+          "prescribed motion, joint dissipation, energy the joints' force update created, "
+          "stored energy changed by contact geometry updates (pdem.dynamics.motion.WORK_*)",
+          **_D),
     # scratch: per-rank working arrays, derived from the state above
     Field("dtheta", (3,), F, "rad", "this step's rotation increment (contact planes turn)",
           halo=True),

@@ -12,13 +12,16 @@ import numpy as np
 from ..contact.forces import stored_energy
 from ..contact.rigid import Bodies
 from ..dynamics import motion
-from ..parallel.mpi import exact_sum
+from ..dynamics.diagnosis import explain
+from ..errors import SimulationError
+from ..parallel.mpi import allgather, exact_sum
 from .base import Plugin
 
 log = logging.getLogger("pdem")
 
 COLUMNS = ("kinetic", "strain", "gravity_work", "applied_work", "boundary_work",
-           "joint_dissipation", "damping_dissipation", "contact_work", "balance_error")
+           "joint_dissipation", "damping_dissipation", "contact_work", "joint_created",
+           "geometry_created", "balance_error")
 
 
 def energy_totals(state) -> dict[str, float]:
@@ -39,7 +42,8 @@ def energy_totals(state) -> dict[str, float]:
     per_block = np.column_stack([ke, strain[:n], w[:, motion.WORK_GRAVITY],
                                  w[:, motion.WORK_APPLIED], w[:, motion.WORK_BOUNDARY],
                                  w[:, motion.WORK_JOINT], w[:, motion.WORK_DAMPING],
-                                 w[:, motion.WORK_CONTACT]])
+                                 w[:, motion.WORK_CONTACT], w[:, motion.WORK_JOINT_MADE],
+                                 w[:, motion.WORK_GEOMETRY]])
     sums = exact_sum(state.comm, per_block)
     return dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
 
@@ -63,6 +67,12 @@ class EnergyBudget(Plugin):
         self.writer = snapshots.writer if snapshots is not None else None
         every = state.scene.output.energy_every
         self.every = every or max(1, (snapshots.every if snapshots else 1000) // 10)
+        self.tolerance = state.scene.solve.energy_tolerance
+        # below this a balance error is round-off: a millionth of the model's weight times its
+        # size (a model at rest has almost no energy to compare with)
+        r = state.resolved
+        size = float(np.linalg.norm(np.subtract(r.domain_hi, r.domain_lo)))
+        self.floor = 1e-6 * r.ref_force * state.glob.n * size
         self.e0 = None
         if self.writer is not None:
             self.writer.add_history("energy", len(COLUMNS), {
@@ -79,11 +89,32 @@ class EnergyBudget(Plugin):
         t = energy_totals(s)
         if self.e0 is None:
             self.e0 = t["kinetic"] + t["strain"]
-        err, _ = balance(t, self.e0)
+            s.energy_start = (t["kinetic"], t["strain"])
+        err, put_in = balance(t, self.e0)
+        before = self.last["balance_error"] if self.last is not None else err
         self.last = t | {"balance_error": err}
+        scale = max(abs(put_in), t["kinetic"] + t["strain"], self.floor)
+        if self.tolerance and err - before > self.tolerance * scale:
+            self.flush()
+            self._stop(err - before, put_in)
         if self.writer is not None:
             self.times.append(s.time)
             self.rows.append(np.array([self.last[k] for k in COLUMNS]))
+
+    def _stop(self, jump: float, put_in: float):
+        """The balance error jumped: name the fastest block and what made the energy."""
+        s = self.state
+        b, n = s.blocks, s.n_owned
+        speed = np.linalg.norm(b.v[:n], axis=1) if n else np.zeros(0)
+        mine = (float(speed.max()), -int(b.gid[int(speed.argmax())])) if n else None
+        top = max(m for m in allgather(s.comm, mine) if m is not None)
+        gid = -top[1]
+        raise SimulationError(
+            f"step {s.step} (t={s.time:.6g} s): the energy balance error grew by {jump:.3g} J "
+            f"since the last sample ({100 * jump / max(abs(put_in), 1e-300):.2g}% of the energy "
+            f"put in, above solve.energy_tolerance = {self.tolerance:g}); fastest block "
+            f"{s.specs[gid].name!r} at {top[0]:.3g} m/s." + explain(s, self.last, s.energy_start,
+                                                                  gid))
 
     def flush(self):
         if self.writer is None:
@@ -121,8 +152,11 @@ class EnergyBudget(Plugin):
         self.flush()
 
     def restart_state(self) -> dict:
-        return {"energy_start": json.dumps(self.e0)}
+        return {"energy_start": json.dumps(self.state.energy_start)}
 
     def restore(self, attrs: dict):
         if "energy_start" in attrs:
-            self.e0 = json.loads(attrs["energy_start"])
+            start = json.loads(attrs["energy_start"])
+            if start is not None:
+                self.state.energy_start = tuple(start)
+                self.e0 = start[0] + start[1]

@@ -55,7 +55,7 @@ class Blocks:
         self.vfix = np.zeros(n, np.uint8)
         self.force = np.zeros((n, 3))
         self.applied = np.zeros((n, 3))
-        self.work = np.zeros((n, 6))
+        self.work = np.zeros((n, 8))
         self.moment = np.zeros((n, 3))
         self.mscale = np.ones(n)
         self.prev_force = np.zeros((n, 3))

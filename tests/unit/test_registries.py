@@ -65,13 +65,16 @@ solve: {steps: 300}
 def glue_registered(monkeypatch):
     """Register the law for one test (the registry line a new law file adds).
 
-    The force kernel compiled for it is not written to numba's disk cache: the cache index
+    The contact kernels compiled for it are not written to numba's disk cache: a cache index
     would then name this test module, which other processes (MPI ranks) cannot import."""
     from numba.core.caching import NullCache
+    from numba.core.dispatcher import Dispatcher
 
     from pdem.contact import forces
 
-    monkeypatch.setattr(forces.contact_forces, "_cache", NullCache())
+    for kernel_ in vars(forces).values():
+        if isinstance(kernel_, Dispatcher):
+            monkeypatch.setattr(kernel_, "_cache", NullCache())
     monkeypatch.setitem(JOINT_LAWS._entries, "glue", GLUE)
     import pdem.config.schema as schema
 
