@@ -95,8 +95,11 @@ class ModelState:
                 r.margin)
             b = self.blocks
             refresh_pose(b, 0.5 * r.ctol)
-            # a rank whose brick holds no block has no cell space until blocks arrive
-            self.cells = CellSpace(b.lo, b.hi, r.cell_size) if b.n else None
+            # a rank whose brick holds no block has no cell space until blocks arrive; blocks
+            # deleted from the model take no space
+            present = b.out != 2
+            self.cells = CellSpace(b.lo[present], b.hi[present], r.cell_size) \
+                if present.any() else None
             self.n_rebuilds += 1
 
     def distribute_initial(self):
@@ -133,6 +136,9 @@ class ModelState:
         self.run_id = str(a["run_id"])
         self.resolved = dataclasses.replace(self.resolved, dt=self.dt)
         blocks = ck["blocks"]
+        gone = blocks["out"] > 0  # blocks that left the model domain act as fixed ones
+        self.glob.fixed[gone] = 1
+        self.glob.out[gone] = blocks["out"][gone]
         owned = np.nonzero(self.decomp.owner_of(blocks["x"]) == self.comm.rank)[0]
         self.distribute(owned, {k: blocks[k][owned] for k in MIGRATE}, ck["contacts"])
 

@@ -256,6 +256,23 @@ class Checkpoint(Strict):
         return self
 
 
+class Domain(Strict):
+    """The model domain (3DEC's): a free block whose centroid leaves the box is taken out of
+    the model, ``delete``d (no more contacts or motion; its last pose stays in the output) or
+    ``freeze``d (it stops where it is and acts as a fixed block)."""
+
+    min: Vec3
+    max: Vec3
+    action: Literal["delete", "freeze"] = "delete"
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for axis, (lo, hi) in enumerate(zip(self.min, self.max, strict=True)):
+            if not hi > lo:
+                raise ValueError(f"max[{axis}] must exceed min[{axis}] ({hi} <= {lo})")
+        return self
+
+
 class Scene(Strict):
     name: str = "pdem"
     gravity: Vec3 = (0.0, 0.0, -9.81)
@@ -268,6 +285,7 @@ class Scene(Strict):
     solve: Solve
     output: Output = Output()
     checkpoint: Checkpoint | None = None
+    domain: Domain | None = None
 
     @field_validator("joints", mode="before")
     @classmethod

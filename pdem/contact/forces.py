@@ -9,7 +9,6 @@ import numpy as np
 from ..jit import inline_kernel, kernel
 from .laws import apply_law, law_energy
 from .rigid import (
-    WORK_GEOMETRY,
     add_point_force,
     apply_pair,
     energy_shares,
@@ -157,12 +156,13 @@ def contact_energies(pairs, subs, joints):
 
 
 @kernel
-def book_geometry_jumps(bodies, ia, ib, jump):
-    """A geometry update changed the contacts' stored energy by ``jump`` (per contact, without
-    any work done): book it on the blocks (:func:`pdem.contact.rigid.energy_shares`)."""
+def book_contact_energy(bodies, ia, ib, energy, column):
+    """Book a per-contact energy change on the blocks' ``work[:, column]``
+    (:func:`pdem.contact.rigid.energy_shares`): a geometry update's jump of the stored energy
+    (``WORK_GEOMETRY``), or what contacts of blocks leaving the model held (``WORK_REMOVED``)."""
     for c in range(ia.shape[0]):
         a = ia[c]
         b = ib[c]
         wa, wb = energy_shares(bodies, a, b)
-        bodies.work[a, WORK_GEOMETRY] += wa * jump[c]
-        bodies.work[b, WORK_GEOMETRY] += wb * jump[c]
+        bodies.work[a, column] += wa * energy[c]
+        bodies.work[b, column] += wb * energy[c]

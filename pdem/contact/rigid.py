@@ -22,6 +22,7 @@ Bodies = namedtuple("Bodies", "x R v w dtheta force moment fixed work")
 WORK_JOINT = 5
 WORK_JOINT_MADE = 6
 WORK_GEOMETRY = 7
+WORK_REMOVED = 8
 
 
 @inline_kernel

@@ -56,7 +56,8 @@ def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: 
     put_in = ke0 + strain0 + t["gravity_work"] + t["applied_work"] + t["boundary_work"]
     integ = t["kinetic"] - ke0 - (t["gravity_work"] + t["applied_work"] + t["contact_work"]
                                   + t["boundary_work"] - t["damping_dissipation"])
-    err = integ + t["contact_work"] + (t["strain"] - strain0) + t["joint_dissipation"]
+    err = integ + t["contact_work"] + (t["strain"] - strain0) + t["joint_dissipation"] \
+        + t["removed"]
     made = t["geometry_created"]  # measured at each contact geometry update
     stepping = err - made  # what the time stepping (motion and force updates) made
     scale = max(abs(put_in), 1e-300)

@@ -139,7 +139,11 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
             raise ValueError(f"{path}: checkpoint format {int(f.attrs['format_version'])} is newer "
                              f"than this pdem reads ({FORMAT_VERSION})")
         out = {"attrs": {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}}
-        out["blocks"] = {k: f[f"blocks/{k}"][()] for k in CHECKPOINT}
+        n_blocks = int(f.attrs["n_blocks"])
+        # a field added after the file was written starts from zero (its declared start value)
+        out["blocks"] = {k: f[f"blocks/{k}"][()] if f"blocks/{k}" in f else
+                         np.zeros((n_blocks, *BLOCK_BY_NAME[k].shape), BLOCK_BY_NAME[k].dtype)
+                         for k in CHECKPOINT}
         nsub = f["contacts/nsub"][()]
         arrays = {fd.name: f[f"contacts/{fd.name}"][()] for fd in CONTACT_CK}
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed

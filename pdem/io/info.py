@@ -93,6 +93,7 @@ def _output_summary(f: h5py.File) -> list[str]:
         lines.append(f"histories:   {', '.join(items)}")
     else:
         lines.append("histories:   none")
+    lines += _energy_lines(f)
     if n_snap == 0:
         return lines
     c0, c1 = f["blocks/centroid"][0], f["blocks/centroid"][n_snap - 1]
@@ -120,6 +121,30 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"max {_g(speed.max())} m/s ({names[int(speed.argmax())]})"
         )
     return lines
+
+
+def _energy_lines(f: h5py.File) -> list[str]:
+    """The last row of the energy budget (histories/energy), if the file has one."""
+    g = f.get("histories/energy")
+    if g is None or g["value"].shape[0] == 0:
+        return []
+    cols = _text(g.attrs.get("columns", "")).split(",")
+    row = dict(zip(cols, g["value"][-1], strict=False))
+    t = g["time"][-1]
+    if "balance_error" not in row:
+        return []
+    put_in = row["gravity_work"] + row["applied_work"] + row["boundary_work"]
+    first = dict(zip(cols, g["value"][0], strict=False))
+    put_in += first["kinetic"] + first["strain"]
+    share = 100.0 * abs(row["balance_error"]) / max(abs(put_in), 1e-300)
+    return [
+        f"energy (J, t = {_g(t)} s): kinetic {_g(row['kinetic'])}, in joints {_g(row['strain'])};"
+        f" work of gravity {_g(row['gravity_work'])}, applied {_g(row['applied_work'])}, "
+        f"prescribed {_g(row['boundary_work'])}",
+        f"             dissipated in joints {_g(row['joint_dissipation'])}, by damping "
+        f"{_g(row['damping_dissipation'])}; balance error {_g(row['balance_error'])} "
+        f"({share:.2g}% of {_g(put_in)} put in)",
+    ]
 
 
 def _viewer_lines(f: h5py.File) -> list[str]:

@@ -71,10 +71,13 @@ BLOCK: tuple[Field, ...] = (
     Field("u_geo", (), F, "m", "motion since the last periodic geometry update", **_D,
           halo=True),
     Field("u_mig", (), F, "m", "motion since the last ghost rebuild", **_D),
-    Field("work", (8,), F, "J", "energy budget accumulators of the block since the start: work "
+    Field("out", (), U8, "1", "taken out of the model (left the domain): 1 frozen, 2 deleted",
+          **_D),
+    Field("work", (9,), F, "J", "energy budget accumulators of the block since the start: work "
           "of gravity, of applied forces, of contact forces, damping dissipation, work of a "
           "prescribed motion, joint dissipation, energy the joints' force update created, "
-          "stored energy changed by contact geometry updates (pdem.dynamics.motion.WORK_*)",
+          "stored energy changed by contact geometry updates, energy taken out with blocks that "
+          "left the model domain (pdem.dynamics.motion.WORK_*)",
           **_D),
     # scratch: per-rank working arrays, derived from the state above
     Field("dtheta", (3,), F, "rad", "this step's rotation increment (contact planes turn)",

@@ -120,7 +120,9 @@ def _partials(x, out):
 def exact_sum(comm, values: np.ndarray) -> np.ndarray:
     """Column sums of ``values`` (n, k) over all ranks' rows, correctly rounded: the same bits
     for any distribution of the rows over any number of ranks."""
-    values = np.asarray(values, np.float64).reshape(len(values), -1)
+    values = np.asarray(values, np.float64)
+    if values.ndim == 1:
+        values = values[:, None]
     parts = []
     for col in values.T:
         if not np.isfinite(col).all():

@@ -21,7 +21,7 @@ log = logging.getLogger("pdem")
 
 COLUMNS = ("kinetic", "strain", "gravity_work", "applied_work", "boundary_work",
            "joint_dissipation", "damping_dissipation", "contact_work", "joint_created",
-           "geometry_created", "balance_error")
+           "geometry_created", "removed", "balance_error")
 
 
 def energy_totals(state) -> dict[str, float]:
@@ -43,7 +43,7 @@ def energy_totals(state) -> dict[str, float]:
                                  w[:, motion.WORK_APPLIED], w[:, motion.WORK_BOUNDARY],
                                  w[:, motion.WORK_JOINT], w[:, motion.WORK_DAMPING],
                                  w[:, motion.WORK_CONTACT], w[:, motion.WORK_JOINT_MADE],
-                                 w[:, motion.WORK_GEOMETRY]])
+                                 w[:, motion.WORK_GEOMETRY], w[:, motion.WORK_REMOVED]])
     sums = exact_sum(state.comm, per_block)
     return dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
 
@@ -52,7 +52,8 @@ def balance(t: dict[str, float], e0: float) -> tuple[float, float]:
     """(balance error, energy put in): what is held plus what was dissipated, less what was
     there at the start and what was put in. Zero for an exact scheme."""
     put_in = e0 + t["gravity_work"] + t["applied_work"] + t["boundary_work"]
-    held = t["kinetic"] + t["strain"] + t["joint_dissipation"] + t["damping_dissipation"]
+    held = t["kinetic"] + t["strain"] + t["joint_dissipation"] + t["damping_dissipation"] \
+        + t["removed"]
     return held - put_in, put_in
 
 

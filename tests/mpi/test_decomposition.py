@@ -366,3 +366,30 @@ def test_block_ghosted_on_several_ranks(tmp_path):
         assert np.all(held[:, :, 1].sum(0) == comm.size - 1), held[:, :, 1]
         assert held[:, 1, 1].sum() >= min(3, comm.size - 1)
     compare_on_rank0(comm, f"{base}/cross.h5", scene, f"{base}/cross-ref.h5")
+
+
+LEDGE = """
+name: ledge
+materials: {rock: {density: 2500.0}}
+joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 10.0}}
+gravity: [3.0, 0.0, -9.81]
+blocks:
+  - {name: ledge, box: {min: [-3, -1, -1], max: [0.5, 1, 0]}, material: rock, fixed: true}
+  - {name: rock, box: {min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}, material: rock}
+  - {name: pebble, box: {min: [-2.5, -0.2, 0.0], max: [-2.1, 0.2, 0.4]}, material: rock}
+solve: {time: 1.2, damping: none}
+domain: {min: [-4, -2, -1.5], max: [4, 2, 3], action: delete}
+"""
+
+
+def test_block_leaving_the_domain_matches_one_rank(tmp_path):
+    """A rock slides off a ledge across the brick boundary (x = 0 on 2 ranks) and is deleted
+    when it leaves the domain: outputs, energy history included, equal the 1-rank run's."""
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    dims = [comm.size, 1, 1]
+    scene = with_parallel(LEDGE, dims, f"{base}/ledge.h5", every_steps=200)
+    sim, _, _, _ = run(scene, comm)
+    out = np.concatenate(comm.allgather(sim.blocks.out[:sim.n_owned]))
+    assert out.max() == 2  # the rock was deleted
+    compare_on_rank0(comm, f"{base}/ledge.h5", scene, f"{base}/ledge-ref.h5")

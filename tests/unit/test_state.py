@@ -75,4 +75,24 @@ def test_restart_continues_history_schedule_and_state(tmp_path):
     np.testing.assert_array_equal(t1, t0[tail])  # no extra sample at the restart
     np.testing.assert_array_equal(v1, v0[tail])
     assert np.array_equal(again.blocks.x, sim.blocks.x)
+    from pdem.io import summarise
+
+    assert "energy (J" in summarise(straight) and "balance error" in summarise(straight)
     assert v0[-1, 0] > 1e-3  # it slides (5 / 9.81 > tan 20 deg): 1.43 m/s2, 2.6 mm by 0.06 s
+
+
+def test_exact_sum_does_not_depend_on_how_rows_are_split():
+    """The energy budget's reduction: correctly rounded, so any partition gives the same bits
+    (a plain sum of these values depends on the order); a rank with no rows takes part."""
+    from pdem.parallel.mpi import exact_sum
+
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(1000, 3)) * 10.0 ** rng.integers(-8, 8, size=(1000, 1))
+    whole = exact_sum(MPI.COMM_SELF, v)
+    assert not np.array_equal(v[::-1].sum(axis=0), v.sum(axis=0))  # order matters to np.sum
+    perm = rng.permutation(1000)
+    np.testing.assert_array_equal(exact_sum(MPI.COMM_SELF, v[perm]), whole)
+    import math
+
+    np.testing.assert_array_equal(whole, [math.fsum(v[:, k]) for k in range(3)])
+    assert exact_sum(MPI.COMM_SELF, np.zeros((0, 3))).tolist() == [0.0, 0.0, 0.0]
