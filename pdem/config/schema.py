@@ -45,15 +45,20 @@ class JointPair(Strict):
     joint: str
 
 
+def _check_ordered(lo3, hi3) -> None:
+    """``max`` exceeds ``min`` on every axis (a box, a domain)."""
+    for axis, (lo, hi) in enumerate(zip(lo3, hi3, strict=True)):
+        if not hi > lo:
+            raise ValueError(f"max[{axis}] must exceed min[{axis}] ({hi} <= {lo})")
+
+
 class BoxShape(Strict):
     min: Vec3
     max: Vec3
 
     @model_validator(mode="after")
     def _ordered(self):
-        for axis, (lo, hi) in enumerate(zip(self.min, self.max, strict=True)):
-            if not hi > lo:
-                raise ValueError(f"max[{axis}] must exceed min[{axis}] ({hi} <= {lo})")
+        _check_ordered(self.min, self.max)
         return self
 
 
@@ -267,9 +272,7 @@ class Domain(Strict):
 
     @model_validator(mode="after")
     def _ordered(self):
-        for axis, (lo, hi) in enumerate(zip(self.min, self.max, strict=True)):
-            if not hi > lo:
-                raise ValueError(f"max[{axis}] must exceed min[{axis}] ({hi} <= {lo})")
+        _check_ordered(self.min, self.max)
         return self
 
 

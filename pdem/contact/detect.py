@@ -49,6 +49,22 @@ def _grow(a, size):
 
 
 @kernel
+def _spring_sums(area, un, dil, fs):
+    """(sum A (un + dil)^2 over compressed sub-contacts, sum |fs|^2 / A): a contact's normal
+    and shear spring energies times 2 kn and 2 ks."""
+    en = 0.0
+    es = 0.0
+    for s in range(area.shape[0]):
+        a = area[s]
+        if a > 0.0:
+            d = un[s] + dil[s]
+            if d > 0.0:
+                en += a * d * d
+            es += (fs[s, 0] ** 2 + fs[s, 1] ** 2 + fs[s, 2] ** 2) / a
+    return en, es
+
+
+@kernel
 def carry_spring_energy(old_area, old_un, old_dil, old_fs, area, un, dil, fs):
     """Scale one refreshed contact's new sub-contacts so that the geometry update neither
     stores nor releases spring energy (issue 16).
@@ -67,24 +83,8 @@ def carry_spring_energy(old_area, old_un, old_dil, old_fs, area, un, dil, fs):
     overlap equals its tracked one, is unchanged. Energy held by sub-contacts that are all
     open after the update cannot be carried and is released (lost).
     """
-    en0 = 0.0
-    es0 = 0.0
-    for o in range(old_area.shape[0]):
-        a = old_area[o]
-        if a > 0.0:
-            d = old_un[o] + old_dil[o]
-            if d > 0.0:
-                en0 += a * d * d
-            es0 += (old_fs[o, 0] ** 2 + old_fs[o, 1] ** 2 + old_fs[o, 2] ** 2) / a
-    en1 = 0.0
-    es1 = 0.0
-    for s in range(area.shape[0]):
-        a = area[s]
-        if a > 0.0:
-            d = un[s] + dil[s]
-            if d > 0.0:
-                en1 += a * d * d
-            es1 += (fs[s, 0] ** 2 + fs[s, 1] ** 2 + fs[s, 2] ** 2) / a
+    en0, es0 = _spring_sums(old_area, old_un, old_dil, old_fs)
+    en1, es1 = _spring_sums(area, un, dil, fs)
     if en1 > 0.0 and en1 != en0:
         f = np.sqrt(en0 / en1)
         for s in range(area.shape[0]):

@@ -19,6 +19,7 @@ from mpi4py import MPI
 from support import compare_on_rank0, launch_job, on_rank0, reference, run, shared_dir, with_parallel
 
 import pdem.cli
+from pdem.cases.collapse import ledge_scene
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
 
@@ -368,18 +369,6 @@ def test_block_ghosted_on_several_ranks(tmp_path):
     compare_on_rank0(comm, f"{base}/cross.h5", scene, f"{base}/cross-ref.h5")
 
 
-LEDGE = """
-name: ledge
-materials: {rock: {density: 2500.0}}
-joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 10.0}}
-gravity: [3.0, 0.0, -9.81]
-blocks:
-  - {name: ledge, box: {min: [-3, -1, -1], max: [0.5, 1, 0]}, material: rock, fixed: true}
-  - {name: rock, box: {min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}, material: rock}
-  - {name: pebble, box: {min: [-2.5, -0.2, 0.0], max: [-2.1, 0.2, 0.4]}, material: rock}
-solve: {time: 1.2, damping: none}
-domain: {min: [-4, -2, -1.5], max: [4, 2, 3], action: delete}
-"""
 
 
 def test_block_leaving_the_domain_matches_one_rank(tmp_path):
@@ -388,7 +377,7 @@ def test_block_leaving_the_domain_matches_one_rank(tmp_path):
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
     dims = [comm.size, 1, 1]
-    scene = with_parallel(LEDGE, dims, f"{base}/ledge.h5", every_steps=200)
+    scene = with_parallel(ledge_scene(time=1.2, floor=-1.5), dims, f"{base}/ledge.h5", every_steps=200)
     sim, _, _, _ = run(scene, comm)
     out = np.concatenate(comm.allgather(sim.blocks.out[:sim.n_owned]))
     assert out.max() == 2  # the rock was deleted

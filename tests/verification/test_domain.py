@@ -7,27 +7,15 @@ import numpy as np
 import pytest
 
 from pdem.cases import make_simulation
+from pdem.cases.collapse import ledge_scene
 from pdem.plugins.energy import balance, energy_totals
-
-SCENE = """
-name: ledge
-materials: {rock: {density: 2500.0}}
-joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 10.0}}
-gravity: [3.0, 0.0, -9.81]
-blocks:
-  - {name: ledge, box: {min: [-3, -1, -1], max: [0.5, 1, 0]}, material: rock, fixed: true}
-  - {name: rock, box: {min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}, material: rock}
-  - {name: pebble, box: {min: [-2.5, -0.2, 0.0], max: [-2.1, 0.2, 0.4]}, material: rock}
-solve: {time: 2.0, damping: none}
-domain: {min: [-4, -2, -3], max: [4, 2, 3], action: ACTION}
-"""
 
 
 @pytest.mark.parametrize("action", ["delete", "freeze"])
 def test_blocks_leaving_the_domain_are_taken_out_and_the_budget_balances(action):
     """The rock slides off the ledge (gravity tilted 17 deg, friction 10 deg) and falls out of
     the domain; the pebble slides too and the run goes on to its end."""
-    sim = make_simulation(SCENE.replace("ACTION", action))
+    sim = make_simulation(ledge_scene(action=action))
     sim.run()
     b = sim.blocks
     rock, pebble = 1, 2
