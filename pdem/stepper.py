@@ -12,14 +12,15 @@ One step (``Stepper.advance``):
 
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
 
+from . import domain
 from .config.resolve import TOUCH_FRACTION
+from .contact import forces
 from .contact.detect import Planes, refresh_contacts
-from .contact.forces import book_contact_energy, contact_energies, contact_forces
+from .contact.forces import contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .dynamics import motion
 from .dynamics.kinematics import envelopes, rotation_matrices, world_vertices
@@ -27,8 +28,6 @@ from .errors import SimulationError
 from .model.contacts import ContactStore
 from .model.csr import pair_key
 from .parallel import mpi
-
-log = logging.getLogger("pdem")
 
 # u_acc trigger as a fraction of CTOL. 3DEC remaps at CTOL; at CTOL/2 no pair can close a gap
 # larger than CTOL unseen (each block moves less than CTOL/2 between searches), so a contact
@@ -138,7 +137,7 @@ class Stepper:
         refreshed = ContactStore(c.arrays, sub, start)
         # energy budget: what the update changed in the joints' springs, with no work done
         jump = contact_energies(refreshed.pairs(), refreshed.subs(), joints) * keep - before
-        book_contact_energy(self.bodies(), c.ia, c.ib, jump, motion.WORK_GEOMETRY)
+        forces.book_contact_energy(self.bodies(), c.ia, c.ib, jump, motion.WORK_GEOMETRY)
         s.contacts = refreshed.select(keep.astype(bool))
 
     def bodies(self) -> Bodies:
@@ -192,14 +191,14 @@ class Stepper:
             # one small reduction a step: max unbalanced force, trouble, rebuild needed, blocks
             # that left the model domain (looked for at the contact updates)
             rebuild = bool(n) and u_mig_max > 0.5 * r.margin
-            left = periodic and s.scene.domain is not None and self._outside().any()
+            left = periodic and s.scene.domain is not None and domain.outside(s).any()
             flags = mpi.allreduce_max_array(s.comm, np.array(
                 [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild),
                  float(left)]))
         if flags[1]:
             self._raise_non_finite(bad)
         if flags[3]:
-            self.take_out()
+            domain.take_out(s, self.bodies())
             flags[2] = 1.0
         if s.damping.adaptive and s.step % 10 == 0:
             sums = mpi.allreduce_sum_array(s.comm, np.array(
@@ -208,44 +207,6 @@ class Stepper:
                 s.alpha or 1e-3, sums[0], sums[1], s.scene.solve.damping.ratio, dt=s.dt)
         s.ratio = float(flags[0]) / r.ref_force
         return bool(flags[2]) and s.comm.size > 1
-
-    def _outside(self) -> np.ndarray:
-        """Owned free blocks whose centroid is outside the model domain (rows)."""
-        s = self.s
-        b, n = s.blocks, s.n_owned
-        d = s.scene.domain
-        x = b.x[:n]
-        out = np.any((x < np.array(d.min)) | (x > np.array(d.max)), axis=1)
-        return out & (b.fixed[:n] == 0) & (b.out[:n] == 0)
-
-    def take_out(self):
-        """Blocks that left the model domain are frozen or deleted (collective): they stop,
-        act as fixed blocks from now on, and their kinetic energy - and, deleted, the energy
-        their contacts held, which go with them - is booked as taken out of the model."""
-        s = self.s
-        b = s.blocks
-        rows = np.nonzero(self._outside())[0]
-        code = 2 if s.scene.domain.action == "delete" else 1
-        ke = 0.5 * b.mass[rows] * b.mscale[rows] * np.einsum("ij,ij->i", b.v[rows], b.v[rows]) \
-            + 0.5 * np.einsum("ij,ij->i", b.w[rows], b.L[rows])
-        b.work[rows, motion.WORK_REMOVED] += ke
-        gids = np.concatenate(mpi.allgather(s.comm, b.gid[rows].copy())).astype(np.int64)
-        for rows_of in (s.glob, b):
-            hit = np.isin(rows_of.gid, gids)
-            rows_of.fixed[hit] = 1
-            rows_of.out[hit] = code
-            rows_of.v[hit] = 0.0
-            rows_of.w[hit] = 0.0
-            rows_of.L[hit] = 0.0
-        c = s.contacts
-        if code == 2 and c.n:
-            gone = np.isin(c.ga, gids) | np.isin(c.gb, gids)
-            held = contact_energies(c.pairs(), c.subs(), s.joints.kernel_args) * gone
-            book_contact_energy(self.bodies(), c.ia, c.ib, held, motion.WORK_REMOVED)
-            s.contacts = c.select(~gone)
-        names = ", ".join(s.specs[g].name for g in gids[:10]) + (" ..." if len(gids) > 10 else "")
-        log.info("step %d: %d block(s) left the model domain (%s): %s", s.step, len(gids),
-                 "deleted" if code == 2 else "frozen", names)
 
     def _raise_non_finite(self, row: int):
         """Every rank raises the same SimulationError, naming the first bad block (by gid) and

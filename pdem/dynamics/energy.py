@@ -61,3 +61,11 @@ def linear_momentum(mass, v):
         for k in range(3):
             out[k] += mass[i] * v[i, k]
     return out
+
+
+def kinetic_per_block(b, rows) -> np.ndarray:
+    """Kinetic energy of blocks ``rows`` of a block store, as integrated: translation with the
+    inertial mass and rotation w . L / 2, both at t - dt/2."""
+    v, w, L = b.v[rows], b.w[rows], b.L[rows]
+    return 0.5 * b.mass[rows] * b.mscale[rows] * np.einsum("ij,ij->i", v, v) \
+        + 0.5 * np.einsum("ij,ij->i", w, L)

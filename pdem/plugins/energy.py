@@ -13,6 +13,7 @@ from ..contact.forces import stored_energy
 from ..contact.rigid import Bodies
 from ..dynamics import motion
 from ..dynamics.diagnosis import explain
+from ..dynamics.energy import kinetic_per_block
 from ..errors import SimulationError
 from ..parallel.mpi import allgather, exact_sum
 from .base import Plugin
@@ -32,8 +33,7 @@ def energy_totals(state) -> dict[str, float]:
     """
     b, n = state.blocks, state.n_owned
     free = (b.fixed[:n] == 0) & (b.vfix[:n] == 0)
-    ke = np.where(free, 0.5 * b.mass[:n] * b.mscale[:n] * np.einsum("ij,ij->i", b.v[:n], b.v[:n])
-                  + 0.5 * np.einsum("ij,ij->i", b.w[:n], b.L[:n]), 0.0)
+    ke = np.where(free, kinetic_per_block(b, slice(0, n)), 0.0)
     strain = np.zeros(b.n)
     c = state.contacts
     bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
