@@ -372,7 +372,7 @@ def test_block_ghosted_on_several_ranks(tmp_path):
 
 
 def test_block_leaving_the_domain_matches_one_rank(tmp_path):
-    """A rock slides off a ledge across the brick boundary (x = 0 on 2 ranks) and is deleted
+    """A rock slides off a ledge across a brick boundary (bricks along x) and is deleted
     when it leaves the domain: outputs, energy history included, equal the 1-rank run's."""
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
