@@ -377,7 +377,8 @@ def test_block_leaving_the_domain_matches_one_rank(tmp_path):
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
     dims = [comm.size, 1, 1]
-    scene = with_parallel(ledge_scene(time=1.2, floor=-1.5), dims, f"{base}/ledge.h5", every_steps=200)
+    scene = with_parallel(ledge_scene(time=2.0, floor=-1.0), dims, f"{base}/ledge.h5",
+                          every_steps=400)
     sim, _, _, _ = run(scene, comm)
     out = np.concatenate(comm.allgather(sim.blocks.out[:sim.n_owned]))
     assert out.max() == 2  # the rock was deleted
