@@ -28,14 +28,14 @@ blocks:
     random: {{count: 30, region: {{min: [-2, -2, 0.05], max: [2, 2, 1.3]}}, size: [0.45, 0.6], seed: 3}}
     material: rock
     velocity: [0.5, 0.0, -3.0]
-solve: {{steps: 1500, damping: local}}
-output: {{file: {out}, every_steps: 250}}
+solve: {{steps: 4000, damping: local}}
+output: {{file: {out}, every_steps: 500}}
 """
 FIELDS = ("centroid", "orientation", "velocity", "angular_velocity")
 PDEM = ["-m", "pdem.cli"]
 
 
-def signalled_job(n, argv, signum, delay=1.0, timeout=300.0):
+def signalled_job(n, argv, signum, delay=0.5, timeout=300.0):
     """Start ``mpiexec -n n python argv``, send ``signum`` to mpiexec ``delay`` s after the run
     logs its first line about stepping; (exit code, output)."""
     proc = subprocess.Popen([MPIEXEC, "-n", str(n), sys.executable, *argv],
@@ -45,7 +45,7 @@ def signalled_job(n, argv, signum, delay=1.0, timeout=300.0):
     try:
         for line in proc.stdout:
             lines.append(line)
-            if line.rstrip().endswith(" steps"):  # "...; 1500 steps": the march begins
+            if line.rstrip().endswith(" steps"):  # "...; 4000 steps": the march begins
                 time.sleep(delay)
                 proc.send_signal(signum)
                 break
@@ -77,15 +77,16 @@ def test_sigterm_stops_all_ranks_with_a_checkpoint_that_restarts_bitwise(tmp_pat
                           r"pdem restart (\S+)\n", out)
         assert rc == 128 + signal.SIGTERM and found, f"exit {rc}:\n{out}"
         step, ck = int(found[1]), found[2]
+        print(f"stopped at step {step}, exit status {rc}")
         assert ck == f"{d}/run-stop-{step:09d}.h5" and os.path.exists(ck), out
-        assert 0 < step < 1500 and last_state(f"{d}/run.h5")[1] == step  # output flushed
+        assert 0 < step < 4000 and last_state(f"{d}/run.h5")[1] == step  # output flushed
         rc, out, err, _ = launch_job(2, [*PDEM, "restart", ck, "-q"])
         assert rc == 0, out + err
         rc, out, err, _ = launch_job(2, [*PDEM, "run", scene, "-q", "-o", f"{d}/straight.h5"])
         assert rc == 0, out + err
         got, got_step = last_state(f"{d}/run-from{step}.h5")
         ref, ref_step = last_state(f"{d}/straight.h5")
-        assert got_step == ref_step == 1500
+        assert got_step == ref_step == 4000
         return [k for k in FIELDS if not np.array_equal(got[k], ref[k])]
 
     assert on_rank0(comm, scenario) == []
