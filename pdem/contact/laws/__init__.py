@@ -12,7 +12,10 @@ in order, from column 0); ``un`` the overlap (+ closing), ``dil`` the dilation; 
 the shear force on B carried from the last step, already turned into the current plane;
 ``dx, dy, dz`` this step's shear displacement increment and ``ux, uy, uz`` the total; ``area``
 the sub-contact's area; ``state`` its bits (:mod:`.base`). It returns the new normal force
-(> 0 compression), dilation, state and shear force. Laws never see block kinematics.
+(> 0 compression), dilation, state and shear force. Laws never see block kinematics. A law
+sets SLIPPING in every step in which it yields: the energy budget evaluates a joint's
+dissipation only in such steps or when its state or dilation changes (an elastic step of
+linear springs dissipates exactly nothing).
 
 A scene compiles only the laws its joints use: the force kernel receives a tuple of the used
 laws' tables and :func:`apply_law` is resolved per tuple type at compile time (no runtime
