@@ -50,7 +50,8 @@ def take_out(state, bodies) -> None:
     c = state.contacts
     if code == DELETED and c.n:
         gone = np.isin(c.ga, gids) | np.isin(c.gb, gids)
-        held = contact_energies(c.pairs(), c.subs(), state.joints.kernel_args) * gone
+        held = contact_energies(c.pairs(), c.subs(), state.joints.kernel_args,
+                                gone.astype(np.uint8))
         book_contact_energy(bodies, c.ia, c.ib, held, motion.WORK_REMOVED)
         state.contacts = c.select(~gone)
     names = ", ".join(state.specs[g].name for g in gids[:10]) + (" ..." if len(gids) > 10 else "")

@@ -131,7 +131,9 @@ class Stepper:
         planes = Planes(a["ia"], a["ib"], a["normal"], a["point"], a["gap"], a["ctype"],
                         a["warm"])
         joints = s.joints.kernel_args
-        before = contact_energies(c.pairs(), c.subs(), joints)
+        # only updated contacts can change their stored energy (the others are copied)
+        todo = todo.astype(np.uint8)
+        before = contact_energies(c.pairs(), c.subs(), joints, todo)
         res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
                                todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm)
         keep, start, pa, area, un, fs, us, dil, state, hist = res
@@ -140,7 +142,8 @@ class Stepper:
                "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
         refreshed = ContactStore(c.arrays, sub, start)
         # energy budget: what the update changed in the joints' springs, with no work done
-        jump = contact_energies(refreshed.pairs(), refreshed.subs(), joints) * keep - before
+        jump = contact_energies(refreshed.pairs(), refreshed.subs(), joints, todo) * keep \
+            - before
         forces.book_contact_energy(self.bodies(), c.ia, c.ib, jump, motion.WORK_GEOMETRY)
         s.contacts = refreshed.select(keep.astype(bool))
 

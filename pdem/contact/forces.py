@@ -146,10 +146,13 @@ def stored_energy(bodies, pairs, subs, joints, out):
 
 
 @kernel
-def contact_energies(pairs, subs, joints):
-    """Spring energy stored in each contact's joint (per contact)."""
+def contact_energies(pairs, subs, joints, which):
+    """Spring energy stored in the joint of each contact with ``which[c] != 0`` (0 for the
+    others)."""
     out = np.zeros(pairs.ia.shape[0])
     for c in range(pairs.ia.shape[0]):
+        if which[c] == 0:
+            continue
         jrow = pairs.joint[c]
         slot = joints.slot[jrow]
         j = joints.row[jrow]
