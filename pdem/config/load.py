@@ -120,12 +120,20 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
     return out
 
 
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """PyYAML's message on one line, with the line it points at (its own text spans several)."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc)
+    where = f"  [line {mark.line + 1}, column {mark.column + 1}]" if mark is not None else ""
+    return " ".join(str(problem).split()) + where
+
+
 def parse_scene(text: str, source: str = "scene") -> Scene:
     """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ConfigError([f"not valid YAML: {exc}"], source) from None
+        raise ConfigError([f"not valid YAML: {_yaml_problem(exc)}"], source) from None
     if not isinstance(data, dict):
         raise ConfigError(["the scene must be a mapping of keys (name, blocks, solve, ...)"], source)
     try:
@@ -141,6 +149,9 @@ def load_scene(path: str | Path) -> Scene:
         text = path.read_text()
     except OSError as exc:
         raise ConfigError([f"cannot read: {exc.strerror}"], str(path)) from None
+    except UnicodeDecodeError as exc:
+        # found by the fuzz: a binary file gave a traceback
+        raise ConfigError([f"not a text file (byte {exc.start} is not UTF-8)"], str(path)) from None
     return parse_scene(text, str(path))
 
 

@@ -276,6 +276,25 @@ class Domain(Strict):
         return self
 
 
+class Limits(Strict):
+    """What a scene may ask of the machine, checked before anything is built (pdem.config.
+    preflight, docs/limits.md). ``max_blocks``: blocks after expanding ``array``/``random``;
+    ``auto`` = what fits in ``max_memory_per_rank``. ``max_memory_per_rank``: bytes (a number
+    or text like ``8 GiB``); ``auto`` = half of this machine's memory shared by the ranks."""
+
+    max_blocks: PositiveInt | Literal["auto"] = "auto"
+    max_memory_per_rank: PositiveFloat | str = "auto"
+
+    @field_validator("max_memory_per_rank")
+    @classmethod
+    def _size(cls, v):
+        if v != "auto":
+            from .preflight import parse_bytes
+
+            parse_bytes(v)
+        return v
+
+
 class Scene(Strict):
     name: str = "pdem"
     gravity: Vec3 = (0.0, 0.0, -9.81)
@@ -289,6 +308,7 @@ class Scene(Strict):
     output: Output = Output()
     checkpoint: Checkpoint | None = None
     domain: Domain | None = None
+    limits: Limits = Limits()
 
     @field_validator("joints", mode="before")
     @classmethod

@@ -76,12 +76,16 @@ def _lattice(region: BoxShape, count: int, cell: float):
         raise ValueError(
             f"region holds only {int(np.prod(dims))} sites of size {cell:g}; count is {count}"
         )
+    # the first ``count`` sites only: a large region of small sites has far more (1e18 would
+    # never finish), and the order (x fastest) is the same
     sites = []
     for k in range(dims[2]):
         for j in range(dims[1]):
             for i in range(dims[0]):
+                if len(sites) == count:
+                    return sites
                 sites.append(lo + (np.array([i, j, k]) + 0.5) * span / dims)
-    return sites[:count]
+    return sites
 
 
 def _box(p):
