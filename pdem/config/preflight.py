@@ -181,9 +181,11 @@ def preflight(scene, comm_size: int) -> Estimate:
     if est.blocks > est.max_blocks or est.bytes_per_rank > est.max_bytes:
         big = sorted(per_entry, key=lambda t: -t[1])[:3]
         where = "; ".join(f"blocks[{i}] ({scene.blocks[i].name!r}){_generator_text(scene.blocks[i])}"
-                          for i, n in big if n > 1) or "many entries"
+                          for i, n in big if n > 1) or f"{len(scene.blocks)} entries"
         msgs = []
-        if est.blocks > est.max_blocks:
+        explicit = scene.limits.max_blocks != "auto"
+        # the memory message says more (the bytes and the blocks) unless max_blocks was given
+        if est.blocks > est.max_blocks and (explicit or est.bytes_per_rank <= est.max_bytes):
             src = "auto: what fits in limits.max_memory_per_rank" if scene.limits.max_blocks \
                 == "auto" else "limits.max_blocks"
             msgs.append(f"limits.max_blocks: the scene makes {est.blocks:.4g} blocks, more than "
@@ -192,7 +194,7 @@ def preflight(scene, comm_size: int) -> Estimate:
             src = (f"auto: {MEMORY_FRACTION:g} x this machine's memory / {comm_size} ranks"
                    if scene.limits.max_memory_per_rank == "auto" else "limits.max_memory_per_rank")
             msgs.append(f"limits.max_memory_per_rank: the scene needs ~{_bytes_text(est.bytes_per_rank)}"
-                        f" per rank ({est.blocks} blocks, ~{est.contacts} contacts per rank), more "
+                        f" per rank ({est.blocks:.4g} blocks, ~{est.contacts:.4g} contacts per rank), more "
                         f"than the limit {_bytes_text(est.max_bytes)} ({src}); from {where}")
         raise ConfigError(msgs)
     _warn_ranges(scene)

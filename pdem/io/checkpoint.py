@@ -196,6 +196,9 @@ def _validate(path, attrs, blocks, arrays, sub, nsub) -> None:
     for k, a in arrays.items():
         if len(a) != nc:
             raise ValueError(f"{path}: contacts/{k} has {len(a)} rows, contacts/nsub {nc}")
+    for fd in SUB_CK:
+        if fd.name not in sub:  # sc_hist alone may be absent (format 1), set by the reader
+            raise ValueError(f"{path}: subcontacts/{fd.name} missing: not a complete checkpoint")
     for k, a in sub.items():
         if len(a) != ns:
             raise ValueError(f"{path}: subcontacts/{k} has {len(a)} rows, expected {ns}")
