@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import re
 from pathlib import Path
 from typing import Any
 
@@ -111,6 +112,14 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
                 text = text[len("Value error, ") :]
             got = e.get("input")
             shown = "" if isinstance(got, dict | list) or e["type"] == "missing" else f" (got {got!r})"
+            if not loc and _OWN_PATH.match(text):
+                # a whole-scene check (Scene._references) names its keys itself, one a line;
+                # found by the fuzz: its second and later lines lost the "  - " of the list
+                for part in text.split("\n"):
+                    if part not in seen:
+                        seen.add(part)
+                        out.append(part)
+                continue
             msg = f"{where}: {text}{shown}" if "\n" not in text else text
         if line and "\n" not in msg:
             msg += f"  [line {line}]"
@@ -118,6 +127,10 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
             seen.add(msg)
             out.append(msg)
     return out
+
+
+# "blocks[1].name: ..." -- a message that starts with its own key path
+_OWN_PATH = re.compile(r"^[A-Za-z_][\w\[\]\.-]*: ")
 
 
 def _yaml_problem(exc: yaml.YAMLError) -> str:

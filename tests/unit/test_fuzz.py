@@ -28,7 +28,7 @@ import pytest
 import yaml
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, example, given, settings  # noqa: E402
+from hypothesis import HealthCheck, event, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from pdem.cli import main  # noqa: E402
@@ -227,6 +227,7 @@ def _check_and_run(text: str, workdir: Path, capsys):
     scene = workdir / "scene.yaml"
     scene.write_text(text) if isinstance(text, str) else scene.write_bytes(text)
     rc, out, err = _cli(["check", str(scene)], capsys)
+    event("accepted" if rc == 0 else "refused")  # --hypothesis-show-statistics
     if rc == 0:
         assert "valid;" in out
         rc, out, err = _cli(["run", str(scene), "-q", "--steps", "3", "-o",
@@ -273,6 +274,8 @@ def _with(path_values, drop=()):
 # a 1e308 coordinate made the geometry nan (numpy overflow warnings, a misleading message)
 @example(_with([(("blocks", 0, "box", "max"), [1e308, 3.0, 0.0])]))
 @example(_with([(("blocks", 1, "velocity"), [1e308, 0.0, 0.0])]))
+# two errors of the whole-scene check shared one list item, the second without "  - "
+@example(_with([(("blocks", 1, "name"), "floor"), (("blocks", 1, "material"), "granite")]))
 def test_mutated_scenes_never_crash(warm, workdir, capsys, s):
     _check_and_run(_scene_text(s), workdir, capsys)
 
