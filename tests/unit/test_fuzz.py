@@ -120,6 +120,13 @@ def _entry(kind: str, i: int, size: float, n: int, seed: int) -> dict:
     elif kind == "random":
         shape = {"random": {"count": n, "region": {"min": lo, "max": [x0 + 2.0, 1.0, 2.0]},
                             "size": [0.4, 0.5], "vertices": 8, "seed": seed}}
+    elif kind == "prism":
+        shape = {"prism": {"base": [[x0, 0.0, 0.001], [x0 + size, 0.0, 0.001],
+                                    [x0, size, 0.001]], "extrude": [0.0, 0.0, size]}}
+    elif kind == "planes":  # a cube as six half-spaces
+        shape = {"planes": {"normals": [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0],
+                                        [0, 0, 1], [0, 0, -1]],
+                            "offsets": [x0 + size, -x0, size, 0.0, 0.001 + size, -0.001]}}
     else:  # tetrahedron
         shape = {"polyhedron": {"vertices": [[x0, 0.0, 0.001], [x0 + size, 0.0, 0.001],
                                              [x0, size, 0.001], [x0, 0.0, 0.001 + size]]}}
@@ -129,7 +136,8 @@ def _entry(kind: str, i: int, size: float, n: int, seed: int) -> dict:
 @st.composite
 def scenes(draw) -> dict:
     s = copy.deepcopy(BASE)
-    kinds = draw(st.lists(st.sampled_from(["box", "array", "random", "polyhedron"]),
+    kinds = draw(st.lists(st.sampled_from(["box", "array", "random", "polyhedron", "prism",
+                                           "planes"]),
                           min_size=1, max_size=3))
     for i, kind in enumerate(kinds):
         s["blocks"].append(_entry(kind, i, draw(st.floats(0.3, 1.0)), draw(st.integers(1, 3)),
@@ -137,6 +145,17 @@ def scenes(draw) -> dict:
     s["joints"]["default"]["kn"] = draw(st.sampled_from([1e7, 1e8, 1e9, 1e10]))
     if draw(st.booleans()):
         s["solve"] = {"time": draw(st.sampled_from([1e-4, 1e-3, 0.01]))}
+    s["solve"]["damping"] = draw(st.sampled_from(["none", "local", "combined", "adaptive"]))
+    if draw(st.booleans()):
+        s["solve"]["mass_scaling"] = True
+    if draw(st.booleans()):
+        s["domain"] = {"min": [-11.0, -4.0, -2.0], "max": [21.0, 4.0, 5.0], "action": "freeze"}
+    if draw(st.booleans()):
+        s["joints"]["weak"] = {"kn": 1e8, "ks": 1e8, "friction": 20.0, "cohesion": 1e3}
+        s["joint_pairs"] = [{"groups": ["default", "default"], "joint": "weak"}]
+    if draw(st.booleans()):
+        s["contact"] = {"algorithm": draw(st.sampled_from(["fast", "cundall"])),
+                        "detect_every": draw(st.integers(1, 5))}
     return s
 
 
