@@ -295,6 +295,9 @@ def _with(path_values, drop=()):
 @example(_with([(("blocks", 1, "velocity"), [1e308, 0.0, 0.0])]))
 # two errors of the whole-scene check shared one list item, the second without "  - "
 @example(_with([(("blocks", 1, "name"), "floor"), (("blocks", 1, "material"), "granite")]))
+@example(_with([(("blocks", 1), _entry("random", 0, 1.0, 2, 0)),
+                (("blocks", 1, "random", "region", "max"), [1e6, 1e6, 1e6]),
+                (("blocks", 1, "random", "size"), [1e-300, 1e-300])]))
 def test_mutated_scenes_never_crash(warm, workdir, capsys, s):
     _check_and_run(_scene_text(s), workdir, capsys)
 
