@@ -15,7 +15,7 @@ import numpy as np
 
 from .config import ConfigError, Scene
 from .config.load import dump_scene
-from .config.preflight import check_derived, preflight
+from .config.preflight import check_derived, machine_memory, preflight
 from .config.resolve import TOUCH_FRACTION, Resolved, resolve
 from .contact.algorithms import ALGORITHMS
 from .contact.cellspace import CellSpace
@@ -71,13 +71,16 @@ class ModelState:
     @staticmethod
     def create(scene: Scene, comm, *, check_overlaps: bool = True) -> ModelState:
         """Build the blocks, resolve the scene's ``auto`` values and check the start."""
-        # refuse a scene too large for the machine before its blocks exist (docs/limits.md)
-        estimate = preflight(scene, comm.size)
+        # refuse a scene too large for the machine before its blocks exist (docs/limits.md);
+        # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
+        memory = min(allgather(comm, machine_memory()))
+        warn = comm.rank == 0
+        estimate = preflight(scene, comm.size, memory, warn)
         specs = expand_blocks(scene)
         glob, group_names = block_store(scene, specs)
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)
-        check_derived(scene, specs, glob, joints, group_names, resolved.dt)
+        check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
         state.estimate = estimate
         if check_overlaps:

@@ -129,8 +129,10 @@ class Estimate:
                 f"{_bytes_text(self.max_bytes)} per rank)")
 
 
-def estimate(scene, comm_size: int) -> tuple[Estimate, list[tuple[int, int]]]:
-    """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry."""
+def estimate(scene, comm_size: int, memory: float | None = None
+             ) -> tuple[Estimate, list[tuple[int, int]]]:
+    """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry.
+    ``memory``: the physical memory to plan for (default: this machine's)."""
     from ..model.fields import BLOCK, CONTACT, SUB
 
     block_row = _row_bytes(BLOCK)
@@ -153,7 +155,8 @@ def estimate(scene, comm_size: int) -> tuple[Estimate, list[tuple[int, int]]]:
     local = 1.0 + (GHOST_FACTOR - 1.0 if comm_size > 1 else 0.0)
     per_rank = static_bytes + share * local * avg_block + contacts * contact_row
     lim = scene.limits
-    max_bytes = (MEMORY_FRACTION * machine_memory() / max(comm_size, 1)
+    memory = machine_memory() if memory is None else memory
+    max_bytes = (MEMORY_FRACTION * memory / max(comm_size, 1)
                  if lim.max_memory_per_rank == "auto" else parse_bytes(lim.max_memory_per_rank))
     if lim.max_blocks == "auto":
         # the count whose estimate fits the memory limit (every rank holds the static model)
@@ -174,10 +177,11 @@ def _generator_text(b) -> str:
     return ""
 
 
-def preflight(scene, comm_size: int) -> Estimate:
+def preflight(scene, comm_size: int, memory: float | None = None, warn: bool = True) -> Estimate:
     """Refuse a scene too large for ``limits:`` before any block is made; log warnings for
-    physical parameters outside their usual ranges. Returns the estimate."""
-    est, per_entry = estimate(scene, comm_size)
+    physical parameters outside their usual ranges (``warn``: on one rank only). Every rank
+    must decide alike (or the others wait forever): give them the same ``memory``."""
+    est, per_entry = estimate(scene, comm_size, memory)
     if est.blocks > est.max_blocks or est.bytes_per_rank > est.max_bytes:
         big = sorted(per_entry, key=lambda t: -t[1])[:3]
         where = "; ".join(f"blocks[{i}] ({scene.blocks[i].name!r}){_generator_text(scene.blocks[i])}"
@@ -197,7 +201,8 @@ def preflight(scene, comm_size: int) -> Estimate:
                         f" per rank ({est.blocks:.4g} blocks, ~{est.contacts:.4g} contacts per rank), more "
                         f"than the limit {_bytes_text(est.max_bytes)} ({src}); from {where}")
         raise ConfigError(msgs)
-    _warn_ranges(scene)
+    if warn:
+        _warn_ranges(scene)
     return est
 
 
@@ -219,7 +224,7 @@ def _warn_ranges(scene) -> None:
         log.warning("gravity: |g| = %.4g m/s2 is more than %g m/s2 (docs/limits.md)", g, GRAVITY_MAX)
 
 
-def check_derived(scene, specs, glob, joints, group_names, dt: float) -> None:
+def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool = True) -> None:
     """Refuse what the built model makes impossible: no usable timestep, an end time that
     double precision cannot reach, free blocks sinking into their support under gravity."""
     if not (math.isfinite(dt) and dt > 0.0):
@@ -236,7 +241,7 @@ def check_derived(scene, specs, glob, joints, group_names, dt: float) -> None:
             raise ConfigError([
                 f"solve.time: {scene.solve.time:.4g} s at dt={dt:.4g} s is {steps:.4g} steps, "
                 f"more than {MAX_TIME_STEPS:.4g} (beyond it t + dt == t in double precision)"])
-        if scene.solve.max_steps is not None and steps > scene.solve.max_steps:
+        if warn and scene.solve.max_steps is not None and steps > scene.solve.max_steps:
             log.warning("solve.time: %.4g s at dt=%.4g s is %.4g steps; the run stops at "
                         "solve.max_steps=%d before reaching it", scene.solve.time, dt, steps,
                         scene.solve.max_steps)
