@@ -6,6 +6,7 @@ The only module that names ``MPI.COMM_WORLD``; everything else receives the comm
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 
@@ -71,23 +72,40 @@ def _march(args, comm, log, scene, state=None) -> int:
     """Build the simulation (on every rank alike), run it, close the files."""
     import logging
 
+    from .signals import install
     from .simulation import Simulation
 
     if args.quiet:
         log.setLevel(logging.WARNING)
-    sim = Simulation(scene, comm, checkpoint=state)
+    # SIGTERM, SIGINT or SIGUSR1 (a batch system's warning) only set a flag from here on: the
+    # run stops at a step boundary every rank agrees on, with a checkpoint
+    stop = install()
+    sim = Simulation(scene, comm, checkpoint=state, stop=stop)
     if state is not None:
         log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", sim.state.run_id,
                  sim.step, sim.time, comm.size)
     try:
-        sim.run(time=args.time, steps=args.steps)
+        summary = sim.run(time=args.time, steps=args.steps)
+        sim.close()
     except Exception as exc:
         _fail_during_run(comm, exc, sim)
         return 1
-    sim.close()
     stem = os.path.splitext(scene.output.file)[0]
     log.info("wrote %s (+ %s.xdmf, %s-centroids.xdmf)", scene.output.file, stem, stem)
+    if summary["stopped"]:
+        return _stopped(comm, summary, sim)
     return 0
+
+
+def _stopped(comm, summary, sim) -> int:
+    """The message of a run stopped by a signal; its exit status is the shell's 128 + signal."""
+    from .signals import name
+
+    signum = summary["stopped"]
+    if comm.rank == 0:
+        print(f"pdem: stopped by {name(signum)} at step {sim.step} (t = {sim.time:.6g} s); "
+              f"continue with: pdem restart {summary['checkpoint']}", file=sys.stderr, flush=True)
+    return 128 + signum
 
 
 def _run(args, comm, log) -> int:
@@ -119,8 +137,10 @@ def _fail_during_run(comm, exc, sim) -> None:
     from .errors import SimulationError, UserError
 
     if comm.size == 1 or isinstance(exc, SimulationError):
-        # serial, or raised by every rank alike: close the files properly
-        sim.close()
+        # serial, or raised by every rank alike: close the files properly (a full disk may
+        # refuse the close too: the error already reported is the one that matters)
+        with contextlib.suppress(OSError, UserError):
+            sim.close()
         if isinstance(exc, UserError):
             if comm.rank == 0:
                 print(f"pdem: {exc}", file=sys.stderr)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 
 class UserError(Exception):
     """Base of the errors caused by input or by the run itself, reported without traceback."""
@@ -9,3 +11,16 @@ class UserError(Exception):
 
 class SimulationError(UserError):
     """The run cannot go on (a NaN, a runaway block); names the block, step and likely cause."""
+
+
+class OutputError(UserError):
+    """A file of the run could not be written (disk full, quota, a vanished directory)."""
+
+
+@contextlib.contextmanager
+def writing(path):
+    """Turn an OSError raised while writing ``path`` into an OutputError naming the file."""
+    try:
+        yield
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc

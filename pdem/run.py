@@ -6,7 +6,7 @@ import logging
 import math
 import time as wallclock
 
-from .errors import SimulationError
+from .errors import OutputError, SimulationError
 
 log = logging.getLogger("pdem")
 
@@ -51,7 +51,9 @@ class Run:
         return end_step, end_time, ratio_target, max_steps
 
     def run(self, *, time: float | None = None, steps: int | None = None) -> dict:
-        """March until the scene's end condition (or the given model time / step count)."""
+        """March until the scene's end condition (or the given model time / step count), or
+        until a stop request (``stepper.stop``): then the summary has ``stopped`` (the signal)
+        and ``checkpoint`` (the file to restart from), written after the output is flushed."""
         s = self.state
         end_step, end_time, ratio_target, max_steps = self._end(time, steps)
         log.info("%s: %d blocks, %d contacts, dt=%.4g s, ctol=%.4g m, %s damping; %d steps",
@@ -75,6 +77,8 @@ class Run:
                 log.warning("stopped at solve.max_steps=%d before reaching the target",
                             max_steps)
                 break
+            if self.stepper.stop_signal:  # agreed by every rank in the last step's reduction
+                break
             try:
                 self.advance()
                 for p in self.plugins:
@@ -83,16 +87,32 @@ class Run:
                 for p in self.plugins:  # raised on every rank alike, so this is collective
                     p.on_failure(self)
                 raise
+            except OutputError as exc:
+                # no new checkpoint: the disk that refused this file would likely refuse it too
+                self._name_last_checkpoint(exc)
+                raise
         for p in self.plugins:
             p.finish(self)
+        stopped = self.stepper.stop_signal
+        checkpoint = None
+        if stopped:
+            from .plugins.checkpoints import stop_checkpoint
+
+            checkpoint = stop_checkpoint(self)
         elapsed = wallclock.perf_counter() - t0
         summary = {"steps": s.step - s0, "time": s.time, "ratio": s.ratio, "wall": elapsed,
-                   "contacts": s.contacts.n}
+                   "contacts": s.contacts.n, "stopped": stopped, "checkpoint": checkpoint}
         log.info("time per phase (rank 0): %s", s.timers.report())
         log.info("done: %d steps in %.1f s (%.0f steps/s, %.3g block-steps/s), t=%.5g s, "
                  "ratio=%.3g", summary["steps"], elapsed, summary["steps"] / max(elapsed, 1e-9),
                  summary["steps"] * s.glob.n / max(elapsed, 1e-9), s.time, s.ratio)
         return summary
+
+    def _name_last_checkpoint(self, exc: OutputError) -> None:
+        ck = self.plugin("checkpoints")
+        last = ck.last if ck is not None and ck.last else None
+        if last:
+            exc.args = (f"{exc}; the last good checkpoint is {last}",)
 
     def close(self):
         for p in self.plugins:

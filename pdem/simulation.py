@@ -9,6 +9,7 @@ This is the public entry point for scripts and tests::
 
 from __future__ import annotations
 
+from .io.paths import check_writable
 from .plugins import default_plugins
 from .run import Run
 from .state import ModelState
@@ -16,12 +17,18 @@ from .stepper import Stepper
 
 
 class Simulation:
-    """Build (collective) and march a model; ``checkpoint``: a read checkpoint to continue."""
+    """Build (collective) and march a model; ``checkpoint``: a read checkpoint to continue;
+    ``stop``: a :class:`pdem.signals.StopRequest` that ends the march early (with a checkpoint)."""
 
     def __init__(self, scene, comm, *, output: bool = True, checkpoint: dict | None = None,
-                 plugins=None):
+                 plugins=None, stop=None):
+        paths = {"output.file": scene.output.file} if output else {}
+        if scene.checkpoint is not None:
+            paths["checkpoint.file"] = scene.checkpoint.file
+        check_writable(comm, paths)
         self.state = ModelState.create(scene, comm, check_overlaps=checkpoint is None)
         self.stepper = Stepper(self.state)
+        self.stepper.stop = stop
         if checkpoint is None:
             self.stepper.start()
         else:

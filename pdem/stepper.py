@@ -7,7 +7,8 @@ One step (``Stepper.advance``):
 4. accumulated motion u_acc (eq. 1); blocks past the trigger are remapped into the cell space
    and searched for new neighbours; every ``detect_every`` steps (or when contacts were
    created) the contact geometry is updated (common planes, types, sub-contacts);
-5. one small reduction: the unbalanced force, trouble, and whether blocks must migrate.
+5. one small reduction: the unbalanced force, trouble, whether blocks must migrate, and
+   whether a rank received a stop signal (pdem.signals).
 """
 
 from __future__ import annotations
@@ -49,6 +50,9 @@ class Stepper:
     def __init__(self, state):
         self.s = state
         self.stats = motion.new_stats()
+        # a pdem.signals.StopRequest (or None): polled every step, agreed in the flag reduction
+        self.stop = None
+        self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
 
     # ------------------------------------------------------------------ start
     def start(self):
@@ -189,12 +193,15 @@ class Stepper:
                 self.refresh(all_contacts=False)
         with tm.phase("halo"):
             # one small reduction a step: max unbalanced force, trouble, rebuild needed, blocks
-            # that left the model domain (looked for at the contact updates)
+            # that left the model domain (looked for at the contact updates), and a stop
+            # signal received by any rank (so every rank stops after the same step)
             rebuild = bool(n) and u_mig_max > 0.5 * r.margin
             left = periodic and s.scene.domain is not None and domain.outside(s).any()
+            signum = self.stop.signum if self.stop is not None else 0
             flags = mpi.allreduce_max_array(s.comm, np.array(
                 [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild),
-                 float(left)]))
+                 float(left), float(signum)]))
+        self.stop_signal = int(flags[4])
         if flags[1]:
             self._raise_non_finite(bad)
         if flags[3]:

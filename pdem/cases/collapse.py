@@ -78,17 +78,20 @@ solve: {{time: {time}, damping: none}}
 """
 
 
-def ledge_scene(*, time: float = 2.0, floor: float = -3.0, action: str = "delete") -> str:
-    """A rock slides off a ledge (gravity tilted 17 deg, friction 10 deg) and falls out of the
-    model domain (bottom at ``floor``); a pebble slides on the ledge, staying in."""
+def ledge_scene(*, time: float = 2.0, floor: float = -3.0, action: str = "delete",
+                gx: float = 3.0, pebble: float = 0.4) -> str:
+    """A rock slides off a ledge (gravity tilted by ``gx`` m/s2 along x, 17 deg for 3; friction
+    10 deg) and falls out of the model domain (bottom at ``floor``); a pebble (edge ``pebble``)
+    slides on the ledge, staying in."""
     return f"""name: ledge
 materials: {{rock: {{density: 2500.0}}}}
 joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 10.0}}}}
-gravity: [3.0, 0.0, -9.81]
+gravity: [{gx}, 0.0, -9.81]
 blocks:
   - {{name: ledge, box: {{min: [-3, -1, -1], max: [0.5, 1, 0]}}, material: rock, fixed: true}}
   - {{name: rock, box: {{min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}}, material: rock}}
-  - {{name: pebble, box: {{min: [-2.5, -0.2, 0.0], max: [-2.1, 0.2, 0.4]}}, material: rock}}
+  - {{name: pebble, box: {{min: [-2.5, {-pebble / 2}, 0.0], max: [{-2.5 + pebble}, {pebble / 2}, {pebble}]}},
+     material: rock}}
 solve: {{time: {time}, damping: none}}
 domain: {{min: [-4, -2, {floor}], max: [4, 2, 3], action: {action}}}
 """

@@ -11,6 +11,7 @@ positions) is not stored: it is rebuilt on restart and results do not depend on 
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import uuid
@@ -97,34 +98,49 @@ def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = 
         off_c = off_s = 0
         f = h5py.File(tmp, "w") if comm.rank == 0 else None
     if f is not None:
-        with f:
-            for k, v in attrs.items():
-                f.attrs[k] = v
-            n_blocks = attrs["n_blocks"]
-            order = np.argsort(rows["gid"], kind="stable")
-            gid = rows["gid"][order]
-            for k in CHECKPOINT:
-                data = rows[k][order]
-                d = f.create_dataset(f"blocks/{k}", (n_blocks, *data.shape[1:]), dtype=data.dtype)
-                d.attrs["units"] = BLOCK_BY_NAME[k].units
-                for a, z in _runs(gid):
-                    d[gid[a]:gid[a] + (z - a)] = data[a:z]
-            groups = (("contacts", CONTACT_CK, 0, off_c), ("subcontacts", SUB_CK, 1, off_s))
-            for group, fields, axis, off in groups:
-                for fd in fields:
-                    shape = contacts[fd.name].shape[1:]
-                    d = f.create_dataset(f"{group}/{fd.name}", (int(tot[axis]), *shape),
-                                         dtype=fd.dtype)
-                    if counts[axis]:
-                        d[off:off + counts[axis]] = contacts[fd.name]
-            d = f.create_dataset("contacts/nsub", (int(tot[0]),), dtype=np.int64)
-            if counts[0]:
-                d[off_c:off_c + counts[0]] = nsub
+        try:
+            _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s)
+        except BaseException:
+            # the previous checkpoint is untouched (it has another name); drop the partial temp
+            # file. A parallel file is not closed here: closing is collective and the other
+            # ranks may be elsewhere; the caller aborts the job.
+            if not parallel:
+                f.close()
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+        f.close()
     barrier(comm)
     if comm.rank == 0:
         os.replace(tmp, path)  # atomic: a reader sees the old or the complete new file
     barrier(comm)
     return path
+
+
+def _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s) -> None:
+    """Attributes, blocks (rows = gid) and this rank's contacts into the open file."""
+    for k, v in attrs.items():
+        f.attrs[k] = v
+    n_blocks = attrs["n_blocks"]
+    order = np.argsort(rows["gid"], kind="stable")
+    gid = rows["gid"][order]
+    for k in CHECKPOINT:
+        data = rows[k][order]
+        d = f.create_dataset(f"blocks/{k}", (n_blocks, *data.shape[1:]), dtype=data.dtype)
+        d.attrs["units"] = BLOCK_BY_NAME[k].units
+        for a, z in _runs(gid):
+            d[gid[a]:gid[a] + (z - a)] = data[a:z]
+    groups = (("contacts", CONTACT_CK, 0, off_c), ("subcontacts", SUB_CK, 1, off_s))
+    for group, fields, axis, off in groups:
+        for fd in fields:
+            shape = contacts[fd.name].shape[1:]
+            d = f.create_dataset(f"{group}/{fd.name}", (int(tot[axis]), *shape),
+                                 dtype=fd.dtype)
+            if counts[axis]:
+                d[off:off + counts[axis]] = contacts[fd.name]
+    d = f.create_dataset("contacts/nsub", (int(tot[0]),), dtype=np.int64)
+    if counts[0]:
+        d[off_c:off_c + counts[0]] = nsub
 
 
 def read_checkpoint(path: str | os.PathLike) -> dict:

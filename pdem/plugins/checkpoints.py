@@ -1,13 +1,28 @@
-"""Full-state checkpoints (``checkpoint:``), and the final one when a run fails."""
+"""Full-state checkpoints (``checkpoint:``), the final one when a run fails, and the one a
+stop signal asks for (:func:`stop_checkpoint`)."""
 
 from __future__ import annotations
 
 import logging
+import os
 
+from ..errors import writing
 from ..io.checkpoint import prune, write_checkpoint
 from .base import Plugin, interval_steps
 
 log = logging.getLogger("pdem")
+
+
+def _write(run, name: str) -> str:
+    """The model state and every plugin's restart state to ``name`` (collective)."""
+    s = run.state
+    extra = {}
+    for p in run.plugins:
+        extra.update(p.restart_state())
+    with s.timers.phase("io"), writing(name):
+        path = write_checkpoint(name, s, extra)
+    log.info("checkpoint %s", path)
+    return path
 
 
 class Checkpoints(Plugin):
@@ -22,19 +37,15 @@ class Checkpoints(Plugin):
         self.prefix = ck.file
         self.keep = ck.keep
         self.every = interval_steps(state, ck.every_steps, ck.every)
+        self.last = None  # the newest complete checkpoint written by this run
 
     def write(self, run, final: bool = False) -> str:
         """Write a checkpoint now (collective); keep the newest ``keep``."""
         s = self.state
-        name = f"{self.prefix}-{s.step:09d}{'-failed' if final else ''}.h5"
-        extra = {}
-        for p in run.plugins:
-            extra.update(p.restart_state())
-        with s.timers.phase("io"):
-            path = write_checkpoint(name, s, extra)
-            if not final:
-                prune(self.prefix, self.keep, s.comm)
-        log.info("checkpoint %s", path)
+        path = _write(run, f"{self.prefix}-{s.step:09d}{'-failed' if final else ''}.h5")
+        if not final:
+            self.last = path
+            prune(self.prefix, self.keep, s.comm)
         return path
 
     def after_step(self, run):
@@ -44,3 +55,15 @@ class Checkpoints(Plugin):
     def on_failure(self, run):
         path = self.write(run, final=True)
         log.error("final checkpoint written: %s", path)
+
+
+def stop_checkpoint(run) -> str:
+    """The checkpoint of a stopped run (collective): the scene's ``checkpoint:`` series (not
+    written twice if the stop falls on its interval), else ``{output stem}-stop-{step}.h5``
+    beside the output file, which the run has already found writable."""
+    s = run.state
+    ck = run.plugin("checkpoints")
+    if ck is not None:
+        return ck.last if ck.last == f"{ck.prefix}-{s.step:09d}.h5" else ck.write(run)
+    stem = os.path.splitext(s.scene.output.file)[0]
+    return _write(run, f"{stem}-stop-{s.step:09d}.h5")

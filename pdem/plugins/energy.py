@@ -14,7 +14,7 @@ from ..contact.rigid import Bodies
 from ..dynamics import motion
 from ..dynamics.diagnosis import explain
 from ..dynamics.energy import kinetic_per_block
-from ..errors import SimulationError
+from ..errors import SimulationError, writing
 from ..parallel.mpi import allgather, exact_sum
 from .base import Plugin
 
@@ -121,8 +121,9 @@ class EnergyBudget(Plugin):
         if self.writer is None:
             return
         mine = self.state.comm.rank == 0
-        self.writer.write_history("energy", np.array(self.times),
-                                  np.array(self.rows).reshape(-1, len(COLUMNS)) if mine else None)
+        with writing(self.writer.path):
+            self.writer.write_history("energy", np.array(self.times), np.array(
+                self.rows).reshape(-1, len(COLUMNS)) if mine else None)
         self.times.clear()
         self.rows.clear()
 

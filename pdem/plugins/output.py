@@ -7,6 +7,7 @@ import json
 import numpy as np
 
 from .. import __version__
+from ..errors import writing
 from ..io.writer import OutputWriter
 from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps
@@ -39,11 +40,11 @@ class Snapshots(Plugin):
     def write(self):
         s = self.state
         b, n = s.blocks, s.n_owned
-        with s.timers.phase("io"):
+        with s.timers.phase("io"), writing(self.writer.path):
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT})
-        for callback in self.after_write:
-            callback()
+            for callback in self.after_write:
+                callback()
 
     def start(self, run):
         if self.state.step == 0:
@@ -58,7 +59,8 @@ class Snapshots(Plugin):
             self.write()
 
     def close(self):
-        self.writer.close()
+        with writing(self.writer.path):
+            self.writer.close()
 
 
 class Histories(Plugin):
@@ -106,6 +108,10 @@ class Histories(Plugin):
 
     def flush(self):
         """Collective: the owner of each history's block writes its buffered rows."""
+        with writing(self.writer.path):
+            self._flush()
+
+    def _flush(self):
         for name, gid, _, _ in self.items:
             times, values = self.buffer[name]
             mine = self.state.owned_row(gid) >= 0
