@@ -159,6 +159,7 @@ def _check(args, comm, log) -> int:
     sim = Simulation(scene, comm, output=False)
     log.info("%s: valid; %d blocks, %d initial contacts, dt=%.4g s, ctol=%.4g m",
              args.scene, sim.blocks.n, sim.contacts.n, sim.dt, sim.state.ctol)
+    log.info("pre-flight estimate: %s", sim.state.estimate)
     return 0
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from .config import ConfigError, Scene
 from .config.load import dump_scene
+from .config.preflight import check_derived, machine_memory, preflight
 from .config.resolve import TOUCH_FRACTION, Resolved, resolve
 from .contact.algorithms import ALGORITHMS
 from .contact.cellspace import CellSpace
@@ -22,6 +23,7 @@ from .contact.detect import Planes, refresh_contacts
 from .contact.laws import joint_table
 from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose
+from .errors import UserError
 from .io.checkpoint import new_run_id
 from .model.build import block_store, expand_blocks
 from .model.contacts import ContactStore
@@ -64,15 +66,23 @@ class ModelState:
         self.contacts = ContactStore.empty(joints.hist_width)
         self.halo = None
         self.cells = None
+        self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
 
     @staticmethod
     def create(scene: Scene, comm, *, check_overlaps: bool = True) -> ModelState:
         """Build the blocks, resolve the scene's ``auto`` values and check the start."""
+        # refuse a scene too large for the machine before its blocks exist (docs/limits.md);
+        # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
+        memory = min(allgather(comm, machine_memory()))
+        warn = comm.rank == 0
+        estimate = preflight(scene, comm.size, memory, warn)
         specs = expand_blocks(scene)
         glob, group_names = block_store(scene, specs)
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)
+        check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
+        state.estimate = estimate
         if check_overlaps:
             state.check_initial_overlaps()
         return state
@@ -128,6 +138,10 @@ class ModelState:
     def restore(self, ck: dict):
         """Continue from a checkpoint's state (any rank count; see pdem.io.checkpoint)."""
         a = ck["attrs"]
+        if int(a["n_blocks"]) != self.glob.n:
+            # found by the fuzz: a checkpoint whose blocks do not match its scene
+            raise UserError(f"checkpoint: {int(a['n_blocks'])} blocks stored, its scene makes "
+                            f"{self.glob.n}: the file is damaged")
         self.step = int(a["step"])
         self.time = float(a["time"])
         self.dt = float(a["dt"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import re
 from pathlib import Path
 from typing import Any
 
@@ -111,6 +112,14 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
                 text = text[len("Value error, ") :]
             got = e.get("input")
             shown = "" if isinstance(got, dict | list) or e["type"] == "missing" else f" (got {got!r})"
+            if not loc and _OWN_PATH.match(text):
+                # a whole-scene check (Scene._references) names its keys itself, one a line;
+                # found by the fuzz: its second and later lines lost the "  - " of the list
+                for part in text.split("\n"):
+                    if part not in seen:
+                        seen.add(part)
+                        out.append(part)
+                continue
             msg = f"{where}: {text}{shown}" if "\n" not in text else text
         if line and "\n" not in msg:
             msg += f"  [line {line}]"
@@ -120,12 +129,24 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
     return out
 
 
+# "blocks[1].name: ..." -- a message that starts with its own key path
+_OWN_PATH = re.compile(r"^[A-Za-z_][\w\[\]\.-]*: ")
+
+
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """PyYAML's message on one line, with the line it points at (its own text spans several)."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc)
+    where = f"  [line {mark.line + 1}, column {mark.column + 1}]" if mark is not None else ""
+    return " ".join(str(problem).split()) + where
+
+
 def parse_scene(text: str, source: str = "scene") -> Scene:
     """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ConfigError([f"not valid YAML: {exc}"], source) from None
+        raise ConfigError([f"not valid YAML: {_yaml_problem(exc)}"], source) from None
     if not isinstance(data, dict):
         raise ConfigError(["the scene must be a mapping of keys (name, blocks, solve, ...)"], source)
     try:
@@ -141,6 +162,9 @@ def load_scene(path: str | Path) -> Scene:
         text = path.read_text()
     except OSError as exc:
         raise ConfigError([f"cannot read: {exc.strerror}"], str(path)) from None
+    except UnicodeDecodeError as exc:
+        # found by the fuzz: a binary file gave a traceback
+        raise ConfigError([f"not a text file (byte {exc.start} is not UTF-8)"], str(path)) from None
     return parse_scene(text, str(path))
 
 

@@ -17,7 +17,18 @@ from ..contact.algorithms import ALGORITHMS
 from ..dynamics.damping import DAMPING
 from ..strict import Strict
 
-Vec3 = tuple[float, float, float]
+# Hard bounds where double precision, not physics, ends (docs/limits.md): products of a few
+# such numbers (a volume, an inertia, a kinetic energy) stay finite. A coordinate or length
+# beyond a million km, a speed beyond 1000 km/s is a typo, and 1e308 made the geometry nan.
+LENGTH_MAX = 1.0e9  # m
+SPEED_MAX = 1.0e6  # m/s, rad/s
+FORCE_MAX = 1.0e30  # N
+Length = Annotated[float, Field(ge=-LENGTH_MAX, le=LENGTH_MAX)]
+Speed = Annotated[float, Field(ge=-SPEED_MAX, le=SPEED_MAX)]
+Force = Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]
+Vec3 = tuple[Length, Length, Length]
+Vec3Speed = tuple[Speed, Speed, Speed]
+Vec3Force = tuple[Force, Force, Force]
 
 
 class Material(Strict):
@@ -79,7 +90,7 @@ class PlanesShape(Strict):
     """Intersection of half-spaces ``normal . x <= offset``: the way joint planes cut rock."""
 
     normals: list[Vec3] = Field(min_length=4)
-    offsets: list[float] = Field(min_length=4)
+    offsets: list[Length] = Field(min_length=4)
 
     @model_validator(mode="after")
     def _same_length(self):
@@ -104,7 +115,8 @@ class RandomPolyhedra(Strict):
 
     count: PositiveInt
     region: BoxShape
-    size: tuple[PositiveFloat, PositiveFloat]
+    size: tuple[Annotated[float, Field(gt=0.0, le=LENGTH_MAX)],
+                Annotated[float, Field(gt=0.0, le=LENGTH_MAX)]]
     vertices: Annotated[int, Field(ge=4, le=64)] = 10
     seed: int = 0
 
@@ -122,10 +134,10 @@ class Block(Strict):
     material: str
     group: str = "default"
     fixed: bool = False
-    velocity: Vec3 = (0.0, 0.0, 0.0)
-    angular_velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity: Vec3Speed = (0.0, 0.0, 0.0)
+    angular_velocity: Vec3Speed = (0.0, 0.0, 0.0)
     velocity_fixed: bool = False
-    force: Vec3 = (0.0, 0.0, 0.0)
+    force: Vec3Force = (0.0, 0.0, 0.0)
 
     @model_validator(mode="after")
     def _one_shape(self):
@@ -276,9 +288,28 @@ class Domain(Strict):
         return self
 
 
+class Limits(Strict):
+    """What a scene may ask of the machine, checked before anything is built (pdem.config.
+    preflight, docs/limits.md). ``max_blocks``: blocks after expanding ``array``/``random``;
+    ``auto`` = what fits in ``max_memory_per_rank``. ``max_memory_per_rank``: bytes (a number
+    or text like ``8 GiB``); ``auto`` = half of this machine's memory shared by the ranks."""
+
+    max_blocks: PositiveInt | Literal["auto"] = "auto"
+    max_memory_per_rank: PositiveFloat | str = "auto"
+
+    @field_validator("max_memory_per_rank")
+    @classmethod
+    def _size(cls, v):
+        if v != "auto":
+            from .preflight import parse_bytes
+
+            parse_bytes(v)
+        return v
+
+
 class Scene(Strict):
     name: str = "pdem"
-    gravity: Vec3 = (0.0, 0.0, -9.81)
+    gravity: Vec3Speed = (0.0, 0.0, -9.81)  # m/s2, bounded like a speed
     materials: dict[str, Material] = Field(min_length=1)
     joints: dict[str, Joint] = Field(min_length=1)
     joint_pairs: list[JointPair] = []
@@ -289,6 +320,7 @@ class Scene(Strict):
     output: Output = Output()
     checkpoint: Checkpoint | None = None
     domain: Domain | None = None
+    limits: Limits = Limits()
 
     @field_validator("joints", mode="before")
     @classmethod

@@ -12,6 +12,7 @@ positions) is not stored: it is rebuilt on restart and results do not depend on 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import uuid
 from pathlib import Path
@@ -167,8 +168,59 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
         sub = {fd.name: f[f"subcontacts/{fd.name}"][()] for fd in SUB_CK
                if f"subcontacts/{fd.name}" in f}
         sub.setdefault("sc_hist", np.zeros((int(nsub.sum()), 0)))  # format 1: no law history
+    _validate(path, out["attrs"], out["blocks"], arrays, sub, nsub)
     out["contacts"] = ContactStore(arrays, sub, csr.starts(nsub))
     return out
+
+
+# what a restart reads from the attributes, and the values it can continue from
+_ATTRS = {"step": lambda v: v >= 0, "time": math.isfinite, "dt": lambda v: math.isfinite(v) and v > 0,
+          "alpha": lambda v: math.isfinite(v) and v >= 0, "ratio": math.isfinite,
+          "n_blocks": lambda v: v >= 0}
+# kinematic fields every format has had: a checkpoint without them cannot continue
+_CORE = ("x", "q", "v", "w")
+
+
+def _validate(path, attrs, blocks, arrays, sub, nsub) -> None:
+    """A damaged or foreign checkpoint is refused with what is wrong (found by the fuzz:
+    missing attributes gave KeyError tracebacks, a zero dt a ZeroDivisionError, short datasets
+    IndexErrors deep in the restart)."""
+    for key, ok in _ATTRS.items():
+        if key not in attrs:
+            raise ValueError(f"{path}: attribute {key!r} missing: not a complete checkpoint")
+        try:
+            v = float(attrs[key])
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}: attribute {key!r} is {attrs[key]!r}, not a number") from None
+        if not ok(v):
+            raise ValueError(f"{path}: attribute {key!r} = {v!r} cannot be continued from")
+    for key in ("scene", "run_id"):
+        if not isinstance(attrs.get(key), str):
+            raise ValueError(f"{path}: attribute {key!r} missing: not a complete checkpoint")
+    n = int(attrs["n_blocks"])
+    for k, a in blocks.items():
+        want = (n, *BLOCK_BY_NAME[k].shape)
+        if a.shape != want:
+            raise ValueError(f"{path}: blocks/{k} has shape {a.shape}, expected {want}")
+    for k in _CORE:
+        if not np.isfinite(blocks[k]).all() or (k == "q" and n and
+                                                 not (np.abs(blocks[k]).sum(axis=1) > 0).all()):
+            raise ValueError(f"{path}: blocks/{k} is missing or not finite: cannot continue")
+    nc, ns = len(nsub), int(np.sum(nsub))
+    if (nsub < 0).any():
+        raise ValueError(f"{path}: contacts/nsub has negative counts")
+    for k, a in arrays.items():
+        if len(a) != nc:
+            raise ValueError(f"{path}: contacts/{k} has {len(a)} rows, contacts/nsub {nc}")
+    for fd in SUB_CK:
+        if fd.name not in sub:  # sc_hist alone may be absent (format 1), set by the reader
+            raise ValueError(f"{path}: subcontacts/{fd.name} missing: not a complete checkpoint")
+    for k, a in sub.items():
+        if len(a) != ns:
+            raise ValueError(f"{path}: subcontacts/{k} has {len(a)} rows, expected {ns}")
+    for k in ("ga", "gb"):
+        if nc and not ((arrays[k] >= 0) & (arrays[k] < n)).all():
+            raise ValueError(f"{path}: contacts/{k} names blocks outside 0..{n - 1}")
 
 
 def prune(prefix: str, keep: int, comm) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,17 +72,27 @@ def _random_hull(rng, diameter, nverts):
 def _lattice(region: BoxShape, count: int, cell: float):
     lo = np.array(region.min)
     span = np.array(region.max) - lo
-    dims = np.maximum(np.floor(span / cell).astype(int), 1)
-    if np.prod(dims) < count:
+    per_axis = np.floor(span / cell)
+    if not (per_axis < 2.0**62).all():
+        # found by the fuzz: the cast to int overflowed (a numpy warning and a wrong count)
+        raise ValueError(f"size {cell:g} m is too small for the region ({per_axis.max():.3g} "
+                         "sites along one axis)")
+    dims = np.maximum(per_axis.astype(int), 1)
+    n_sites = math.prod(int(d) for d in dims)  # Python ints: np.prod wraps around silently
+    if n_sites < count:
         raise ValueError(
-            f"region holds only {int(np.prod(dims))} sites of size {cell:g}; count is {count}"
+            f"region holds only {n_sites} sites of size {cell:g}; count is {count}"
         )
+    # the first ``count`` sites only: a large region of small sites has far more (1e18 would
+    # never finish), and the order (x fastest) is the same
     sites = []
     for k in range(dims[2]):
         for j in range(dims[1]):
             for i in range(dims[0]):
+                if len(sites) == count:
+                    return sites
                 sites.append(lo + (np.array([i, j, k]) + 0.5) * span / dims)
-    return sites[:count]
+    return sites
 
 
 def _box(p):

@@ -58,9 +58,9 @@ def test_wrong_type():
 def test_unknown_material_and_duplicate_name():
     text = GOOD.replace("material: rock}\nsolve", "material: granite}\nsolve").replace(
         "name: cube", "name: base")
-    (msg,) = errors_of(text)
-    assert "blocks[1].material: unknown material 'granite'" in msg
-    assert "blocks[1].name: 'base' already names blocks[0]" in msg
+    # one list item each (they shared one, the second without its "  - ")
+    assert errors_of(text) == ["blocks[1].material: unknown material 'granite' (defined: rock)",
+                               "blocks[1].name: 'base' already names blocks[0]"]
 
 
 def test_one_shape_and_one_end_condition():
@@ -82,6 +82,6 @@ def test_missing_file_and_not_a_mapping(tmp_path):
 
 def test_joint_pairs_reference_checks():
     text = GOOD + "joint_pairs: [{groups: [default, nope], joint: weak}]\n"
-    (msg,) = errors_of(text)
-    assert "joint_pairs[0].joint: unknown joint 'weak'" in msg
-    assert "joint_pairs[0].groups: no block has group 'nope'" in msg
+    msgs = errors_of(text)
+    assert msgs[0] == "joint_pairs[0].joint: unknown joint 'weak'"
+    assert msgs[1].startswith("joint_pairs[0].groups: no block has group 'nope'")

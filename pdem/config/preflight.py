@@ -1,0 +1,292 @@
+"""Pre-flight: what a scene will cost and whether it can run, checked before anything is built.
+
+Two stages, both called from :meth:`pdem.state.ModelState.create` (so ``pdem check`` and
+``pdem run`` refuse the same scenes):
+
+* :func:`preflight` reads only the scene: the block count the generators (``array``,
+  ``random``) imply, the contacts and memory per rank that follow, against ``limits:``;
+  physical parameters outside their usual range are logged as warnings.
+* :func:`check_derived` reads the built blocks and resolved values: the timestep is finite
+  and positive, ``time``/dt steps are representable, and gravity does not push a free block
+  deeper into its support than a fraction of its size (a joint far too soft).
+
+Every refusal is a :class:`ConfigError` naming the key path, the number and the limit.
+See docs/limits.md for how the numbers were chosen.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .load import ConfigError
+
+log = logging.getLogger("pdem")
+
+# contacts per block in a dense packing: each block touches 6-14 neighbours, a contact is shared
+# by two blocks; 8 is the upper end of what the example scenes reach (conservative)
+CONTACTS_PER_BLOCK = 8
+# sub-contacts per contact: face-face contacts carry one per vertex of the overlap polygon
+SUBS_PER_CONTACT = 6
+# Python objects per block (BlockSpec, ConvexPolyhedron and its arrays), measured with
+# tracemalloc on 2 500 boxes and 10-vertex random polyhedra: about 2.3 KB, rounded up
+PY_BYTES_PER_BLOCK = 4096
+# a rank holds its owned blocks plus ghosts; a slab of ghosts about as thick as a block on each
+# side of a brick, at most as many again as it owns
+GHOST_FACTOR = 2.0
+# the fraction of physical memory one rank may plan for by default: the rest is the OS, MPI's
+# buffers, HDF5's chunk cache and numba's compiled code
+MEMORY_FRACTION = 0.5
+# static overlap m g / (kn A) beyond this fraction of the block size: the joint is too soft for
+# the load (the contact detection and the common plane assume small overlaps)
+MAX_STATIC_OVERLAP = 0.1
+# time advances by adding dt: past 2**52 steps t + dt == t in double precision, the end time is
+# never reached
+MAX_TIME_STEPS = 2**52
+
+# documented physical ranges: outside them a warning is logged, nothing is refused
+# (name, key path pattern, lo, hi, units, what usual values are)
+STIFFNESS_RANGE = (1.0e6, 1.0e13)  # Pa/m: soft clay-filled joints to intact hard rock
+DENSITY_RANGE = (100.0, 25000.0)  # kg/m3: foams/wood to the densest metals
+GRAVITY_MAX = 100.0  # m/s2: ten g (centrifuge models go further, on purpose)
+
+
+def _bytes_text(n: float) -> str:
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
+_UNITS = {"b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "tb": 1e12,
+          "kib": 2**10, "mib": 2**20, "gib": 2**30, "tib": 2**40}
+
+
+def parse_bytes(value) -> float:
+    """``limits.max_memory_per_rank``: a number of bytes or text like ``8 GiB``, ``500MB``."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected a size like '8 GiB' (got {value!r})")
+    if isinstance(value, int | float):
+        n = float(value)
+    else:
+        text = str(value).strip().lower().replace(" ", "")
+        num = text.rstrip("kmgtib")
+        unit = text[len(num):] or "b"
+        if unit not in _UNITS:
+            raise ValueError(f"unknown unit {unit!r} (use B, kB, MB, GB, TB, KiB, MiB, GiB, TiB)")
+        try:
+            n = float(num) * _UNITS[unit]
+        except ValueError:
+            raise ValueError(f"expected a size like '8 GiB' (got {value!r})") from None
+    if not (math.isfinite(n) and n > 0):
+        raise ValueError(f"must be a finite size > 0 (got {value!r})")
+    return n
+
+
+def machine_memory() -> float:
+    """Physical memory of this machine in bytes (inf when the OS does not say)."""
+    try:
+        return float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return math.inf
+
+
+def _shape_size(block) -> tuple[int, int, int, int]:
+    """(blocks, vertices, faces, edges) per entry; polytope counts from Euler's V - E + F = 2
+    with the worst case of triangular faces (E = 3V - 6, F = 2V - 4)."""
+    kind = block.shape_kind
+    p = getattr(block, kind)
+    if kind in ("box", "array"):
+        n = math.prod(p.count) if kind == "array" else 1
+        return n, 8, 6, 12
+    if kind == "random":
+        v = p.vertices
+        return p.count, v, 2 * v - 4, 3 * v - 6
+    v = {"polyhedron": lambda: len(p.vertices), "prism": lambda: 2 * len(p.base),
+         "planes": lambda: 2 * len(p.normals)}[kind]()
+    return 1, v, max(2 * v - 4, 4), max(3 * v - 6, 6)
+
+
+def _row_bytes(fields) -> int:
+    return sum(f.width * np.dtype(f.dtype).itemsize for f in fields)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    blocks: int
+    contacts: int  # per rank
+    bytes_per_rank: float
+    max_blocks: int
+    max_bytes: float
+
+    def __str__(self) -> str:
+        return (f"{self.blocks} blocks, ~{self.contacts} contacts and ~"
+                f"{_bytes_text(self.bytes_per_rank)} per rank (limits: {self.max_blocks} blocks, "
+                f"{_bytes_text(self.max_bytes)} per rank)")
+
+
+def estimate(scene, comm_size: int, memory: float | None = None
+             ) -> tuple[Estimate, list[tuple[int, int]]]:
+    """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry.
+    ``memory``: the physical memory to plan for (default: this machine's)."""
+    from ..model.fields import BLOCK, CONTACT, SUB
+
+    block_row = _row_bytes(BLOCK)
+    contact_row = _row_bytes(CONTACT) + SUBS_PER_CONTACT * _row_bytes(SUB)
+    per_entry = []
+    n_total = 0
+    static_bytes = 0.0  # the whole static model lives on every rank (built by gid)
+    for i, b in enumerate(scene.blocks):
+        n, v, f, e = _shape_size(b)
+        per_entry.append((i, n))
+        n_total += n
+        # vertices local + world, face normals/offsets/starts, face vertex lists (2E), edges,
+        # edge directions; plus the block row and its Python objects
+        geom = 8 * (6 * v + 6 * f + 2 * e + 2 * e + 3 * e + 4)
+        static_bytes += float(n) * (geom + block_row + PY_BYTES_PER_BLOCK)
+    share = n_total / max(comm_size, 1)
+    contacts = math.ceil(share * CONTACTS_PER_BLOCK / 2)
+    avg_block = static_bytes / max(n_total, 1)
+    # the rank's own store: its blocks, plus ghosts when there are other ranks
+    local = 1.0 + (GHOST_FACTOR - 1.0 if comm_size > 1 else 0.0)
+    per_rank = static_bytes + share * local * avg_block + contacts * contact_row
+    lim = scene.limits
+    memory = machine_memory() if memory is None else memory
+    max_bytes = (MEMORY_FRACTION * memory / max(comm_size, 1)
+                 if lim.max_memory_per_rank == "auto" else parse_bytes(lim.max_memory_per_rank))
+    if lim.max_blocks == "auto":
+        # the count whose estimate fits the memory limit (every rank holds the static model)
+        per_block = avg_block * (1.0 + local / max(comm_size, 1)) \
+            + CONTACTS_PER_BLOCK / 2 * contact_row / max(comm_size, 1)
+        max_blocks = int(min(max_bytes / per_block, 2**62)) if math.isfinite(max_bytes) else 2**62
+    else:
+        max_blocks = int(lim.max_blocks)
+    return Estimate(n_total, contacts, per_rank, max_blocks, max_bytes), per_entry
+
+
+def _generator_text(b) -> str:
+    if b.shape_kind == "array":
+        c = b.array.count
+        return f".array.count: {c[0]} x {c[1]} x {c[2]} = {math.prod(c):.4g} blocks"
+    if b.shape_kind == "random":
+        return f".random.count: {b.random.count:.4g} blocks"
+    return ""
+
+
+def preflight(scene, comm_size: int, memory: float | None = None, warn: bool = True) -> Estimate:
+    """Refuse a scene too large for ``limits:`` before any block is made; log warnings for
+    physical parameters outside their usual ranges (``warn``: on one rank only). Every rank
+    must decide alike (or the others wait forever): give them the same ``memory``."""
+    est, per_entry = estimate(scene, comm_size, memory)
+    if est.blocks > est.max_blocks or est.bytes_per_rank > est.max_bytes:
+        big = sorted(per_entry, key=lambda t: -t[1])[:3]
+        where = "; ".join(f"blocks[{i}] ({scene.blocks[i].name!r}){_generator_text(scene.blocks[i])}"
+                          for i, n in big if n > 1) or f"{len(scene.blocks)} entries"
+        msgs = []
+        explicit = scene.limits.max_blocks != "auto"
+        # the memory message says more (the bytes and the blocks) unless max_blocks was given
+        if est.blocks > est.max_blocks and (explicit or est.bytes_per_rank <= est.max_bytes):
+            src = "auto: what fits in limits.max_memory_per_rank" if scene.limits.max_blocks \
+                == "auto" else "limits.max_blocks"
+            msgs.append(f"limits.max_blocks: the scene makes {est.blocks:.4g} blocks, more than "
+                        f"the limit {est.max_blocks:.4g} ({src}); from {where}")
+        else:
+            src = (f"auto: {MEMORY_FRACTION:g} x this machine's memory / {comm_size} ranks"
+                   if scene.limits.max_memory_per_rank == "auto" else "limits.max_memory_per_rank")
+            msgs.append(f"limits.max_memory_per_rank: the scene needs ~{_bytes_text(est.bytes_per_rank)}"
+                        f" per rank ({est.blocks:.4g} blocks, ~{est.contacts:.4g} contacts per rank), more "
+                        f"than the limit {_bytes_text(est.max_bytes)} ({src}); from {where}")
+        raise ConfigError(msgs)
+    if warn:
+        _warn_ranges(scene)
+    return est
+
+
+def _warn_ranges(scene) -> None:
+    lo, hi = STIFFNESS_RANGE
+    for name, j in scene.joints.items():
+        for key in ("kn", "ks"):
+            v = getattr(j, key)
+            if not lo <= v <= hi:
+                log.warning("joints.%s.%s = %.4g Pa/m is outside the usual range %.0e-%.0e Pa/m "
+                            "(docs/limits.md)", name, key, v, lo, hi)
+    lo, hi = DENSITY_RANGE
+    for name, m in scene.materials.items():
+        if not lo <= m.density <= hi:
+            log.warning("materials.%s.density = %.4g kg/m3 is outside the usual range %g-%g kg/m3"
+                        " (docs/limits.md)", name, m.density, lo, hi)
+    g = math.hypot(*scene.gravity)
+    if g > GRAVITY_MAX:
+        log.warning("gravity: |g| = %.4g m/s2 is more than %g m/s2 (docs/limits.md)", g, GRAVITY_MAX)
+
+
+def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool = True) -> None:
+    """Refuse what the built model makes impossible: no usable timestep, an end time that
+    double precision cannot reach, free blocks sinking into their support under gravity."""
+    if not (math.isfinite(dt) and dt > 0.0):
+        name = max(scene.joints, key=lambda j: max(scene.joints[j].kn, scene.joints[j].ks))
+        j = scene.joints[name]
+        raise ConfigError([
+            f"solve.timestep: the timestep is {dt:.4g} s, not a usable step; the stiffest "
+            f"joint (joints.{name}: kn={j.kn:.4g}, ks={j.ks:.4g} Pa/m) "
+            f"overflows the stability estimate (usual range {STIFFNESS_RANGE[0]:.0e}-"
+            f"{STIFFNESS_RANGE[1]:.0e} Pa/m)"])
+    if scene.solve.time is not None:
+        steps = scene.solve.time / dt
+        if not steps <= MAX_TIME_STEPS:
+            raise ConfigError([
+                f"solve.time: {scene.solve.time:.4g} s at dt={dt:.4g} s is {steps:.4g} steps, "
+                f"more than {MAX_TIME_STEPS:.4g} (beyond it t + dt == t in double precision)"])
+        if warn and scene.solve.max_steps is not None and steps > scene.solve.max_steps:
+            log.warning("solve.time: %.4g s at dt=%.4g s is %.4g steps; the run stops at "
+                        "solve.max_steps=%d before reaching it", scene.solve.time, dt, steps,
+                        scene.solve.max_steps)
+    _check_static_overlap(scene, specs, glob, joints, group_names)
+
+
+def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
+    """m g / (kn A) of each free block resting on its largest face, with the softest joint its
+    group can touch, against MAX_STATIC_OVERLAP of its size (cube root of the volume)."""
+    free = np.nonzero(glob.fixed == 0)[0]
+    if len(free) == 0:
+        return
+    load = np.linalg.norm(glob.mass[free, None] * np.array(scene.gravity, float)
+                          + glob.applied_force[free], axis=1)
+    if not load.any():
+        return
+    # softest joint per group: any pair this group is part of (joint_table's rows by group)
+    soft = _softest_kn_per_group(scene, joints, group_names)
+    worst, worst_b, worst_vals = 0.0, -1, None
+    for n, b in enumerate(free):
+        s = specs[b].shape
+        area = max(s.face_area(f) for f in range(s.n_faces))
+        size = s.volume ** (1.0 / 3.0)
+        kn, jname = soft[int(glob.group[b])]
+        overlap = load[n] / (kn * area)
+        frac = overlap / size
+        if frac > worst:
+            worst, worst_b, worst_vals = frac, b, (load[n], kn, jname, area, overlap, size)
+    if worst > MAX_STATIC_OVERLAP:
+        f, kn, jname, area, overlap, size = worst_vals
+        raise ConfigError([
+            f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[worst_b].name!r} "
+            f"(blocks[{specs[worst_b].entry}]): its static overlap m g / (kn A) = {f:.4g} N / "
+            f"({kn:.4g} Pa/m x {area:.4g} m2) = {overlap:.4g} m is {worst:.3g} of its size "
+            f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g} (docs/limits.md)"])
+
+
+def _softest_kn_per_group(scene, joints, group_names) -> list[tuple[float, str]]:
+    names = list(scene.joints)
+    out = []
+    for g in group_names:
+        cands = [jp.joint for jp in scene.joint_pairs if g in jp.groups]
+        if "default" in scene.joints:
+            cands.append("default")
+        cands = cands or names
+        best = min(cands, key=lambda j: scene.joints[j].kn)
+        out.append((float(scene.joints[best].kn), f"joints.{best}"))
+    return out
