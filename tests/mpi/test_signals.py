@@ -33,6 +33,12 @@ output: {{file: {out}, every_steps: 500}}
 """
 FIELDS = ("centroid", "orientation", "velocity", "angular_velocity")
 PDEM = ["-m", "pdem.cli"]
+# pdem run, recording each rank's exit status in the directory given first: the statuses the
+# ranks return are pdem's contract; what the launcher reports is MPICH's
+RECORDING = ["-c", "import os, sys\nfrom mpi4py import MPI\nimport pdem.cli\n"
+             "rc = pdem.cli.main(sys.argv[2:])\n"
+             "open(os.path.join(sys.argv[1], f'rc-{MPI.COMM_WORLD.rank}'), 'w').write(str(rc))\n"
+             "sys.exit(rc)\n"]
 
 
 def signalled_job(n, argv, signum, delay=0.5, timeout=300.0):
@@ -72,10 +78,14 @@ def test_sigterm_stops_all_ranks_with_a_checkpoint_that_restarts_bitwise(tmp_pat
         scene = f"{d}/scene.yaml"
         with open(scene, "w") as f:
             f.write(SCENE.format(out=f"{d}/run.h5"))
-        rc, out = signalled_job(2, [*PDEM, "run", scene], signal.SIGTERM)
-        found = re.search(r"pdem: stopped by SIGTERM at step (\d+) \(t = \S+ s\); continue with: "
-                          r"pdem restart (\S+)\n", out)
-        assert rc == 128 + signal.SIGTERM and found, f"exit {rc}:\n{out}"
+        pattern = (r"pdem: stopped by SIGTERM at step (\d+) \(t = \S+ s\); continue with: "
+                   r"pdem restart (\S+)\n")
+        rc, out = signalled_job(2, [*RECORDING, d, "run", scene], signal.SIGTERM)
+        found = re.search(pattern, out)
+        ranks = [open(f"{d}/rc-{r}").read() for r in range(2)]
+        # every rank exits 143; hydra passes that on, but on an oversubscribed machine it was
+        # seen to report 0 when it received the signal itself (docs/limits.md)
+        assert ranks == ["143", "143"] and rc in (143, 0) and found, f"exit {rc} {ranks}:\n{out}"
         step, ck = int(found[1]), found[2]
         print(f"stopped at step {step}, exit status {rc}")
         assert ck == f"{d}/run-stop-{step:09d}.h5" and os.path.exists(ck), out
