@@ -76,7 +76,7 @@ class ModelState:
         memory = min(allgather(comm, machine_memory()))
         warn = comm.rank == 0
         estimate = preflight(scene, comm.size, memory, warn)
-        specs = expand_blocks(scene)
+        specs = expand_blocks(scene, estimate.max_blocks)
         glob, group_names = block_store(scene, specs)
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)
@@ -162,14 +162,18 @@ class ModelState:
         g = self.glob
         tol = self.resolved.overlap_tolerance
         cells = CellSpace(g.lo, g.hi, self.resolved.cell_size)
-        pi, pj = cells.candidates(g.lo, g.hi, np.ones(g.n, np.uint8))
-        if len(pi) == 0:
+        qi, qj = cells.candidates(g.piece_lo, g.piece_hi, np.ones(g.n_pieces, np.uint8))
+        other = g.piece_block[qi] != g.piece_block[qj]  # a joined block's pieces touch
+        qi, qj = qi[other], qj[other]
+        if len(qi) == 0:
             return
+        pi, pj = g.piece_block[qi], g.piece_block[qj]
         probe = ContactStore.empty(self.joints.hist_width).with_new_pairs(
-            pi, pj, g.gid[pi], g.gid[pj], np.zeros(len(pi), np.int32))
+            ia=pi, ib=pj, ka=qi, kb=qj, ga=g.gid[pi], gb=g.gid[pj], pga=g.piece_gid[qi],
+            pgb=g.piece_gid[qj], joint=np.zeros(len(pi), np.int32))
         a = probe.arrays
-        planes = Planes(a["ia"], a["ib"], a["normal"], a["point"], a["gap"], a["ctype"],
-                        a["warm"])
+        planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
+                        a["ctype"], a["warm"])
         shapes = g.shapes()._replace(point_area=np.ones(g.n))
         keep = refresh_contacts(g.x, g.R, shapes, planes, np.zeros(probe.n + 1, np.int64),
                                 probe.subs(), np.ones(probe.n, np.uint8), 1e300, TOUCH_FRACTION,

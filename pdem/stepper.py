@@ -22,9 +22,10 @@ from .config.resolve import TOUCH_FRACTION
 from .contact import forces
 from .contact.detect import Planes, refresh_contacts
 from .contact.forces import contact_energies, contact_forces
+from .contact.joint_sets import set_joints
 from .contact.rigid import Bodies
 from .dynamics import motion
-from .dynamics.kinematics import envelopes, rotation_matrices, world_vertices
+from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
 from .model.contacts import ContactStore
 from .model.csr import pair_key
@@ -76,38 +77,46 @@ class Stepper:
             return 0
         if s.cells is None:
             return 0
-        envelopes(b.vert_start, b.verts_world, 0.5 * s.ctol, b.lo, b.hi)
+        update_envelopes(b, 0.5 * s.ctol)
         # Every search maps all blocks afresh, so a grown cell space needs no extra remap; which
         # pairs are found depends only on the envelopes, never on the cell layout (a rank's
         # cell space differs from another's, the contacts they create must not).
         gone = b.out == 2
         if gone.any():  # deleted blocks: an inverted envelope meets nothing and maps nowhere
             s.cells.grow_to(b.lo[~gone], b.hi[~gone])
-            b.lo[gone] = s.cells.hi + 1.0
-            b.hi[gone] = s.cells.origin - 1.0
+            pgone = gone[b.piece_block]
+            b.piece_lo[pgone] = s.cells.hi + 1.0
+            b.piece_hi[pgone] = s.cells.origin - 1.0
         else:
             s.cells.grow_to(b.lo, b.hi)
         moving = active & (b.fixed == 0) if s.step > 0 else active
-        pi, pj = s.cells.candidates(b.lo, b.hi, moving.astype(np.uint8))
+        # candidates are pairs of convex pieces; pieces of one block never touch each other
+        qi, qj = s.cells.candidates(b.piece_lo, b.piece_hi,
+                                    moving[b.piece_block].astype(np.uint8))
         b.u_acc[active] = 0.0
+        pi, pj = b.piece_block[qi], b.piece_block[qj]
+        other = pi != pj
+        qi, qj, pi, pj = qi[other], qj[other], pi[other], pj[other]
         if len(pi) == 0:
             return 0
-        gi, gj = b.gid[pi], b.gid[pj]
+        gi, gj = b.piece_gid[qi], b.piece_gid[qj]
         # this rank computes the contacts in which it owns a free block
         mine = ((b.owned[pi] == 1) & (b.fixed[pi] == 0)) | ((b.owned[pj] == 1) & (b.fixed[pj] == 0))
         new = ~np.isin(pair_key(gi, gj), s.contacts.keys()) & mine
         if not new.any():
             return 0
-        pi, pj, gi, gj = pi[new], pj[new], gi[new], gj[new]
+        qi, qj, gi, gj = qi[new], qj[new], gi[new], gj[new]
         swap = gi > gj
-        ia = np.where(swap, pj, pi)
-        ib = np.where(swap, pi, pj)
-        ga, gb = b.gid[ia], b.gid[ib]
-        _, first = np.unique(pair_key(ga, gb), return_index=True)
-        ia, ib, ga, gb = ia[first], ib[first], ga[first], gb[first]
+        ka = np.where(swap, qj, qi)
+        kb = np.where(swap, qi, qj)
+        pga, pgb = b.piece_gid[ka], b.piece_gid[kb]
+        _, first = np.unique(pair_key(pga, pgb), return_index=True)
+        ka, kb, pga, pgb = ka[first], kb[first], pga[first], pgb[first]
+        ia, ib = b.piece_block[ka], b.piece_block[kb]
         joint = s.joints.pair[b.group[ia], b.group[ib]].astype(np.int32)
         before = s.contacts.n
-        s.contacts = s.contacts.with_new_pairs(ia, ib, ga, gb, joint)
+        s.contacts = s.contacts.with_new_pairs(ia=ia, ib=ib, ka=ka, kb=kb, ga=b.gid[ia],
+                                               gb=b.gid[ib], pga=pga, pgb=pgb, joint=joint)
         return s.contacts.n - before
 
     def refresh(self, all_contacts: bool, periodic: bool = False):
@@ -128,15 +137,20 @@ class Stepper:
             todo |= c.moved > s.resolved.refresh_tolerance
         c.moved[todo] = 0.0
         a = c.arrays
-        planes = Planes(a["ia"], a["ib"], a["normal"], a["point"], a["gap"], a["ctype"],
-                        a["warm"])
+        planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
+                        a["ctype"], a["warm"])
         joints = s.joints.kernel_args
         # only updated contacts can change their stored energy (the others are copied)
         todo = todo.astype(np.uint8)
         before = contact_energies(c.pairs(), c.subs(), joints, todo)
+        new = (c.warm == 0).astype(np.uint8)
         res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
                                todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm)
         keep, start, pa, area, un, fs, us, dil, state, hist = res
+        if s.joints.by_set and new.any():  # a new contact on a joint plane: the set's joint
+            set_joints(new & keep, c.ia, c.ib, c.ka, c.kb, c.normal, b.x, b.R, b.face_start,
+                       b.normals_local, b.offsets_local, b.face_tag, s.joints.cut_joint,
+                       s.ctol, c.joint)
         # normal forces of refreshed sub-contacts are recomputed by the next force update
         sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fn": np.zeros(len(area)),
                "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
@@ -187,7 +201,7 @@ class Stepper:
             periodic = s.step % s.scene.contact.detect_every == 0
             created = 0
             if active.any() or periodic:
-                world_vertices(b.x, b.R, b.vert_start, b.verts_local, b.verts_world)
+                update_world_vertices(b)
                 created = self.search(active) if active.any() else 0
         with tm.phase("contacts"):
             if periodic:

@@ -262,9 +262,8 @@ def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
     soft = _softest_kn_per_group(scene, joints, group_names)
     worst, worst_b, worst_vals = 0.0, -1, None
     for n, b in enumerate(free):
-        s = specs[b].shape
-        area = max(s.face_area(f) for f in range(s.n_faces))
-        size = s.volume ** (1.0 / 3.0)
+        area = float(specs[b].face_areas.max())
+        size = specs[b].volume ** (1.0 / 3.0)
         kn, jname = soft[int(glob.group[b])]
         overlap = load[n] / (kn * area)
         frac = overlap / size

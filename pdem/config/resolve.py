@@ -54,7 +54,7 @@ class Resolved:
 
 def block_sizes(specs) -> np.ndarray:
     """Equivalent size (cube root of the volume) of every block, gid order."""
-    return np.array([s.shape.volume for s in specs]) ** (1.0 / 3.0)
+    return np.array([s.volume for s in specs]) ** (1.0 / 3.0)
 
 
 def _estimated_stiffness(specs, joints) -> np.ndarray:
@@ -62,7 +62,7 @@ def _estimated_stiffness(specs, joints) -> np.ndarray:
     cube): the timestep must be stable before the first contact forms, and must not depend
     on which contacts a rank holds."""
     kmax = float(np.maximum(joints.kn, joints.ks).max())
-    surf = np.array([sum(s.shape.face_area(f) for f in range(s.shape.n_faces)) for s in specs])
+    surf = np.array([s.face_areas.sum() for s in specs])
     # an absurd stiffness overflows to inf (dt = 0), refused by preflight.check_derived with
     # the joint named; numpy's warning would only add noise before that message
     with np.errstate(over="ignore"):

@@ -156,6 +156,72 @@ class Block(Strict):
 SHAPE_KEYS = ("box", "polyhedron", "prism", "planes", "array", "random")
 
 
+class CutRange(Strict):
+    """Which blocks a cut applies to: those whose centroid lies in ``box``."""
+
+    box: BoxShape
+
+
+class Cut(Strict):
+    """A joint set (parallel planes) cutting the blocks, 3DEC's ``block cut joint-set``.
+    x = east, y = north, z = up; ``dip`` below horizontal, ``dip_direction`` clockwise from
+    north; ``origin`` lies on one plane; ``spacing`` between planes (omit: one plane);
+    ``count`` planes on each side of ``origin`` (default: as many as cross the blocks)."""
+
+    name: str
+    dip: Annotated[float, Field(ge=0.0, le=90.0)]
+    dip_direction: Annotated[float, Field(ge=-360.0, le=720.0)]
+    origin: Vec3
+    spacing: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)] | None = None
+    count: Annotated[int, Field(ge=0, le=1_000_000)] | None = None
+    joint: str | None = None
+    range: CutRange | None = None
+    groups: list[str] | None = None
+
+    @model_validator(mode="after")
+    def _count_needs_spacing(self):
+        if self.count and self.spacing is None:
+            raise ValueError("count needs a spacing")
+        return self
+
+
+class CylinderRegion(Strict):
+    """A polygonal cylinder (a tunnel): ``sides`` faces, corners on the circle of
+    ``radius`` around the axis from ``start`` to ``end``."""
+
+    start: Vec3
+    end: Vec3
+    radius: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)]
+    sides: Annotated[int, Field(ge=3, le=720)] = 24
+
+
+class Excavation(Strict):
+    """A convex region removed from the model (3DEC's ``block excavate``): blocks inside go,
+    straddling blocks are cut by its surface and keep their outside as one (concave) block.
+    ``time``: model time of the excavation (0: before the run starts); until then the inside
+    pieces stay in the model as blocks of their own."""
+
+    cylinder: CylinderRegion | None = None
+    box: BoxShape | None = None
+    planes: PlanesShape | None = None
+    time: Annotated[float, Field(ge=0.0)] = 0.0
+
+    @model_validator(mode="after")
+    def _one_region(self):
+        given = [k for k in REGION_KEYS if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one region of " + ", ".join(REGION_KEYS)
+                             + f" (got {given or 'none'})")
+        return self
+
+    @property
+    def region_kind(self) -> str:
+        return next(k for k in REGION_KEYS if getattr(self, k) is not None)
+
+
+REGION_KEYS = ("cylinder", "box", "planes")
+
+
 class Timestep(Strict):
     """Automatic step ``frac * 2 sqrt(M_min / K_max)`` (eq. 87) unless ``dt`` is fixed."""
 
@@ -314,6 +380,10 @@ class Scene(Strict):
     joints: dict[str, Joint] = Field(min_length=1)
     joint_pairs: list[JointPair] = []
     blocks: list[Block] = Field(min_length=1)
+    cuts: list[Cut] = []
+    cut_tolerance: Annotated[float, Field(ge=0.0, le=LENGTH_MAX)] | Literal["auto"] = "auto"
+    join: list[Annotated[list[str], Field(min_length=2)]] = []
+    excavate: list[Excavation] = []
     contact: Contact = Contact()
     parallel: Parallel = Parallel()
     solve: Solve
@@ -357,6 +427,14 @@ class Scene(Strict):
                         f"joint_pairs[{i}].groups: no block has group {g!r} "
                         f"(groups: {', '.join(sorted(groups))})"
                     )
+        for i, c in enumerate(self.cuts):
+            if c.joint is not None and c.joint not in self.joints:
+                errors.append(f"cuts[{i}].joint: unknown joint {c.joint!r} "
+                              f"(defined: {', '.join(sorted(self.joints))})")
+            for g in c.groups or ():
+                if g not in groups:
+                    errors.append(f"cuts[{i}].groups: no block has group {g!r} "
+                                  f"(groups: {', '.join(sorted(groups))})")
         for i, h in enumerate(self.output.histories):
             if h.block not in names and not _is_family_member(h.block, names):
                 errors.append(f"output.histories[{i}].block: unknown block {h.block!r}")

@@ -26,15 +26,18 @@ from .laws import FAILED
 from .subcontacts import POLYGON, contact_region
 
 # The contact arrays the geometry update reads and writes.
-Planes = namedtuple("Planes", "ia ib normal point gap ctype warm")
+# ``ia``/``ib`` are the bodies (block rows), ``ka``/``kb`` the convex pieces in contact.
+Planes = namedtuple("Planes", "ia ib ka kb normal point gap ctype warm")
 
 
 @kernel
-def _plane(a, b, x, shapes, normals_world, edirs_world, n_in, p_in, warm, alg):
-    """Common plane of blocks a and b, world face normals and edge directions precomputed."""
+def _plane(a, b, shapes, normals_world, edirs_world, n_in, p_in, warm, alg):
+    """Common plane of convex pieces a and b, world face normals and edge directions
+    precomputed."""
     vs, fs, es = shapes.vert_start, shapes.face_start, shapes.edir_start
     va = shapes.verts_world[vs[a]:vs[a + 1]]
     vb = shapes.verts_world[vs[b]:vs[b + 1]]
+    x = shapes.piece_x
     return find_plane(alg, va, vb, x[a], x[b], normals_world[fs[a]:fs[a + 1]],
                       normals_world[fs[b]:fs[b + 1]], edirs_world[es[a]:es[a + 1]],
                       edirs_world[es[b]:es[b + 1]], n_in, p_in, warm)
@@ -111,6 +114,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     periodic geometry updates). ``alg``: the common-plane algorithm (:mod:`.algorithms`).
     """
     c_ia, c_ib, c_normal, c_point = planes.ia, planes.ib, planes.normal, planes.point
+    c_ka, c_kb = planes.ka, planes.kb
     c_gap, c_ctype, c_warm = planes.gap, planes.ctype, planes.warm
     old_pa, old_area, old_un, old_fs = old.pa, old.area, old.un, old.fs
     old_us, old_dil, old_state, old_hist = old.us, old.dil, old.state, old.hist
@@ -128,15 +132,16 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     dil = np.empty(cap)
     state = np.empty(cap, np.int64)
     hist = np.empty((cap, old_hist.shape[1]))
-    # world face normals and edge directions, once per block (each block is in many contacts)
+    # world face normals and edge directions, once per piece (each is in many contacts)
     rows = np.zeros(vert_start.shape[0] - 1, np.uint8)
     if uses_face_normals(alg):
         for c in range(nc):
             if todo[c] != 0:
-                rows[c_ia[c]] = 1
-                rows[c_ib[c]] = 1
-    normals_world = world_vectors(R, shapes.face_start, shapes.normals_local, rows)
-    edirs_world = world_vectors(R, shapes.edir_start, shapes.edirs_local, rows)
+                rows[c_ka[c]] = 1
+                rows[c_kb[c]] = 1
+    pb = shapes.piece_block
+    normals_world = world_vectors(R, pb, shapes.face_start, shapes.normals_local, rows)
+    edirs_world = world_vectors(R, pb, shapes.edir_start, shapes.edirs_local, rows)
     pos = 0
     for c in range(nc):
         a = c_ia[c]
@@ -166,7 +171,9 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
             counts[c] = k
             pos += k
             continue
-        n, p, gap = _plane(a, b, x, shapes, normals_world, edirs_world, c_normal[c],
+        ka = c_ka[c]
+        kb = c_kb[c]
+        n, p, gap = _plane(ka, kb, shapes, normals_world, edirs_world, c_normal[c],
                            c_point[c], c_warm[c] == 1, alg)
         if gap > ctol:
             continue
@@ -175,8 +182,8 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         c_point[c] = p
         c_gap[c] = gap
         c_warm[c] = 1
-        va = verts_world[vert_start[a]:vert_start[a + 1]]
-        vb = verts_world[vert_start[b]:vert_start[b + 1]]
+        va = verts_world[vert_start[ka]:vert_start[ka + 1]]
+        vb = verts_world[vert_start[kb]:vert_start[kb + 1]]
         pts, ovl, ar, kind, e1, e2, cnt = contact_region(va, vb, n, p, touch_frac * ctol)
         c_ctype[c] = type_code(cnt[0], cnt[1])  # Table 1
         apt = min(point_area[a], point_area[b])

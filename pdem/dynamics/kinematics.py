@@ -19,24 +19,31 @@ def rotation_matrices(q, out):
 
 
 @kernel
-def world_vertices(x, R, vert_start, verts_local, verts_world):
-    """World vertices from the pose (no drift: always from the body-frame geometry)."""
-    for b in range(vert_start.shape[0] - 1):
-        for v in range(vert_start[b], vert_start[b + 1]):
+def world_vertices(x, R, piece_block, piece_center, piece_x, vert_start, verts_local,
+                   verts_world):
+    """World piece centres and vertices from the pose (no drift: always from the body-frame
+    geometry). A one-piece block's centre offset is zero, so its piece centre is x exactly."""
+    for p in range(piece_block.shape[0]):
+        b = piece_block[p]
+        for k in range(3):
+            piece_x[p, k] = x[b, k] + R[b, k, 0] * piece_center[p, 0] + \
+                R[b, k, 1] * piece_center[p, 1] + R[b, k, 2] * piece_center[p, 2]
+        for v in range(vert_start[p], vert_start[p + 1]):
             for k in range(3):
                 verts_world[v, k] = x[b, k] + R[b, k, 0] * verts_local[v, 0] + \
                     R[b, k, 1] * verts_local[v, 1] + R[b, k, 2] * verts_local[v, 2]
 
 
 @kernel
-def world_vectors(R, start, local, rows):
-    """Body-frame vectors (CSR by block, ``start``) rotated to the world, for the blocks with
-    ``rows[b] != 0`` (others are left uninitialised)."""
+def world_vectors(R, piece_block, start, local, rows):
+    """Body-frame vectors (CSR by piece, ``start``) rotated to the world, for the pieces with
+    ``rows[p] != 0`` (others are left uninitialised)."""
     out = np.empty_like(local)
-    for b in range(start.shape[0] - 1):
-        if rows[b] == 0:
+    for p in range(start.shape[0] - 1):
+        if rows[p] == 0:
             continue
-        for f in range(start[b], start[b + 1]):
+        b = piece_block[p]
+        for f in range(start[p], start[p + 1]):
             for k in range(3):
                 out[f, k] = R[b, k, 0] * local[f, 0] + R[b, k, 1] * local[f, 1] \
                     + R[b, k, 2] * local[f, 2]
@@ -44,26 +51,48 @@ def world_vectors(R, start, local, rows):
 
 
 @kernel
-def envelopes(vert_start, verts_world, pad, lo, hi):
-    """Axis-aligned envelope of each block, enlarged by ``pad`` on every side."""
-    for b in range(vert_start.shape[0] - 1):
+def envelopes(piece_block, vert_start, verts_world, pad, piece_lo, piece_hi, lo, hi):
+    """Axis-aligned envelope of each piece and of each block (the union of its pieces'),
+    enlarged by ``pad`` on every side."""
+    for b in range(lo.shape[0]):
         for k in range(3):
             lo[b, k] = np.inf
             hi[b, k] = -np.inf
-        for v in range(vert_start[b], vert_start[b + 1]):
+    for p in range(piece_block.shape[0]):
+        b = piece_block[p]
+        for k in range(3):
+            piece_lo[p, k] = np.inf
+            piece_hi[p, k] = -np.inf
+        for v in range(vert_start[p], vert_start[p + 1]):
             for k in range(3):
                 c = verts_world[v, k]
-                if c < lo[b, k]:
-                    lo[b, k] = c
-                if c > hi[b, k]:
-                    hi[b, k] = c
+                if c < piece_lo[p, k]:
+                    piece_lo[p, k] = c
+                if c > piece_hi[p, k]:
+                    piece_hi[p, k] = c
         for k in range(3):
-            lo[b, k] -= pad
-            hi[b, k] += pad
+            piece_lo[p, k] -= pad
+            piece_hi[p, k] += pad
+            if piece_lo[p, k] < lo[b, k]:
+                lo[b, k] = piece_lo[p, k]
+            if piece_hi[p, k] > hi[b, k]:
+                hi[b, k] = piece_hi[p, k]
+
+
+def update_world_vertices(blocks) -> None:
+    """World piece centres and vertices of every row of ``blocks`` from x and R."""
+    world_vertices(blocks.x, blocks.R, blocks.piece_block, blocks.piece_center, blocks.piece_x,
+                   blocks.vert_start, blocks.verts_local, blocks.verts_world)
+
+
+def update_envelopes(blocks, pad: float) -> None:
+    """Piece and block envelopes of every row of ``blocks`` from the world vertices."""
+    envelopes(blocks.piece_block, blocks.vert_start, blocks.verts_world, pad, blocks.piece_lo,
+              blocks.piece_hi, blocks.lo, blocks.hi)
 
 
 def refresh_pose(blocks, pad: float) -> None:
     """R, world vertices and envelopes of every row of ``blocks`` from x and q."""
     rotation_matrices(blocks.q, blocks.R)
-    world_vertices(blocks.x, blocks.R, blocks.vert_start, blocks.verts_local, blocks.verts_world)
-    envelopes(blocks.vert_start, blocks.verts_world, pad, blocks.lo, blocks.hi)
+    update_world_vertices(blocks)
+    update_envelopes(blocks, pad)

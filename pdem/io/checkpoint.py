@@ -27,8 +27,9 @@ from ..parallel.mpi import allgather, barrier, gather
 
 FORMAT = "checkpoint"
 # 2: contact rows (ia, ib) no longer stored, joint-law history columns (subcontacts/sc_hist),
-# the resolved scene values and the plugins' restart state as attributes. 1 still reads.
-FORMAT_VERSION = 2
+# the resolved scene values and the plugins' restart state as attributes. 3: contacts name
+# their convex pieces (pga, pgb: joined blocks). 1 and 2 still read.
+FORMAT_VERSION = 3
 CONTACT_CK = select(CONTACT, checkpoint=True)
 SUB_CK = select(SUB, checkpoint=True) + (SUB_HIST,)
 
@@ -162,7 +163,14 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
                          np.zeros((n_blocks, *BLOCK_BY_NAME[k].shape), BLOCK_BY_NAME[k].dtype)
                          for k in CHECKPOINT}
         nsub = f["contacts/nsub"][()]
-        arrays = {fd.name: f[f"contacts/{fd.name}"][()] for fd in CONTACT_CK}
+        arrays = {fd.name: f[f"contacts/{fd.name}"][()] for fd in CONTACT_CK
+                  if f"contacts/{fd.name}" in f}
+        for piece, block in (("pga", "ga"), ("pgb", "gb")):
+            if piece not in arrays and block in arrays:  # format <= 2: every block one piece
+                arrays[piece] = arrays[block].copy()
+        missing = [fd.name for fd in CONTACT_CK if fd.name not in arrays]
+        if missing:
+            raise ValueError(f"{path}: contacts/{missing[0]} missing: not a complete checkpoint")
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed
             arrays.setdefault(fd.name, np.zeros((len(nsub), *fd.shape), fd.dtype))
         sub = {fd.name: f[f"subcontacts/{fd.name}"][()] for fd in SUB_CK

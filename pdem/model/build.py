@@ -26,12 +26,54 @@ from .fields import BLOCK, allocate
 
 @dataclass
 class BlockSpec:
-    """One expanded block of the scene: its name, world-frame shape and scene entry."""
+    """One expanded block of the scene: its name, convex pieces (world frame) and scene entry.
+
+    Most blocks are one convex piece; a joined (concave) block is several, moving as one
+    rigid body (3DEC's leader/follower groups). ``parent``: the name of the scene block it was
+    cut from (its own name if uncut)."""
 
     name: str
     entry: int  # index in scene.blocks
-    shape: ConvexPolyhedron
+    pieces: list[ConvexPolyhedron]
     spec: Block
+    parent: str = ""
+    # model time at which the block is excavated (None: it stays), see pdem.model.rockmass
+    excavate_at: float | None = None
+
+    @property
+    def shape(self) -> ConvexPolyhedron:
+        """The block's single convex piece (joined blocks have no single shape)."""
+        if len(self.pieces) != 1:
+            raise ValueError(f"block {self.name!r} is joined from {len(self.pieces)} pieces")
+        return self.pieces[0]
+
+    @property
+    def volume(self) -> float:
+        return sum(p.volume for p in self.pieces)
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return sum(p.volume * np.asarray(p.centroid) for p in self.pieces) / self.volume
+
+    @property
+    def face_areas(self) -> np.ndarray:
+        return np.concatenate([[p.face_area(f) for f in range(p.n_faces)] for p in self.pieces])
+
+    def principal_frame(self):
+        """(body-frame pieces, centroid, R, principal moments per unit density) of the rigid
+        body; ``world = R @ body + centroid``. One piece: the piece's own principal frame."""
+        if len(self.pieces) == 1:
+            body, c, R, moments = self.pieces[0].principal_frame()
+            return [body], c, R, moments
+        c = self.centroid
+        inertia = np.zeros((3, 3))
+        for p in self.pieces:  # parallel-axis theorem, per unit density
+            d = np.asarray(p.centroid) - c
+            inertia += np.asarray(p.inertia) + p.volume * (d @ d * np.eye(3) - np.outer(d, d))
+        moments, R = np.linalg.eigh(inertia)
+        if np.linalg.det(R) < 0.0:
+            R[:, 2] = -R[:, 2]
+        return [p.transformed(R.T, -c @ R) for p in self.pieces], c, R, moments
 
 
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
@@ -146,20 +188,24 @@ for _name, _builder in (("box", _box), ("polyhedron", _polyhedron), ("prism", _p
     SHAPES.register(_name, _builder)
 
 
-def expand_blocks(scene: Scene) -> list[BlockSpec]:
-    """Every block of the scene in gid order, shapes in the world frame."""
+def expand_blocks(scene: Scene, max_blocks: int | None = None) -> list[BlockSpec]:
+    """Every block of the scene in gid order, shapes in the world frame: the ``blocks:``
+    entries, then their cuts, joins and excavations (pdem.model.rockmass)."""
     out: list[BlockSpec] = []
     errors: list[str] = []
     for i, b in enumerate(scene.blocks):
         kind = b.shape_kind
         try:
             for k, shape in SHAPES[kind](getattr(b, kind)):
-                out.append(BlockSpec(b.name if k is None else f"{b.name}[{k}]", i, shape, b))
+                name = b.name if k is None else f"{b.name}[{k}]"
+                out.append(BlockSpec(name, i, [shape], b, parent=name))
         except (GeometryError, ValueError) as exc:
             errors.append(f"blocks[{i}] ({b.name!r}).{kind}: {exc}")
     if errors:
         raise ConfigError(errors)
-    return out
+    from .rockmass import build_rock_mass
+
+    return build_rock_mass(scene, out, max_blocks)
 
 
 def _fixed(spec, arr, r):
@@ -188,59 +234,75 @@ for _name, _apply in (("fixed", _fixed), ("velocity", _velocity), ("force", _for
 def block_store(scene: Scene, specs: list[BlockSpec]):
     """BlockStore of every block of the scene (gid order), body frame = principal axes;
     returns (store, sorted group names)."""
-    rows = np.arange(len(specs))
-    n = len(rows)
+    n = len(specs)
     arr = allocate(BLOCK, n)
     mats = list(scene.materials)
     groups = sorted({b.group for b in scene.blocks})
-    vl, fn, fo, fv, fvs, ed = [], [], [], [], [0], []
+    vl, fn, fo, fv, fvs, ed, tags, centers = [], [], [], [], [0], [], [], []
+    piece_start = [0]
     vert_start = [0]
     face_start = [0]
     edge_start = [0]
     edir_start = [0]
     edirs = []
-    for r, gid in enumerate(rows):
-        s = specs[gid]
-        body, centroid, R, moments = s.shape.principal_frame()
+    for r, s in enumerate(specs):
+        bodies, centroid, R, moments = s.principal_frame()
         rho = scene.materials[s.spec.material].density
-        arr["gid"][r] = gid
+        arr["gid"][r] = r
         arr["owned"][r] = 1
         arr["x"][r] = centroid
         arr["x0"][r] = centroid
         arr["q"][r] = quat_from_matrix(R)
-        arr["mass"][r] = rho * s.shape.volume
+        arr["mass"][r] = rho * s.volume
         arr["inertia"][r] = rho * moments
         arr["mscale"][r] = 1.0
         arr["material"][r] = mats.index(s.spec.material)
         arr["group"][r] = groups.index(s.spec.group)
         for apply in BLOCK_CONDITIONS.values():
             apply(s.spec, arr, r)
-        arr["radius"][r] = np.linalg.norm(body.vertices, axis=1).max()
-        v0 = vert_start[-1]
-        vl.append(body.vertices)
-        vert_start.append(v0 + body.n_vertices)
-        fn.append(body.normals)
-        fo.append(body.offsets)
-        for f in range(body.n_faces):
-            ids = body.face_verts[body.face_start[f]:body.face_start[f + 1]] + v0
-            fv.append(ids)
-            fvs.append(fvs[-1] + len(ids))
-        face_start.append(face_start[-1] + body.n_faces)
-        ed.append(body.edges + v0)
-        edge_start.append(edge_start[-1] + len(body.edges))
-        dirs = unique_directions(body.vertices[body.edges[:, 1]] - body.vertices[body.edges[:, 0]])
-        edirs.append(dirs)
-        edir_start.append(edir_start[-1] + len(dirs))
+        arr["radius"][r] = max(np.linalg.norm(body.vertices, axis=1).max() for body in bodies)
+        piece_start.append(piece_start[-1] + len(bodies))
+        for body in bodies:
+            # a one-piece block's centre is its centroid: exactly zero in the body frame
+            centers.append(np.zeros(3) if len(bodies) == 1 else np.asarray(body.centroid))
+            v0 = vert_start[-1]
+            vl.append(body.vertices)
+            vert_start.append(v0 + body.n_vertices)
+            fn.append(body.normals)
+            fo.append(body.offsets)
+            tags.append(body.face_tag if body.face_tag is not None
+                        else np.full(body.n_faces, -1))
+            for f in range(body.n_faces):
+                ids = body.face_verts[body.face_start[f]:body.face_start[f + 1]] + v0
+                fv.append(ids)
+                fvs.append(fvs[-1] + len(ids))
+            face_start.append(face_start[-1] + body.n_faces)
+            ed.append(body.edges + v0)
+            edge_start.append(edge_start[-1] + len(body.edges))
+            dirs = unique_directions(body.vertices[body.edges[:, 1]]
+                                     - body.vertices[body.edges[:, 0]])
+            edirs.append(dirs)
+            edir_start.append(edir_start[-1] + len(dirs))
     # world angular momentum from the initial angular velocity: L = R diag(I) R^T w
     for r in range(n):
         Rm = quat_to_matrix(arr["q"][r])
         arr["L"][r] = Rm @ (arr["inertia"][r] * (Rm.T @ arr["w"][r]))
     verts_local = np.concatenate(vl) if vl else np.zeros((0, 3))
+    n_pieces = piece_start[-1]
+    piece_start = np.array(piece_start, np.int64)
     return BlockStore(arr, dict(
+        piece_start=piece_start,
+        piece_block=np.repeat(np.arange(n), np.diff(piece_start)),
+        piece_gid=np.arange(n_pieces, dtype=np.int64),
+        piece_center=np.array(centers, float).reshape(-1, 3),
+        piece_x=np.zeros((n_pieces, 3)),
+        piece_lo=np.zeros((n_pieces, 3)),
+        piece_hi=np.zeros((n_pieces, 3)),
         vert_start=np.array(vert_start, np.int64),
         verts_local=verts_local,
         verts_world=np.zeros_like(verts_local),
         face_start=np.array(face_start, np.int64),
+        face_tag=np.concatenate(tags).astype(np.int32) if tags else np.zeros(0, np.int32),
         fvert_start=np.array(fvs, np.int64),
         face_verts=np.concatenate(fv).astype(np.int64) if fv else np.zeros(0, np.int64),
         normals_local=np.concatenate(fn) if fn else np.zeros((0, 3)),

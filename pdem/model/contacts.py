@@ -1,4 +1,7 @@
-"""ContactStore: contacts sorted by key (gid_a, gid_b) with their sub-contacts as CSR.
+"""ContactStore: contacts sorted by key (piece gid A, piece gid B) with their sub-contacts as CSR.
+
+A contact is between two convex pieces of two different blocks (a block of one piece: the
+piece gid is the block gid, so the key is the block pair's).
 
 Fields are declared in :mod:`pdem.model.fields` (``CONTACT``, ``SUB`` and the joint laws'
 history columns ``sc_hist``).
@@ -53,7 +56,7 @@ class ContactStore:
         return ContactStore(allocate(CONTACT, 0), sub, np.zeros(1, np.int64))
 
     def keys(self) -> np.ndarray:
-        return self.arrays["ga"] * csr.KEY_SHIFT + self.arrays["gb"]
+        return self.arrays["pga"] * csr.KEY_SHIFT + self.arrays["pgb"]
 
     def pairs(self) -> Pairs:
         a = self.arrays
@@ -74,13 +77,14 @@ class ContactStore:
         """Contacts where ``keep`` is true, sub-contacts carried along."""
         return self.take(np.nonzero(keep)[0])
 
-    def with_new_pairs(self, ia, ib, ga, gb, joint) -> ContactStore:
-        """Merge new pairs (no sub-contacts yet, cold common plane) keeping key order."""
-        m = len(ia)
+    def with_new_pairs(self, **fields) -> ContactStore:
+        """Merge new pairs (no sub-contacts yet, cold common plane) keeping key order;
+        ``fields``: ia, ib, ka, kb, ga, gb, pga, pgb, joint."""
+        m = len(fields["ia"])
         if m == 0:
             return self
         new = allocate(CONTACT, m)
-        new.update(ia=ia, ib=ib, ga=ga, gb=gb, joint=joint)
+        new.update(fields)
         arrays = {k: np.concatenate([self.arrays[k], new[k]]) for k in self.arrays}
         merged = ContactStore(arrays, self.sub,
                               np.concatenate([self.sc_start, np.full(m, self.sc_start[-1])]))

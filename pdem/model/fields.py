@@ -92,8 +92,13 @@ BLOCK: tuple[Field, ...] = (
 CONTACT: tuple[Field, ...] = (
     Field("ia", (), I64, "1", "row of block A in the block store (local)"),
     Field("ib", (), I64, "1", "row of block B in the block store (local)"),
-    Field("ga", (), I64, "1", "gid of A (ga < gb)", **_D),
+    Field("ka", (), I64, "1", "row of A's convex piece in the store's piece geometry (local)"),
+    Field("kb", (), I64, "1", "row of B's convex piece (local)"),
+    Field("ga", (), I64, "1", "gid of A", **_D),
     Field("gb", (), I64, "1", "gid of B", **_D),
+    Field("pga", (), I64, "1", "global id of A's convex piece (pga < pgb); equals ga for a "
+          "block of one piece", **_D),
+    Field("pgb", (), I64, "1", "global id of B's convex piece", **_D),
     Field("joint", (), I32, "1", "row in the joint table", **_D),
     Field("normal", (3,), F, "1", "common-plane unit normal, A -> B", **_D),
     Field("point", (3,), F, "m", "common-plane reference point", **_D),

@@ -115,6 +115,10 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
                                                      != mine.arrays[g]):
             raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
         mine.arrays[side] = row_of[pos]
+    # the pieces in contact: the same piece ordinal within the block's local pieces
+    for side, piece, g, pg in (("ia", "ka", "ga", "pga"), ("ib", "kb", "gb", "pgb")):
+        ordinal = mine.arrays[pg] - glob.piece_start[mine.arrays[g]]
+        mine.arrays[piece] = blocks.piece_start[mine.arrays[side]] + ordinal
 
     # 5. the per-step halo plan (free blocks only; fixed ghosts were sent once, above)
     send = {}

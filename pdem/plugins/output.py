@@ -13,6 +13,22 @@ from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps
 
 
+def body_surfaces(specs):
+    """Per block, its body-frame vertices and faces (vertex ids into them): a joined block's
+    pieces side by side."""
+    vertices, faces = [], []
+    for spec in specs:
+        bodies = spec.principal_frame()[0]
+        v0, fs = 0, []
+        for sh in bodies:
+            fs += [[v0 + int(i) for i in sh.face_verts[sh.face_start[f]:sh.face_start[f + 1]]]
+                   for f in range(sh.n_faces)]
+            v0 += sh.n_vertices
+        vertices.append(np.concatenate([sh.vertices for sh in bodies]))
+        faces.append(fs)
+    return vertices, faces
+
+
 class Snapshots(Plugin):
     """Every ``output.every`` model seconds (or ``every_steps``) the owned blocks' output
     fields (pdem.model.fields, ``output=``) go to the HDF5 file; opened at construction."""
@@ -24,13 +40,11 @@ class Snapshots(Plugin):
         out = state.scene.output
         self.every = interval_steps(state, out.every_steps, out.every)
         self.after_write = []  # callbacks run after each snapshot (histories flush)
-        shapes = [s.shape.principal_frame()[0] for s in state.specs]
-        faces = [[list(sh.face_verts[sh.face_start[f]:sh.face_start[f + 1]])
-                  for f in range(sh.n_faces)] for sh in shapes]
+        vertices, faces = body_surfaces(state.specs)
         r = state.resolved
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
-            body_vertices=[sh.vertices for sh in shapes], body_faces=faces,
+            body_vertices=vertices, body_faces=faces,
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
             group_names=state.group_names, fixed=state.glob.fixed,
             attrs={"pdem_version": __version__, "scene_name": state.scene.name, "dt": state.dt,

@@ -47,10 +47,13 @@ Joints = namedtuple("Joints", "slot row laws")
 class JointTable:
     """The scene's joints resolved: per-law tables, stiffnesses, the group-pair map."""
 
-    def __init__(self, names, params, pair):
+    def __init__(self, names, params, pair, cut_joint=None):
         self.names = list(names)
         self.params = list(params)
         self.pair = pair
+        # per cut (``cuts:``), the joint row its faces use, -1 where the cut names none
+        self.cut_joint = np.zeros(0, np.int32) if cut_joint is None else cut_joint
+        self.by_set = bool((self.cut_joint >= 0).any())
         used = [law for law in JOINT_LAWS.values()
                 if any(p.model == law.name for p in self.params)]
         self.laws = tuple(used)
@@ -78,7 +81,9 @@ def joint_table(scene, group_names: list[str]) -> JointTable:
     for jp in scene.joint_pairs:
         a, b = gidx[jp.groups[0]], gidx[jp.groups[1]]
         pair[a, b] = pair[b, a] = rows[jp.joint]
-    return JointTable(names, [scene.joints[k] for k in names], pair)
+    cut_joint = np.array([rows[c.joint] if c.joint is not None else -1 for c in scene.cuts],
+                         np.int32)
+    return JointTable(names, [scene.joints[k] for k in names], pair, cut_joint)
 
 
 def apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,

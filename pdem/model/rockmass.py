@@ -1,0 +1,294 @@
+"""Scene -> rock mass: blocks cut by joint sets (``cuts:``), joined into concave blocks
+(``join:``) and excavated (``excavate:``), as 3DEC's ``block cut joint-set``, ``block join``
+and ``block excavate``.
+
+Applied in that order to the blocks the ``blocks:`` entries make (pdem.model.build). Everything
+here runs once at model build, on every rank alike, so it is plain numpy; the order of the
+resulting blocks (their gids) depends only on the scene.
+
+* A cut splits every selected one-piece block by each plane of its set; faces made by cut ``i``
+  carry face tag ``i`` (the contact between two faces of one set uses the set's joint,
+  pdem.contact.joint_sets). After all cuts, the pieces of a scene block ``P`` are named
+  ``P[k]``. Pieces thinner than ``cut_tolerance`` are not made (default: 1% of the size of the
+  block being cut).
+* A join makes one rigid body of several blocks that touch face to face (a concave block): one
+  mass, centroid and inertia, contacts per convex piece, none between its own pieces. It takes
+  the first member's name and place.
+* An excavation removes a convex region: blocks inside go, a straddling block is cut by the
+  region's planes and the pieces of it outside the region that touch each other stay one
+  (joined) block. With ``time > 0`` the inside pieces stay blocks of their own until then.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..config import ConfigError
+from ..geometry import ConvexPolyhedron, GeometryError, from_planes
+from ..geometry.cutting import (
+    UNTAGGED,
+    box_planes,
+    cut_blocks,
+    cylinder_planes,
+    excavate,
+    joint_set_planes,
+    split_by_plane,
+)
+from ..geometry.hull import default_tolerance
+
+# Relative sliver size: pieces thinner than this fraction of the cut block's size (cube root
+# of its volume) are not created, unless ``cut_tolerance`` says otherwise.
+AUTO_CUT_TOLERANCE = 0.01
+# Two convex pieces "touch" (may be joined) when they share a face patch larger than this
+# fraction of the smaller piece's size squared.
+TOUCH_AREA = 1e-4
+
+
+def build_rock_mass(scene, specs, max_blocks: int | None = None):
+    """The scene's blocks after its cuts, joins and excavations (gid order)."""
+    if scene.cuts:
+        specs = apply_cuts(scene, specs, max_blocks)
+    if scene.join:
+        specs = apply_joins(scene, specs)
+    if scene.excavate:
+        specs = apply_excavations(scene, specs)
+    return specs
+
+
+def _size(poly: ConvexPolyhedron) -> float:
+    return float(poly.volume) ** (1.0 / 3.0)
+
+
+def _cut_tolerance(scene, poly) -> float:
+    if scene.cut_tolerance == "auto":
+        return AUTO_CUT_TOLERANCE * _size(poly)
+    return float(scene.cut_tolerance)
+
+
+def _in_box(point, box) -> bool:
+    return bool(np.all(np.asarray(point) >= box.min) and np.all(np.asarray(point) <= box.max))
+
+
+def apply_cuts(scene, specs, max_blocks=None):
+    for i, cut in enumerate(scene.cuts):
+        where = f"cuts[{i}] ({cut.name!r})"
+        chosen = [
+            len(s.pieces) == 1
+            and (cut.groups is None or s.spec.group in cut.groups)
+            and (cut.range is None or _in_box(s.centroid, cut.range.box))
+            for s in specs
+        ]
+        if not any(chosen):
+            raise ConfigError([f"{where}: selects no block (range/groups; joined blocks are "
+                               "not cut)"])
+        verts = np.concatenate([s.pieces[0].vertices for s, c in zip(specs, chosen) if c])
+        try:
+            normal, offsets = joint_set_planes(cut.dip, cut.dip_direction, cut.origin,
+                                               cut.spacing, cut.count,
+                                               (verts.min(axis=0), verts.max(axis=0)))
+        except GeometryError as exc:
+            raise ConfigError([f"{where}: {exc}"]) from None
+        out, made = [], 0
+        limit = max_blocks if max_blocks is not None else np.inf
+        for k, (s, c) in enumerate(zip(specs, chosen)):
+            if not c:
+                out.append(s)
+                continue
+            poly = s.pieces[0]
+            pieces, _ = cut_blocks([poly], i, normal, offsets, tol=_cut_tolerance(scene, poly))
+            made += len(pieces) - 1
+            out.extend(dataclasses.replace(s, pieces=[p]) for p in pieces)
+            if len(out) + len(specs) - k - 1 > limit:
+                raise ConfigError([f"{where}: makes more than {int(limit)} blocks "
+                                   "(limits.max_blocks): a larger spacing, a range, or a "
+                                   "higher limits.max_blocks"])
+        if made == 0:
+            raise ConfigError([f"{where}: misses every block (no plane of the set cuts one; "
+                               f"{len(offsets)} plane(s) through origin {list(cut.origin)})"])
+        specs = out
+    return _name_pieces(specs)
+
+
+def _name_pieces(specs):
+    """Pieces of scene block ``P`` (more than one) are named ``P[k]`` in build order."""
+    count: dict[str, int] = {}
+    for s in specs:
+        count[s.parent] = count.get(s.parent, 0) + 1
+    seen: dict[str, int] = {}
+    out = []
+    for s in specs:
+        if count[s.parent] == 1:
+            out.append(dataclasses.replace(s, name=s.parent))
+            continue
+        k = seen.get(s.parent, 0)
+        seen[s.parent] = k + 1
+        out.append(dataclasses.replace(s, name=f"{s.parent}[{k}]"))
+    return out
+
+
+# ---------------------------------------------------------------------------- contact of pieces
+def _planes(poly: ConvexPolyhedron):
+    return np.asarray(poly.normals), np.asarray(poly.offsets)
+
+
+def touch_area(p: ConvexPolyhedron, q: ConvexPolyhedron) -> float:
+    """Area of the face patch two convex pieces share (0 if they do not touch face to face):
+    the volume of their intersection, each grown by a small ``eps``, over ``2 eps``."""
+    eps = 1e-6 * min(_size(p), _size(q))
+    n, d = _planes(p)
+    try:
+        inner = from_planes(n, d + eps)
+    except GeometryError:
+        return 0.0
+    for m, e in zip(*_planes(q), strict=True):
+        inner, _ = split_by_plane(inner, m, e + eps, 0.0)
+        if inner is None:
+            return 0.0
+    return float(inner.volume) / (2.0 * eps)
+
+
+def _touch(p, q) -> bool:
+    return touch_area(p, q) > TOUCH_AREA * min(_size(p), _size(q)) ** 2
+
+
+def components(pieces: list[ConvexPolyhedron]) -> list[list[int]]:
+    """Groups of pieces connected face to face (indices, each group ascending, groups by
+    their first index)."""
+    n = len(pieces)
+    root = list(range(n))
+
+    def find(i):
+        while root[i] != i:
+            root[i] = root[root[i]]
+            i = root[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if find(i) != find(j) and _touch(pieces[i], pieces[j]):
+                root[find(j)] = find(i)
+    groups: dict[int, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(find(i), []).append(i)
+    return sorted(groups.values())
+
+
+# ---------------------------------------------------------------------------- joins
+def apply_joins(scene, specs):
+    by_name = {s.name: k for k, s in enumerate(specs)}
+    member_of: dict[int, int] = {}
+    errors = []
+    for i, names in enumerate(scene.join):
+        rows = []
+        for name in names:
+            k = by_name.get(name)
+            if k is None:
+                errors.append(f"join[{i}]: unknown block {name!r}")
+            elif k in member_of:
+                errors.append(f"join[{i}]: block {name!r} is already in join[{member_of[k]}]")
+            else:
+                member_of[k] = i
+                rows.append(k)
+        if len(rows) != len(names):
+            continue
+        first = specs[rows[0]]
+        for k in rows[1:]:
+            s = specs[k]
+            if (s.spec.material, s.spec.group) != (first.spec.material, first.spec.group):
+                errors.append(f"join[{i}]: {s.name!r} has material/group {s.spec.material!r}/"
+                              f"{s.spec.group!r}, {first.name!r} {first.spec.material!r}/"
+                              f"{first.spec.group!r}: a joined block has one of each")
+        pieces = [p for k in rows for p in specs[k].pieces]
+        groups = components(pieces)
+        if len(groups) > 1:
+            owner = np.repeat(rows, [len(specs[k].pieces) for k in rows])
+            apart = sorted({specs[owner[j]].name for g in groups[1:] for j in g})
+            errors.append(f"join[{i}]: blocks {apart} do not touch the rest of the join face to "
+                          f"face (joined blocks must form one connected body)")
+    if errors:
+        raise ConfigError(errors)
+    out = []
+    for k, s in enumerate(specs):
+        i = member_of.get(k)
+        if i is None:
+            out.append(s)
+        elif by_name[scene.join[i][0]] == k:  # the first member leads: name and place
+            pieces = [p for name in scene.join[i] for p in specs[by_name[name]].pieces]
+            out.append(dataclasses.replace(s, pieces=pieces))
+    return out
+
+
+# ---------------------------------------------------------------------------- excavations
+def region_planes(exc) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals and offsets of an excavation's convex region."""
+    kind = exc.region_kind
+    r = getattr(exc, kind)
+    if kind == "cylinder":
+        return cylinder_planes(r.start, r.end, r.radius, r.sides)
+    if kind == "box":
+        return box_planes(r.min, r.max)
+    n = np.asarray(r.normals, float)
+    norm = np.linalg.norm(n, axis=1)
+    if not (norm > 0).all():
+        raise GeometryError("a plane normal is zero")
+    return n / norm[:, None], np.asarray(r.offsets, float) / norm
+
+
+def inside_part(poly: ConvexPolyhedron, normals, offsets, tol) -> ConvexPolyhedron | None:
+    """The part of ``poly`` inside the convex region (None if thinner than ``tol``)."""
+    inner = poly
+    for n, d in zip(normals, offsets, strict=True):
+        inner, _ = split_by_plane(inner, n, d, tol, UNTAGGED)
+        if inner is None:
+            return None
+    return inner
+
+
+def apply_excavations(scene, specs):
+    for j, exc in enumerate(scene.excavate):
+        where = f"excavate[{j}] ({exc.region_kind})"
+        try:
+            normals, offsets = region_planes(exc)
+        except GeometryError as exc_:
+            raise ConfigError([f"{where}: {exc_}"]) from None
+        out, touched = [], 0
+        for s in specs:
+            if s.excavate_at is not None:  # already inside an earlier excavation
+                out.append(s)
+                continue
+            outside, inside, changed = [], [], False
+            for poly in s.pieces:
+                tol = _cut_tolerance(scene, poly)
+                kept, removed = excavate(poly, (normals, offsets), tol, UNTAGGED)
+                if removed == 0.0 and len(kept) == 1:
+                    outside.append(poly)
+                    continue
+                changed = True
+                outside.extend(kept)
+                if removed > 0.0 and exc.time > 0.0:
+                    part = inside_part(poly, normals, offsets,
+                                       max(tol, default_tolerance(poly.vertices)))
+                    if part is not None:
+                        inside.append(part)
+            if not changed:
+                out.append(s)
+                continue
+            touched += 1
+            made = [dataclasses.replace(s, pieces=[outside[i] for i in g])
+                    for g in components(outside)]
+            made += [dataclasses.replace(s, pieces=[inside[i] for i in g],
+                                         excavate_at=exc.time) for g in components(inside)]
+            if len(made) == 1:
+                made[0] = dataclasses.replace(made[0], name=s.name)
+            else:
+                made = [dataclasses.replace(m, name=f"{s.name}[{k}]")
+                        for k, m in enumerate(made)]
+            out.extend(made)
+        if touched == 0:
+            raise ConfigError([f"{where}: the region meets no block"])
+        if not out:
+            raise ConfigError([f"{where}: removes every block"])
+        specs = out
+    return specs
