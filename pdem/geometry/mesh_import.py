@@ -250,7 +250,8 @@ def cell_polyhedron(
         missing = sorted(set(range(len(ids))) - used)
         raise GeometryError(f"node(s) {missing} are on no face")
     try:
-        poly = ConvexPolyhedron.from_faces(v, oriented)
+        # the planes just checked become the block's face planes (no second fit)
+        poly = ConvexPolyhedron.from_faces(v, oriented, normals=n, offsets=d)
     except GeometryError as exc:
         raise GeometryError(f"faces do not form a closed surface ({exc})") from None
     return poly
