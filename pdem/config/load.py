@@ -141,18 +141,35 @@ def _yaml_problem(exc: yaml.YAMLError) -> str:
     return " ".join(str(problem).split()) + where
 
 
-def parse_scene(text: str, source: str = "scene") -> Scene:
-    """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages."""
+def _anchor_files(data: dict, base: Path) -> None:
+    """Mesh files named relative to the scene file are read from beside it (made absolute, so
+    the scene stored in outputs and checkpoints still finds them)."""
+    for b in data.get("blocks") or ():
+        mesh = b.get("mesh") if isinstance(b, dict) else None
+        if isinstance(mesh, dict) and isinstance(mesh.get("file"), str):
+            f = Path(mesh["file"])
+            if not f.is_absolute():
+                mesh["file"] = str((base / f).resolve())
+
+
+def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> Scene:
+    """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages. ``base``:
+    the directory relative file names in the scene start from."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ConfigError([f"not valid YAML: {_yaml_problem(exc)}"], source) from None
     if not isinstance(data, dict):
         raise ConfigError(["the scene must be a mapping of keys (name, blocks, solve, ...)"], source)
+    if base is not None:
+        _anchor_files(data, base)
+    lines = _line_index(text)
     try:
-        return Scene.model_validate(data)
+        scene = Scene.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(_messages(exc, _line_index(text)), source) from None
+        raise ConfigError(_messages(exc, lines), source) from None
+    scene._lines = lines  # so that errors found while building name the YAML line too
+    return scene
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -165,7 +182,7 @@ def load_scene(path: str | Path) -> Scene:
     except UnicodeDecodeError as exc:
         # found by the fuzz: a binary file gave a traceback
         raise ConfigError([f"not a text file (byte {exc.start} is not UTF-8)"], str(path)) from None
-    return parse_scene(text, str(path))
+    return parse_scene(text, str(path), path.parent)
 
 
 def dump_scene(scene: Scene) -> str:

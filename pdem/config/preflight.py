@@ -100,6 +100,8 @@ def _shape_size(block) -> tuple[int, int, int, int]:
     with the worst case of triangular faces (E = 3V - 6, F = 2V - 4)."""
     kind = block.shape_kind
     p = getattr(block, kind)
+    if kind == "mesh":  # counted once the mesh is read (the cuts' blocks likewise)
+        return 1, 8, 6, 12
     if kind in ("box", "array"):
         n = math.prod(p.count) if kind == "array" else 1
         return n, 8, 6, 12

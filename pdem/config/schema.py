@@ -9,6 +9,7 @@ from pydantic import (
     NonNegativeFloat,
     PositiveFloat,
     PositiveInt,
+    PrivateAttr,
     field_validator,
     model_validator,
 )
@@ -101,6 +102,20 @@ class PlanesShape(Strict):
         return self
 
 
+class MeshShape(Strict):
+    """Blocks from a volume mesh (any format meshio reads): one convex block per 3D cell;
+    cells sharing a value of the cell data ``cell_data_group`` are joined into one block
+    named ``NAME[value]``. ``group_data``/``material_data``: cell data whose value (as text)
+    is the block's group/material; ``select``: only cells whose cell data match (a value or
+    a list of values per array)."""
+
+    file: str
+    cell_data_group: str | None = None
+    group_data: str | None = None
+    material_data: str | None = None
+    select: dict[str, int | float | str | list[int | float | str]] | None = None
+
+
 class ArrayOf(Strict):
     """Copies of a box on a regular lattice: ``count[i]`` copies spaced ``spacing[i]``."""
 
@@ -131,6 +146,7 @@ class Block(Strict):
     planes: PlanesShape | None = None
     array: ArrayOf | None = None
     random: RandomPolyhedra | None = None
+    mesh: MeshShape | None = None
     material: str
     group: str = "default"
     fixed: bool = False
@@ -153,7 +169,7 @@ class Block(Strict):
         return next(k for k in SHAPE_KEYS if getattr(self, k) is not None)
 
 
-SHAPE_KEYS = ("box", "polyhedron", "prism", "planes", "array", "random")
+SHAPE_KEYS = ("box", "polyhedron", "prism", "planes", "array", "random", "mesh")
 
 
 class CutRange(Strict):
@@ -374,6 +390,9 @@ class Limits(Strict):
 
 
 class Scene(Strict):
+    # YAML line of each key path, set by pdem.config.load (empty for scenes built in code)
+    _lines: dict = PrivateAttr(default_factory=dict)
+
     name: str = "pdem"
     gravity: Vec3Speed = (0.0, 0.0, -9.81)  # m/s2, bounded like a speed
     materials: dict[str, Material] = Field(min_length=1)
@@ -391,6 +410,14 @@ class Scene(Strict):
     checkpoint: Checkpoint | None = None
     domain: Domain | None = None
     limits: Limits = Limits()
+
+    def at(self, *path) -> str:
+        """``path`` as a key path (``cuts[2].dip``) with its YAML line when known."""
+        text = ""
+        for part in path:
+            text += f"[{part}]" if isinstance(part, int) else ("." if text else "") + str(part)
+        line = self._lines.get(tuple(path))
+        return f"{text} (line {line})" if line else text
 
     @field_validator("joints", mode="before")
     @classmethod
@@ -418,11 +445,13 @@ class Scene(Strict):
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}
+        # groups read from mesh cell data are known once the mesh is read (pdem.model.build)
+        open_groups = any(b.mesh is not None and b.mesh.group_data for b in self.blocks)
         for i, jp in enumerate(self.joint_pairs):
             if jp.joint not in self.joints:
                 errors.append(f"joint_pairs[{i}].joint: unknown joint {jp.joint!r}")
             for g in jp.groups:
-                if g not in groups:
+                if g not in groups and not open_groups:
                     errors.append(
                         f"joint_pairs[{i}].groups: no block has group {g!r} "
                         f"(groups: {', '.join(sorted(groups))})"
@@ -432,7 +461,7 @@ class Scene(Strict):
                 errors.append(f"cuts[{i}].joint: unknown joint {c.joint!r} "
                               f"(defined: {', '.join(sorted(self.joints))})")
             for g in c.groups or ():
-                if g not in groups:
+                if g not in groups and not open_groups:
                     errors.append(f"cuts[{i}].groups: no block has group {g!r} "
                                   f"(groups: {', '.join(sorted(groups))})")
         for i, h in enumerate(self.output.histories):

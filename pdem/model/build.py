@@ -39,6 +39,17 @@ class BlockSpec:
     parent: str = ""
     # model time at which the block is excavated (None: it stays), see pdem.model.rockmass
     excavate_at: float | None = None
+    # group and material when not the scene entry's (mesh cells carry their own)
+    group_name: str | None = None
+    material_name: str | None = None
+
+    @property
+    def group(self) -> str:
+        return self.group_name if self.group_name is not None else self.spec.group
+
+    @property
+    def material(self) -> str:
+        return self.material_name if self.material_name is not None else self.spec.material
 
     @property
     def shape(self) -> ConvexPolyhedron:
@@ -195,6 +206,11 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None) -> list[BlockSpec
     errors: list[str] = []
     for i, b in enumerate(scene.blocks):
         kind = b.shape_kind
+        if kind == "mesh":
+            from .mesh_blocks import mesh_blocks
+
+            out.extend(mesh_blocks(scene, i, b))
+            continue
         try:
             for k, shape in SHAPES[kind](getattr(b, kind)):
                 name = b.name if k is None else f"{b.name}[{k}]"
@@ -237,7 +253,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
     n = len(specs)
     arr = allocate(BLOCK, n)
     mats = list(scene.materials)
-    groups = sorted({b.group for b in scene.blocks})
+    groups = sorted({b.group for b in scene.blocks if b.mesh is None} | {s.group for s in specs})
     vl, fn, fo, fv, fvs, ed, tags, centers = [], [], [], [], [0], [], [], []
     piece_start = [0]
     vert_start = [0]
@@ -247,7 +263,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
     edirs = []
     for r, s in enumerate(specs):
         bodies, centroid, R, moments = s.principal_frame()
-        rho = scene.materials[s.spec.material].density
+        rho = scene.materials[s.material].density
         arr["gid"][r] = r
         arr["owned"][r] = 1
         arr["x"][r] = centroid
@@ -256,8 +272,8 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
         arr["mass"][r] = rho * s.volume
         arr["inertia"][r] = rho * moments
         arr["mscale"][r] = 1.0
-        arr["material"][r] = mats.index(s.spec.material)
-        arr["group"][r] = groups.index(s.spec.group)
+        arr["material"][r] = mats.index(s.material)
+        arr["group"][r] = groups.index(s.group)
         for apply in BLOCK_CONDITIONS.values():
             apply(s.spec, arr, r)
         arr["radius"][r] = max(np.linalg.norm(body.vertices, axis=1).max() for body in bodies)

@@ -73,17 +73,17 @@ def _in_box(point, box) -> bool:
 
 def apply_cuts(scene, specs, max_blocks=None):
     for i, cut in enumerate(scene.cuts):
-        where = f"cuts[{i}] ({cut.name!r})"
+        where = f"{scene.at('cuts', i)} ({cut.name!r})"
         chosen = [
             len(s.pieces) == 1
-            and (cut.groups is None or s.spec.group in cut.groups)
+            and (cut.groups is None or s.group in cut.groups)
             and (cut.range is None or _in_box(s.centroid, cut.range.box))
             for s in specs
         ]
         if not any(chosen):
             raise ConfigError([f"{where}: selects no block (range/groups; joined blocks are "
                                "not cut)"])
-        verts = np.concatenate([s.pieces[0].vertices for s, c in zip(specs, chosen) if c])
+        verts = np.concatenate([s.pieces[0].vertices for s, c in zip(specs, chosen, strict=True) if c])
         try:
             normal, offsets = joint_set_planes(cut.dip, cut.dip_direction, cut.origin,
                                                cut.spacing, cut.count,
@@ -92,7 +92,7 @@ def apply_cuts(scene, specs, max_blocks=None):
             raise ConfigError([f"{where}: {exc}"]) from None
         out, made = [], 0
         limit = max_blocks if max_blocks is not None else np.inf
-        for k, (s, c) in enumerate(zip(specs, chosen)):
+        for k, (s, c) in enumerate(zip(specs, chosen, strict=True)):
             if not c:
                 out.append(s)
                 continue
@@ -165,10 +165,16 @@ def components(pieces: list[ConvexPolyhedron]) -> list[list[int]]:
             i = root[i]
         return i
 
+    lo = np.array([p.vertices.min(axis=0) for p in pieces]).reshape(-1, 3)
+    hi = np.array([p.vertices.max(axis=0) for p in pieces]).reshape(-1, 3)
+    pad = 1e-6 * (hi - lo).max() if n else 0.0
     for i in range(n):
-        for j in range(i + 1, n):
-            if find(i) != find(j) and _touch(pieces[i], pieces[j]):
-                root[find(j)] = find(i)
+        # only pieces whose boxes meet can share a face
+        near = np.nonzero(np.all((lo[i + 1:] <= hi[i] + pad) & (hi[i + 1:] >= lo[i] - pad),
+                                 axis=1))[0] + i + 1
+        for j in near:
+            if find(i) != find(j) and _touch(pieces[i], pieces[int(j)]):
+                root[find(int(j))] = find(i)
     groups: dict[int, list[int]] = {}
     for i in range(n):
         groups.setdefault(find(i), []).append(i)
@@ -181,13 +187,14 @@ def apply_joins(scene, specs):
     member_of: dict[int, int] = {}
     errors = []
     for i, names in enumerate(scene.join):
+        where = scene.at("join", i)
         rows = []
         for name in names:
             k = by_name.get(name)
             if k is None:
-                errors.append(f"join[{i}]: unknown block {name!r}")
+                errors.append(f"{where}: unknown block {name!r}")
             elif k in member_of:
-                errors.append(f"join[{i}]: block {name!r} is already in join[{member_of[k]}]")
+                errors.append(f"{where}: block {name!r} is already in join[{member_of[k]}]")
             else:
                 member_of[k] = i
                 rows.append(k)
@@ -196,16 +203,16 @@ def apply_joins(scene, specs):
         first = specs[rows[0]]
         for k in rows[1:]:
             s = specs[k]
-            if (s.spec.material, s.spec.group) != (first.spec.material, first.spec.group):
-                errors.append(f"join[{i}]: {s.name!r} has material/group {s.spec.material!r}/"
-                              f"{s.spec.group!r}, {first.name!r} {first.spec.material!r}/"
-                              f"{first.spec.group!r}: a joined block has one of each")
+            if (s.material, s.group) != (first.material, first.group):
+                errors.append(f"{where}: {s.name!r} has material/group {s.material!r}/"
+                              f"{s.group!r}, {first.name!r} {first.material!r}/{first.group!r}: "
+                              "a joined block has one of each")
         pieces = [p for k in rows for p in specs[k].pieces]
         groups = components(pieces)
         if len(groups) > 1:
             owner = np.repeat(rows, [len(specs[k].pieces) for k in rows])
             apart = sorted({specs[owner[j]].name for g in groups[1:] for j in g})
-            errors.append(f"join[{i}]: blocks {apart} do not touch the rest of the join face to "
+            errors.append(f"{where}: blocks {apart} do not touch the rest of the join face to "
                           f"face (joined blocks must form one connected body)")
     if errors:
         raise ConfigError(errors)
@@ -248,7 +255,7 @@ def inside_part(poly: ConvexPolyhedron, normals, offsets, tol) -> ConvexPolyhedr
 
 def apply_excavations(scene, specs):
     for j, exc in enumerate(scene.excavate):
-        where = f"excavate[{j}] ({exc.region_kind})"
+        where = f"{scene.at('excavate', j)} ({exc.region_kind})"
         try:
             normals, offsets = region_planes(exc)
         except GeometryError as exc_:
