@@ -6,6 +6,11 @@ and is not installed by ``pip install -e .[test]``; nothing in pdem/ or tests/ i
 
     .venv/bin/python -m pip install matplotlib
     .venv/bin/python docs/make_figures.py            # from the repository root, ~1-3 min
+    python3 docs/make_figures.py dip-convention      # one figure, by its name in CASES
+
+Any python with numpy and matplotlib will do (the system python3, say): pdem is imported from
+this checkout, its compiled and MPI parts only when a case runs a simulation, and h5py only by
+arch-energy. dip-convention (docs/rock-mass.md) is a drawing, no simulation.
 
 The scenes, constants and closed forms come from the case library pdem.cases, which the tests
 (tests/verification/test_*.py) use too, so the figures show exactly the set-ups the tests
@@ -28,11 +33,11 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS", "MK
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FIG = os.path.join(ROOT, "docs", "figures")
+sys.path.insert(0, ROOT)  # the figures document this checkout's pdem
 
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
-import h5py  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -457,6 +462,7 @@ def static():
 def arch_energy(tr: float = 0.100, time_: float = 3.0):
     """Energy budget of an undamped arch collapse, read back from ``histories/energy`` of the
     run's output file (written by pdem.plugins.energy)."""
+    import h5py
     from mpi4py import MPI
 
     from pdem.config import parse_scene
@@ -513,8 +519,120 @@ def arch_energy(tr: float = 0.100, time_: float = 3.0):
     save(fig, "arch-energy.png")
 
 
+# --------------------------------------------------------------------------- dip convention
+def dip_convention(dip: float = 40.0, dd: float = 120.0):
+    """Sketch of the orientation convention of joint sets (docs/rock-mass.md): x = east,
+    y = north, z = up; dip below horizontal, dip direction clockwise from north, upward normal
+    ``n = (sin(dip) sin(dd), sin(dip) cos(dd), cos(dip))`` (pdem.geometry.cutting.dip_normal).
+    A drawing only: no simulation."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from pdem.geometry.cutting import dip_normal
+
+    print(f"dip convention (dip {dip:g}, dip direction {dd:g})")
+    d, a = math.radians(dip), math.radians(dd)
+    n = dip_normal(dip, dd)
+    h = np.array([math.sin(a), math.cos(a), 0.0])  # dip direction, horizontal
+    s = math.cos(d) * h - math.sin(d) * np.array([0.0, 0.0, 1.0])  # down-dip (steepest descent)
+    t = np.cross(s, n)  # strike, horizontal
+    assert abs(t[2]) < 1e-12 and abs(n @ s) < 1e-12
+    print(f"  n = ({n[0]:.3f}, {n[1]:.3f}, {n[2]:.3f})")
+
+    fig = plt.figure(figsize=(15, 7.2))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax.set_proj_type("ortho")
+    ax.view_init(elev=32, azim=-62)
+    ax.computed_zorder = False  # draw in the order added: lines and labels over the planes
+    box = {"facecolor": "white", "alpha": 0.75, "edgecolor": "none", "pad": 1.5}
+    # horizontal reference plane z = 0 and the dipping plane through the origin
+    r = 2.0
+    ax.add_collection3d(Poly3DCollection([[(-r, -r, 0), (r, -r, 0), (r, r, 0), (-r, r, 0)]],
+                                         facecolor="0.85", edgecolor="0.6", alpha=0.35))
+    a_, b_ = 1.5, 1.15
+    corners = [a_ * t + b_ * s, -a_ * t + b_ * s, -a_ * t - b_ * s, a_ * t - b_ * s]
+    ax.add_collection3d(Poly3DCollection([corners], facecolor="#c98b4b", edgecolor="#7a4a1c",
+                                         alpha=0.35, lw=1.5))
+    # strike line (horizontal line of the plane) and the down-dip line
+    ax.plot(*np.array([-a_ * t, a_ * t]).T, color="#7a4a1c", ls="--", lw=1.2)
+    ax.text(*(a_ * t * 1.08 + [0, 0, 0.08]), "strike\n(horizontal)", color="#7a4a1c", fontsize=9,
+            bbox=box)
+    ax.quiver(0, 0, 0, *(b_ * s), color="C3", lw=2.2, arrow_length_ratio=0.15)
+    ax.text(*(b_ * s * 1.1 + [0, 0, -0.15]), "down-dip line", color="C3", fontsize=10, bbox=box)
+    # horizontal projection of the down-dip line = dip direction, and north
+    ax.plot(*np.array([0 * h, 1.9 * h]).T, color="C0", lw=1.6)
+    ax.quiver(0, 0, 0, 0, 1.9, 0, color="C2", lw=1.6, arrow_length_ratio=0.08)
+    ax.text(0.0, 2.0, -0.05, "north (+y)", color="C2", fontsize=10, va="top", bbox=box)
+    # dip angle: arc from the dip direction (horizontal) down to the down-dip line
+    th = np.linspace(0.0, d, 30)
+    arc = 0.75 * (np.cos(th)[:, None] * h - np.sin(th)[:, None] * np.array([0, 0, 1.0]))
+    ax.plot(*arc.T, color="C3", lw=2)
+    m = 0.85 * (math.cos(d / 2) * h - math.sin(d / 2) * np.array([0, 0, 1.0]))
+    ax.text(*(m + [0.05, 0.0, -0.12]), f"dip = {dip:g}°\n(below horizontal)", color="C3",
+            fontsize=10, bbox=box)
+    # dip direction: horizontal arc from north clockwise (seen from above) to the dip direction
+    th = np.linspace(0.0, a, 60)
+    arc = 1.2 * np.column_stack([np.sin(th), np.cos(th), np.zeros_like(th)])
+    ax.plot(*arc.T, color="C0", lw=2)
+    ax.quiver(*arc[-4], *(arc[-1] - arc[-4]), color="C0", lw=2, arrow_length_ratio=1.0)
+    mid = 1.3 * np.array([math.sin(a / 2), math.cos(a / 2), 0.0])
+    ax.text(*(mid + [0.1, 0.0, 0.0]), f"dip direction = {dd:g}°\n(clockwise from north)",
+            color="C0", fontsize=10, bbox=box)
+    # upward normal
+    ax.quiver(0, 0, 0, *(1.4 * n), color="k", lw=2.2, arrow_length_ratio=0.12)
+    ax.text(*(1.45 * n + [0, 0, 0.08]), "upward normal n", color="k", fontsize=10, ha="right",
+            bbox=box)
+    # coordinate triad in a corner
+    o = np.array([-2.0, -2.0, 0.0])
+    for v, lab, col in (((1, 0, 0), "x = east", "C1"), ((0, 1, 0), "y = north", "C2"),
+                        ((0, 0, 1), "z = up", "C4")):
+        v = np.array(v, dtype=float)
+        ax.quiver(*o, *(0.9 * v), color=col, lw=2, arrow_length_ratio=0.18)
+        ax.text(*(o + 1.02 * v), lab, color=col, fontsize=10, fontweight="bold")
+    ax.set(xlim=(-2, 2), ylim=(-2, 2), zlim=(-1.6, 1.6), xlabel="x (east)", ylabel="y (north)",
+           zlabel="z (up)")
+    ax.set_box_aspect((1, 1, 0.8))
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.pane.fill = False
+        axis.set_ticklabels([])  # a sketch: the scale means nothing
+    ax.set_title(f"A joint plane: dip {dip:g}°, dip direction {dd:g}°", fontsize=12)
+
+    # plan view (map): dip direction as a compass bearing, the strike/dip map symbol
+    ap = fig.add_subplot(1, 2, 2)
+    ap.set_aspect("equal")
+    ap.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.6", lw=1))
+    for k, lab in enumerate(("N\n0°", "E 90°", "S\n180°", "270° W")):
+        az = math.radians(90.0 * k)
+        x, y = 1.17 * math.sin(az), 1.17 * math.cos(az)
+        ap.text(x, y, lab, ha="center", va="center", fontsize=11, color="C2" if k == 0 else "0.3")
+    ap.annotate("", xy=(0, 1.0), xytext=(0, 0), arrowprops={"arrowstyle": "-|>", "color": "C2", "lw": 1.6})
+    ap.annotate("", xy=(0.95 * h[0], 0.95 * h[1]), xytext=(0, 0),
+                arrowprops={"arrowstyle": "-|>", "color": "C0", "lw": 2.2})
+    th = np.linspace(0.0, a, 60)
+    ap.plot(0.45 * np.sin(th), 0.45 * np.cos(th), color="C0", lw=2)
+    ap.annotate("", xy=(0.45 * math.sin(a), 0.45 * math.cos(a)),
+                xytext=(0.45 * math.sin(a - 0.08), 0.45 * math.cos(a - 0.08)),
+                arrowprops={"arrowstyle": "-|>", "color": "C0", "lw": 2})
+    ap.text(0.55 * math.sin(a / 2), 0.55 * math.cos(a / 2), f"{dd:g}°", color="C0", fontsize=12)
+    # strike line: where the plane cuts a horizontal plane, at right angles to the dip direction
+    ap.plot([-0.9 * t[0], 0.9 * t[0]], [-0.9 * t[1], 0.9 * t[1]], color="#7a4a1c", lw=3)
+    ap.text(0.97 * h[0] + 0.03, 0.97 * h[1] - 0.1, f"dip direction\n(dip {dip:g}°)", color="C0", fontsize=10)
+    ap.text(-0.9 * t[0] - 0.02, -0.9 * t[1] + 0.05, "strike", color="#7a4a1c", fontsize=10, ha="right")
+    ap.text(0.0, -1.5, "map view, looking down (x east, y north): the dip direction is the compass\n"
+            "bearing of the down-dip line, measured clockwise from north",
+            ha="center", fontsize=10)
+    ap.text(0.0, -1.9, "upward normal  n = (sin dip · sin dd,  sin dip · cos dd,  cos dip)\n"
+            f"here n = ({n[0]:.3f}, {n[1]:.3f}, {n[2]:.3f});  "
+            "the plane is n · x = n · origin  (pdem.geometry.cutting.dip_normal)",
+            ha="center", fontsize=10, family="monospace")
+    ap.set(xlim=(-1.45, 1.45), ylim=(-2.1, 1.4))
+    ap.axis("off")
+    ap.set_title("The same plane on a map", fontsize=12)
+    save(fig, "dip-convention.png")
+
+
 CASES = {"incline": incline, "oscillator": oscillator, "bounce": bounce, "tumbling": tumbling,
-         "wedge": wedge, "tipping": tipping, "static": static, "arch-energy": arch_energy}
+         "wedge": wedge, "tipping": tipping, "static": static, "arch-energy": arch_energy,
+         "dip-convention": dip_convention}
 
 
 def main(argv):

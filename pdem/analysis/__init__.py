@@ -1,0 +1,1 @@
+"""Closed-form engineering checks that need no simulation (limit equilibrium of rock wedges)."""
