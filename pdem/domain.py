@@ -38,8 +38,18 @@ def take_out(state, bodies) -> None:
     b = state.blocks
     rows = np.nonzero(outside(state))[0]
     code = DELETED if state.scene.domain.action == "delete" else FROZEN
-    b.work[rows, motion.WORK_REMOVED] += kinetic_per_block(b, rows)
     gids = np.concatenate(mpi.allgather(state.comm, b.gid[rows].copy())).astype(np.int64)
+    remove_blocks(state, bodies, gids, code, "left the model domain")
+
+
+def remove_blocks(state, bodies, gids: np.ndarray, code: int, why: str) -> None:
+    """Freeze (``FROZEN``) or delete (``DELETED``) blocks ``gids`` on every rank (every rank
+    passes the same gids). Their kinetic energy and what their contacts held is booked as
+    taken out of the model."""
+    b, n = state.blocks, state.n_owned
+    gids = np.asarray(gids, np.int64)
+    rows = np.nonzero(np.isin(b.gid[:n], gids) & (b.out[:n] == 0))[0]
+    b.work[rows, motion.WORK_REMOVED] += kinetic_per_block(b, rows)
     for store in (state.glob, b):  # every rank's copy of every such block, owned or ghost
         hit = np.isin(store.gid, gids)
         store.fixed[hit] = 1
@@ -55,5 +65,5 @@ def take_out(state, bodies) -> None:
         book_contact_energy(bodies, c.ia, c.ib, held, motion.WORK_REMOVED)
         state.contacts = c.select(~gone)
     names = ", ".join(state.specs[g].name for g in gids[:10]) + (" ..." if len(gids) > 10 else "")
-    log.info("step %d: %d block(s) left the model domain (%s): %s", state.step, len(gids),
+    log.info("step %d: %d block(s) %s (%s): %s", state.step, len(gids), why,
              "deleted" if code == DELETED else "frozen", names)
