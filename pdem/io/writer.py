@@ -27,10 +27,13 @@ FORMAT_VERSION = 2
 # a snapshot row: the block fields declared with an output name (pdem.model.fields)
 _ROW_COLS = row_width(OUTPUT)
 _COLS = {}
+_SHAPES = {f.output: f.shape for f in OUTPUT}
 _c = 0
 for _f in OUTPUT:
     _COLS[_f.output] = (_c, _f.width)
     _c += _f.width
+# output fields a caller may leave out (zero): a block's removal code
+_OPTIONAL = ("removed",)
 # Parallel HDF5 duplicates the file's communicator for every virtual dataset that names the
 # file itself as its source, and frees them only when the file closes: MPICH allows ~2048
 # communicators, i.e. ~220 snapshots of views. So the file is closed and reopened every this
@@ -104,7 +107,7 @@ def _starts(counts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
 
 
-def _block_fields(centroid, x0, velocity, omega) -> dict[str, np.ndarray]:
+def _block_fields(centroid, x0, velocity, omega, removed) -> dict[str, np.ndarray]:
     """Per-block values of the CELL_FIELDS.
 
     Explicit element-wise sums (no BLAS, no reductions over blocks), so a block's values do not
@@ -115,7 +118,7 @@ def _block_fields(centroid, x0, velocity, omega) -> dict[str, np.ndarray]:
 
     d = centroid - x0
     return {"displacement": d, "displacement_magnitude": norm(d), "velocity": velocity,
-            "speed": norm(velocity), "angular_velocity": omega}
+            "speed": norm(velocity), "angular_velocity": omega, "removed": removed}
 
 
 def _add_view(f: h5py.File, path: str, i: int) -> None:
@@ -185,6 +188,7 @@ class OutputWriter:
         group: Sequence[int] | None = None,
         group_names: Sequence[str] | None = None,
         fixed: Sequence[bool] | None = None,
+        block_parents: Sequence[str] | None = None,
     ) -> None:
         self.path = Path(path)
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
@@ -274,9 +278,10 @@ class OutputWriter:
         self._t.attrs["units"] = "s"
         self._step = series("step", (), np.int64, 1024)
         g = f.create_group("blocks")
-        encoded = [str(s).encode("utf-8") for s in block_names]
-        name_t = h5py.string_dtype("utf-8", max(1, max(len(s) for s in encoded)))
-        self._write_static(g.create_dataset("name", (n,), dtype=name_t), np.array(encoded))
+        for key, texts in (("name", block_names), ("parent", block_parents or block_names)):
+            encoded = [str(s).encode("utf-8") for s in texts]
+            text_t = h5py.string_dtype("utf-8", max(1, max(len(s) for s in encoded)))
+            self._write_static(g.create_dataset(key, (n,), dtype=text_t), np.array(encoded))
         self._write_static(g.create_dataset("gid", (n,), dtype=np.int64), np.arange(n))
         self._series = {fd.output: series(f"blocks/{fd.output}", (n, *fd.shape), fd.dtype)
                         for fd in OUTPUT}
@@ -391,9 +396,9 @@ class OutputWriter:
             k = len(gids)
             rows = np.empty((k, _ROW_COLS))
             for name, (col, w) in _COLS.items():
-                if name not in fields:
+                if name not in fields and name not in _OPTIONAL:
                     raise ValueError(f"write_snapshot: no {name} rows")
-                a = np.asarray(fields[name], dtype=np.float64)
+                a = np.asarray(fields.get(name, np.zeros((k, w))), dtype=np.float64)
                 if a.size != k * w:
                     raise ValueError(f"write_snapshot: {name} has shape {a.shape}, need ({k}, {w})")
                 rows[:, col : col + w] = a.reshape(k, w)
@@ -413,7 +418,8 @@ class OutputWriter:
             self._write_row(self._t, i, np.array([time], np.float64) if root else None)
             self._write_row(self._step, i, np.array([step], np.int64) if root else None)
             for name, (col, w) in _COLS.items():
-                self._write_row(self._series[name], i, mine[:, col : col + w], self._lo)
+                rows_out = mine[:, col : col + w].reshape(-1, *_SHAPES[name])
+                self._write_row(self._series[name], i, rows_out, self._lo)
             pts = self._world_points(_cols(mine, "centroid"), _cols(mine, "orientation"))
             self._write_row(self._points, i, pts, self._vlo)
             self._write_fields(i, mine)
@@ -477,7 +483,7 @@ class OutputWriter:
                 self._x0 = _cols(mine, "centroid").copy()
                 self._write(self._f["blocks/initial_centroid"], (self._lo, 0), self._x0)
         values = _block_fields(_cols(mine, "centroid"), self._x0, _cols(mine, "velocity"),
-                               _cols(mine, "angular_velocity"))
+                               _cols(mine, "angular_velocity"), _cols(mine, "removed")[:, 0])
         for name, d in self._cells.items():
             d.resize(self.n_snap, axis=0)
             self._write_row(d, i, values[name][self._my_tblock], self._tlo)

@@ -20,6 +20,7 @@ CELL_FIELDS = (
     ("velocity", 3, "m/s"),
     ("speed", 1, "m/s"),
     ("angular_velocity", 3, "rad/s"),
+    ("removed", 1, "1"),  # 0 in the model, 1 frozen, 2 deleted (domain, excavation)
 )
 _BLOCK_SERIES = ("velocity", "angular_velocity")  # point attributes of the centroid cloud
 

@@ -44,6 +44,7 @@ class Snapshots(Plugin):
         r = state.resolved
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
+            block_parents=[s.parent for s in state.specs],
             body_vertices=vertices, body_faces=faces,
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
             group_names=state.group_names, fixed=state.glob.fixed,
