@@ -160,6 +160,10 @@ def _check(args, comm, log) -> int:
     log.info("%s: valid; %d blocks, %d initial contacts, dt=%.4g s, ctol=%.4g m",
              args.scene, sim.blocks.n, sim.contacts.n, sim.dt, sim.state.ctol)
     log.info("pre-flight estimate: %s", sim.state.estimate)
+    from .model.report import rock_mass_report
+
+    for line in rock_mass_report(scene, sim.specs, sim.state.glob):
+        log.info("%s", line)
     return 0
 
 
