@@ -92,6 +92,18 @@ def apply_cuts(scene, specs, max_blocks=None):
             raise ConfigError([f"{where}: {exc}"]) from None
         out, made = [], 0
         limit = max_blocks if max_blocks is not None else np.inf
+        # refuse a set that would make too many blocks before cutting (a tiny spacing would
+        # otherwise take hours): each block gets at most one piece per plane crossing it, +1
+        crossing = 0
+        for s, c in zip(specs, chosen, strict=True):
+            if c:
+                proj = s.pieces[0].vertices @ normal
+                crossing += int(np.searchsorted(offsets, proj.max())
+                                - np.searchsorted(offsets, proj.min(), side="right"))
+        if len(specs) + crossing > limit:
+            raise ConfigError([f"{where}: would make up to {len(specs) + crossing} blocks, more "
+                               f"than {int(limit)} (limits.max_blocks): a larger spacing, a "
+                               "range, or a higher limits.max_blocks"])
         for k, (s, c) in enumerate(zip(specs, chosen, strict=True)):
             if not c:
                 out.append(s)
