@@ -401,6 +401,7 @@ class Scene(Strict):
     blocks: list[Block] = Field(min_length=1)
     cuts: list[Cut] = []
     cut_tolerance: Annotated[float, Field(ge=0.0, le=LENGTH_MAX)] | Literal["auto"] = "auto"
+    join_slivers: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.05
     join: list[Annotated[list[str], Field(min_length=2)]] = []
     excavate: list[Excavation] = []
     contact: Contact = Contact()

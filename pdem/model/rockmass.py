@@ -120,7 +120,62 @@ def apply_cuts(scene, specs, max_blocks=None):
             raise ConfigError([f"{where}: misses every block (no plane of the set cuts one; "
                                f"{len(offsets)} plane(s) through origin {list(cut.origin)})"])
         specs = out
+    if scene.join_slivers > 0.0:
+        specs = join_slivers(specs, scene.join_slivers)
     return _name_pieces(specs)
+
+
+def join_slivers(specs, fraction: float):
+    """Join every cut piece smaller than ``fraction`` of the median cut piece (by volume) to
+    the piece of the same parent it shares the largest face with (smallest first).
+
+    Three sets leave small corner pieces even when no piece is thin along any one normal;
+    the smallest block sets the timestep (eq. 87), so one sliver can cost 100x in run time.
+    3DEC users join them by hand; here they go into a neighbour, making it concave."""
+    count: dict[str, int] = {}
+    for s in specs:
+        count[s.parent] = count.get(s.parent, 0) + 1
+    cut = [k for k, s in enumerate(specs) if count[s.parent] > 1]
+    if not cut:
+        return specs
+    vol = np.array([s.volume for s in specs])
+    limit = fraction * float(np.median(vol[cut]))
+    owner = list(range(len(specs)))  # union-find over blocks
+
+    def find(i):
+        while owner[i] != i:
+            owner[i] = owner[owner[i]]
+            i = owner[i]
+        return i
+
+    by_parent: dict[str, list[int]] = {}
+    for k in cut:
+        by_parent.setdefault(specs[k].parent, []).append(k)
+    lo = {k: specs[k].pieces[0].vertices.min(axis=0) for k in cut}
+    hi = {k: specs[k].pieces[0].vertices.max(axis=0) for k in cut}
+    for k in sorted((k for k in cut if vol[k] < limit), key=lambda k: (vol[k], k)):
+        p = specs[k].pieces[0]
+        pad = 1e-6 * _size(p)
+        best, best_area = -1, 0.0
+        for j in by_parent[specs[k].parent]:
+            if find(j) == find(k) or np.any(lo[j] > hi[k] + pad) or np.any(hi[j] < lo[k] - pad):
+                continue
+            area = touch_area(p, specs[j].pieces[0])
+            if area > best_area:
+                best, best_area = j, area
+        if best >= 0 and best_area > TOUCH_AREA * _size(p) ** 2:
+            a, b = find(k), find(best)
+            owner[max(a, b)] = min(a, b)
+    members: dict[int, list[int]] = {}
+    for k in range(len(specs)):
+        members.setdefault(find(k), []).append(k)
+    out = []
+    for k, s in enumerate(specs):
+        if find(k) == k:
+            out.append(dataclasses.replace(s, pieces=[p for j in members[k]
+                                                      for p in specs[j].pieces]))
+    return out
+
 
 
 def _name_pieces(specs):
