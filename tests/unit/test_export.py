@@ -153,3 +153,47 @@ def test_no_snapshots(run_file, tmp_path, capsys):
 
 def test_bad_every(run_file, capsys):
     one_line_error(capsys, ["export", str(run_file), "--every", "0"], "--every")
+
+
+PV_SCRIPT = """
+import json, sys
+from paraview.simple import OpenDataFile
+result = {}
+for path in sys.argv[1:-1]:
+    r = OpenDataFile(path)
+    times = list(r.TimestepValues)
+    r.UpdatePipeline(times[-1])
+    info = r.GetDataInformation()
+    result[path] = {"times": times, "points": info.GetNumberOfPoints(),
+                    "cells": info.GetNumberOfCells(), "arrays": sorted(r.CellData.keys()),
+                    "block_id": list(r.CellData["block_id"].GetRange())}
+open(sys.argv[-1], "w").write(json.dumps(result))
+"""
+
+
+def test_paraview_opens_collections(run_file, tmp_path):
+    """ParaView opens the .pvd (vtu) and .vtk.series (vtk) as one series with the model times
+    and every cell array, without an error in its log."""
+    import subprocess
+
+    from test_paraview import BAD_LOG, pvbatch_command
+
+    command = pvbatch_command()
+    collections = []
+    for fmt, name in (("vtu", "pile.pvd"), ("vtk", "pile.vtk.series")):
+        assert cli.main(["export", str(run_file), "--format", fmt, "--out", f"{tmp_path}/{fmt}/"]) == 0
+        collections.append(str(tmp_path / fmt / name))
+    script, result = tmp_path / "probe.py", tmp_path / "probe.json"
+    script.write_text(PV_SCRIPT)
+    run = subprocess.run([*command, str(script), *collections, str(result)], capture_output=True,
+                         text=True, timeout=300)
+    log = run.stdout + run.stderr
+    assert run.returncode == 0, log[-4000:]
+    assert not [line for line in log.splitlines() if any(b in line for b in BAD_LOG)], log
+    d = h5(run_file)
+    for seen in json.loads(result.read_text()).values():
+        assert seen["times"] == list(d["time"])
+        assert seen["points"] == d["surface/points"].shape[1]
+        assert seen["cells"] == d["surface/connectivity"].shape[0]
+        assert seen["arrays"] == sorted(["block_id", "group", "fixed", *SERIES])
+        assert seen["block_id"] == [d["surface/block_id"].min(), d["surface/block_id"].max()]
