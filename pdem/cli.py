@@ -40,9 +40,10 @@ def _parser() -> argparse.ArgumentParser:
     # not argparse choices: an unknown format gets the one-line error (status 1) of other errors
     e.add_argument("--format", "-f", default="vtu",
                    help="vtu (default), vtk, xdmf, gmsh, med or hmf")
-    e.add_argument("--out", "-o", help="directory, or path stem of the files (default: beside "
-                   "FILE, with its stem)")
-    e.add_argument("--every", type=int, default=1, help="export every K-th snapshot")
+    e.add_argument("--out", "-o", metavar="DIR_OR_STEM", help="directory, or path stem of the "
+                   "files (default: beside FILE, with its stem)")
+    e.add_argument("--every", type=int, default=1, metavar="K",
+                   help="export every K-th snapshot (default 1: all)")
     return p
 
 

@@ -151,6 +151,13 @@ def test_no_snapshots(run_file, tmp_path, capsys):
     one_line_error(capsys, ["export", str(empty)], "no snapshots")
 
 
+def test_help_names_every_format(capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["export", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert ", ".join(list(FORMATS)[1:-1]) + " or " + list(FORMATS)[-1] in text
+
+
 def test_bad_every(run_file, capsys):
     one_line_error(capsys, ["export", str(run_file), "--every", "0"], "--every")
 
