@@ -1,4 +1,4 @@
-"""Command line: ``pdem run SCENE.yaml``, ``pdem info FILE.h5``.
+"""Command line: ``pdem run SCENE.yaml``, ``pdem info FILE.h5``, ``pdem export FILE.h5``.
 
 The only module that names ``MPI.COMM_WORLD``; everything else receives the communicator.
 """
@@ -34,6 +34,16 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("scene")
     i = sub.add_parser("info", help="summarise a pdem output file")
     i.add_argument("file")
+    e = sub.add_parser("export", help="write the block surfaces of an output file as one mesh "
+                       "file per snapshot (VTU, VTK, ...), for tools that do not read XDMF")
+    e.add_argument("file", help="output file of a run (HDF5)")
+    # not argparse choices: an unknown format gets the one-line error (status 1) of other errors
+    e.add_argument("--format", "-f", default="vtu",
+                   help="vtu (default), vtk, xdmf, gmsh, med or hmf")
+    e.add_argument("--out", "-o", metavar="DIR_OR_STEM", help="directory, or path stem of the "
+                   "files (default: beside FILE, with its stem)")
+    e.add_argument("--every", type=int, default=1, metavar="K",
+                   help="export every K-th snapshot (default 1: all)")
     return p
 
 
@@ -41,6 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "info":
         return _info(args)
+    if args.command == "export":
+        return _export(args)
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ.setdefault(var, "1")
     from mpi4py import MPI
@@ -175,6 +187,21 @@ def _info(args) -> int:
     except (OSError, ValueError, KeyError) as exc:
         print(f"pdem info: {args.file}: {exc}", file=sys.stderr)
         return 1
+    return 0
+
+
+def _export(args) -> int:
+    from .errors import UserError
+    from .io.export import export
+
+    try:
+        files = export(args.file, args.format, out=args.out, every=args.every)
+    except (UserError, OSError, ValueError, KeyError) as exc:
+        # OSError etc.: a damaged or odd HDF5 file; still one line, as for `pdem info`
+        print(f"pdem export: {exc}", file=sys.stderr)
+        return 1
+    print(f"wrote {len(files)} files: {files[0]} .. {files[-1]}" if len(files) > 1
+          else f"wrote {files[0]}")
     return 0
 
 
