@@ -157,3 +157,54 @@ def l_block_mass_properties(rho: float = RHO) -> tuple[float, np.ndarray, np.nda
     m = ma + mb
     c = (ma * ca + mb * cb) / m
     return m, c, box_inertia(*L_A, rho, about=c)[2] + box_inertia(*L_B, rho, about=c)[2]
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. a tunnel excavated at a model time in a jointed, confined rock box
+
+TUNNEL_ROCK = ((-3.0, 0.0, 0.0), (4.0, 2.0, 6.0))  # 7 x 2 x 6 m, joints 1 m apart in x and z
+TUNNEL_AXIS = (0.5, 2.5)  # (x, z) of the tunnel axis (along y): the middle of a 1 m cell
+TUNNEL_RADIUS = 1.2
+TUNNEL_SIDES = 16
+TUNNEL_KN = 1.0e9
+
+
+def tunnel_volume(radius: float = TUNNEL_RADIUS, sides: int = TUNNEL_SIDES,
+                  length: float | None = None) -> float:
+    """Volume of the polygonal cylinder inside the rock (corners on the circle)."""
+    if length is None:
+        length = TUNNEL_ROCK[1][1] - TUNNEL_ROCK[0][1]
+    return radius ** 2 * sides * math.sin(2.0 * math.pi / sides) / 2.0 * length
+
+
+def tunnel_scene(at: float, time: float, *, friction: float = 30.0) -> str:
+    """The rock box ``TUNNEL_ROCK`` (group rock) cut by a vertical (dip 90, dd 90) and a
+    horizontal (dip 0) joint set, 1 m apart, in a fixed frame (floor and two side walls,
+    group frame); a 16-sided tunnel of radius 1.2 m along y through the whole box, excavated
+    at model time ``at``; local damping, ``time`` s."""
+    (x0, y0, z0), (x1, y1, z1) = TUNNEL_ROCK
+    cx, cz = TUNNEL_AXIS
+    frame = [("floor", (x0 - 1, y0, z0 - 1), (x1 + 1, y1, z0)),
+             ("west", (x0 - 1, y0, z0), (x0, y1, z1)),
+             ("east", (x1, y0, z0), (x1 + 1, y1, z1))]
+    fixed = "\n".join(f"  - {{name: {n}, box: {_box(lo, hi)}, material: rock, group: frame, "
+                      "fixed: true}" for n, lo, hi in frame)
+    return f"""
+name: tunnel
+gravity: [0, 0, {-G}]
+materials: {{rock: {{density: {RHO}}}}}
+joints: {{default: {{kn: {TUNNEL_KN}, ks: {TUNNEL_KN}, friction: {friction!r}}}}}
+blocks:
+  - {{name: rock, box: {_box(*TUNNEL_ROCK)}, material: rock, group: rock}}
+{fixed}
+cuts:
+  - {{name: vertical, dip: 90, dip_direction: 90, origin: [0, 0, 0], spacing: 1.0,
+     groups: [rock]}}
+  - {{name: horizontal, dip: 0, dip_direction: 0, origin: [0, 0, 0], spacing: 1.0,
+     groups: [rock]}}
+excavate:
+  - cylinder: {{start: {vec((cx, y0 - 0.5, cz))}, end: {vec((cx, y1 + 0.5, cz))},
+               radius: {TUNNEL_RADIUS}, sides: {TUNNEL_SIDES}}}
+    time: {at!r}
+solve: {{time: {time!r}, damping: local}}
+"""

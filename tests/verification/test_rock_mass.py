@@ -198,3 +198,172 @@ def test_l_block_rests_on_floor_on_both_members():
     assert drift < 1e-7
     assert speed < 1e-5
     assert tilt < 1e-9
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. tunnel excavated at a model time
+
+def test_tunnel_excavation_volume_equilibrium_and_crown():
+    """pdem.cases.rock_mass.tunnel_scene: a 7 x 2 x 6 m rock box cut into 1 m columns and
+    layers by a vertical and a horizontal joint set, in a fixed floor and side walls; a
+    16-sided tunnel (radius 1.2 m, along y through the whole box) excavated at T = 0.4 s;
+    local damping.
+
+    Closed forms: removed volume = the polygonal cylinder inside the rock,
+    r^2 sides sin(2 pi / sides) / 2 * 2 m (asserted 1e-9 relative); the blocks' volumes add
+    up to the rock's and the frame's (1e-12 relative), before and after T (the live blocks
+    then hold all but the removed volume).
+    Before T the model reaches equilibrium: at T - 0.05 s the unbalanced-force ratio is below
+    1e-5 and every block slower than 1e-6 m/s, nothing deleted. At T exactly the inside
+    pieces are deleted (``out`` == 2, pdem.domain.DELETED), nothing else. After T the crown
+    (the blocks of the column above the tunnel, x in [0, 1], above the opening) has lost its
+    support: 0.3 s later each has moved down > 2 cm (under local damping the fall is at
+    0.2 g: 8.8 cm), while between T - 0.05 s and the start it had moved < 1 mm (the joints'
+    elastic settlement)."""
+    from pdem.cases.rock_mass import (
+        TUNNEL_AXIS,
+        TUNNEL_RADIUS,
+        TUNNEL_ROCK,
+        tunnel_scene,
+        tunnel_volume,
+    )
+    from pdem.domain import DELETED
+
+    T = 0.4
+    s = make_simulation(tunnel_scene(T, T + 0.3))
+    b = s.blocks
+    specs = s.specs
+    gone = np.array([sp.excavate_at is not None for sp in specs])
+    assert all(sp.excavate_at == T for sp in specs if sp.excavate_at is not None)
+    vol = np.array([sp.volume for sp in specs])
+    removed = float(vol[gone].sum())
+    err_removed = abs(removed / tunnel_volume() - 1.0)
+    rock = float(np.prod(np.subtract(TUNNEL_ROCK[1], TUNNEL_ROCK[0])))
+    frame = 2 * 1.0 * 2.0 * 6.0 + 9.0 * 2.0 * 1.0  # side walls + floor
+    err_total = abs(vol.sum() / (rock + frame) - 1.0)
+    print(f"tunnel: {len(specs)} blocks, {int(gone.sum())} inside the tunnel, removed volume "
+          f"{removed:.12f} m3 vs {tunnel_volume():.12f} (rel. err {err_removed:.1e}), total "
+          f"volume rel. err {err_total:.1e}")
+    assert err_removed < 1e-9
+    assert err_total < 1e-12
+    # the crown: blocks of the column above the tunnel, above its highest corner
+    cx, cz = TUNNEL_AXIS
+    x0 = b.x0[:b.n]
+    crown = np.nonzero((~gone) & (b.fixed[:b.n] == 0) & (np.abs(x0[:, 0] - cx) < 0.5)
+                       & (x0[:, 2] > cz + TUNNEL_RADIUS))[0]
+    assert len(crown) == 3  # the cut block over the crown and two whole blocks above
+
+    s.run(time=T - 0.05)
+    speed = float(np.linalg.norm(b.v[:b.n], axis=1).max())
+    dz_before = (b.x[crown, 2] - b.x0[crown, 2]).copy()
+    print(f"at t = {s.time:.3f} s: ratio {s.state.ratio:.1e}, max speed {speed:.1e} m/s, crown "
+          f"moved {dz_before.round(6)} m")
+    assert s.state.ratio < 1e-5
+    assert speed < 1e-6
+    assert (b.out[:b.n] == 0).all()
+    assert np.abs(dz_before).max() < 1e-3
+
+    s.run(time=0.3 + 0.05)
+    assert abs(s.time - (T + 0.3)) < 2 * s.dt
+    assert b.n == len(specs)  # deleted blocks keep their rows (their last pose is output)
+    out = b.out[:b.n][np.argsort(b.gid[:b.n])]
+    assert (out[gone] == DELETED).all() and (out[~gone] == 0).all()
+    dz_after = b.x[crown, 2] - b.x0[crown, 2]
+    live_volume = float(vol[out == 0].sum())
+    print(f"at t = {s.time:.3f} s: crown moved {dz_after.round(4)} m; live volume "
+          f"{live_volume:.9f} = total - removed {vol.sum() - removed:.9f}")
+    assert abs(live_volume / (vol.sum() - removed) - 1.0) < 1e-12
+    assert (dz_after < -0.02).all()
+    assert (dz_after - dz_before < -0.02).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. volume and tiling of cut pieces
+
+def _pieces(text: str):
+    from pdem.config import parse_scene
+    from pdem.model.build import expand_blocks
+
+    return expand_blocks(parse_scene(text))
+
+
+def _cut_box_scene(box, cuts: str) -> str:
+    lo, hi = box
+    return f"""
+materials: {{rock: {{density: 2500}}}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9}}}}
+blocks:
+  - {{name: rock, box: {{min: {list(lo)}, max: {list(hi)}}}, material: rock}}
+cuts:
+{cuts}
+solve: {{steps: 1}}
+"""
+
+
+def _overlap(p, q) -> float:
+    """Volume of the intersection of convex pieces p and q (0.0 if empty or degenerate):
+    p clipped by each of q's face planes."""
+    from pdem.geometry.cutting import split_by_plane
+
+    inner = p
+    for n, d in zip(np.asarray(q.normals), np.asarray(q.offsets), strict=True):
+        inner, _ = split_by_plane(inner, n, d, 0.0)
+        if inner is None:
+            return 0.0
+    return float(inner.volume)
+
+
+def test_cut_pieces_tile_the_box():
+    """A 3 x 2 x 2.5 m box cut by an inclined set (dip 35, dd 70, spacing 0.7) and a steep one
+    (dip 80, dd 200, spacing 0.9): the pieces' volumes add up to the box's (1e-12 relative),
+    and no two pieces overlap (the intersection of each pair, one piece clipped by the
+    other's face planes, is empty or below 1e-12 of the piece's volume). Three orthogonal
+    sets of 5, 4 and 2 planes give exactly 6 x 5 x 3 = 90 pieces, each the box of its cell
+    (volume 1e-12 relative)."""
+    box = ((0.0, 0.0, 0.0), (3.0, 2.0, 2.5))
+    volume = 3.0 * 2.0 * 2.5
+    specs = _pieces(_cut_box_scene(box, """
+  - {name: J1, dip: 35, dip_direction: 70, origin: [1.1, 0.9, 1.3], spacing: 0.7}
+  - {name: J2, dip: 80, dip_direction: 200, origin: [1.6, 1.2, 0.4], spacing: 0.9}"""))
+    pieces = [sp.shape for sp in specs]
+    err_v = abs(sum(p.volume for p in pieces) / volume - 1.0)
+    lo = np.array([p.vertices.min(axis=0) for p in pieces])
+    hi = np.array([p.vertices.max(axis=0) for p in pieces])
+    worst, pairs = 0.0, 0
+    for i in range(len(pieces)):
+        for j in range(i + 1, len(pieces)):
+            if np.any(lo[j] >= hi[i]) or np.any(lo[i] >= hi[j]):
+                continue
+            pairs += 1
+            worst = max(worst, _overlap(pieces[i], pieces[j])
+                        / min(pieces[i].volume, pieces[j].volume))
+    print(f"inclined sets: {len(pieces)} pieces, volume rel. err {err_v:.1e}, {pairs} pairs with "
+          f"overlapping envelopes, worst intersection {worst:.1e} of the smaller piece")
+    assert len(pieces) > 20
+    assert err_v < 1e-12
+    assert worst < 1e-12
+
+    specs = _pieces(_cut_box_scene(box, """
+  - {name: X, dip: 90, dip_direction: 90, origin: [0.3, 0, 0], spacing: 0.6}
+  - {name: Y, dip: 90, dip_direction: 0, origin: [0, 0.25, 0], spacing: 0.5}
+  - {name: Z, dip: 0, dip_direction: 0, origin: [0, 0, 0.5], spacing: 1.0}"""))
+    edges = [np.array([0.0, 0.3, 0.9, 1.5, 2.1, 2.7, 3.0]),
+             np.array([0.0, 0.25, 0.75, 1.25, 1.75, 2.0]),
+             np.array([0.0, 0.5, 1.5, 2.5])]
+    cells = {}
+    for i in range(6):
+        for j in range(5):
+            for k in range(3):
+                c = (edges[0][i:i + 2].mean(), edges[1][j:j + 2].mean(), edges[2][k:k + 2].mean())
+                cells[tuple(np.round(c, 9))] = float(np.prod([np.diff(edges[a][[i, j, k][a]:
+                                                                       [i, j, k][a] + 2])[0]
+                                                               for a in range(3)]))
+    err_cell = 0.0
+    for sp in specs:
+        key = tuple(np.round(sp.centroid, 9))
+        assert key in cells, f"{sp.name}: centroid {sp.centroid} is no cell's"
+        err_cell = max(err_cell, abs(sp.volume / cells.pop(key) - 1.0))
+    print(f"orthogonal sets: {len(specs)} pieces (expected 90), worst cell volume rel. err "
+          f"{err_cell:.1e}")
+    assert len(specs) == 90 and not cells
+    assert err_cell < 1e-12
