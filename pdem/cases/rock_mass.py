@@ -208,3 +208,35 @@ excavate:
     time: {at!r}
 solve: {{time: {time!r}, damping: local}}
 """
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. an L block falling onto a cut stack (parallel determinism)
+
+def l_on_stack_scene(time: float = 0.4, excavate_at: float = 0.15) -> str:
+    """A 4 x 2 x 1 m stack (group stack) on a fixed floor, cut by a vertical joint set (1 m
+    apart, joint ``vj``) and one horizontal plane at z = 0.5; its bottom-east cell is
+    excavated at ``excavate_at``; an L joined from boxes ``a`` and ``b``, spinning, drops
+    onto it across x = 0 (where a 2-rank split cuts the model)."""
+    return f"""
+name: l-on-stack
+gravity: [0, 0, {-G}]
+materials: {{rock: {{density: {RHO}}}}}
+joints:
+  default: {{kn: 1.0e8, ks: 1.0e8, friction: 30.0}}
+  vj: {{kn: 1.0e8, ks: 1.0e8, friction: 20.0}}
+blocks:
+  - {{name: floor, box: {{min: [-3, -2, -0.5], max: [3, 2, 0]}}, material: rock, fixed: true}}
+  - {{name: stack, box: {{min: [-2, -1, 0], max: [2, 1, 1]}}, material: rock, group: stack}}
+  - {{name: a, box: {{min: [-0.9, -0.4, 1.2], max: [0.7, 0.4, 1.5]}}, material: rock,
+     velocity: [0.3, 0.1, -0.5], angular_velocity: [0.4, 1.0, 0.3]}}
+  - {{name: b, box: {{min: [-0.9, 0.4, 1.2], max: [-0.4, 1.2, 1.5]}}, material: rock}}
+cuts:
+  - {{name: V, dip: 90, dip_direction: 90, origin: [0, 0, 0], spacing: 1.0, joint: vj,
+     groups: [stack]}}
+  - {{name: H, dip: 0, dip_direction: 0, origin: [0, 0, 0.5], groups: [stack]}}
+join: [[a, b]]
+excavate:
+  - {{box: {{min: [1.0, -1.5, 0.0], max: [2.5, 1.5, 0.5]}}, time: {excavate_at!r}}}
+solve: {{time: {time!r}, damping: none}}
+"""
