@@ -10,7 +10,9 @@ closed forms the runs are checked against:
 * :mod:`pdem.cases.static` -- a two-cube stack relaxing to elastic equilibrium;
 * :mod:`pdem.cases.tumbling` -- torque-free rotation of an asymmetric block;
 * :mod:`pdem.cases.tipping` -- a cube tipping over a floor edge (common-plane motion);
-* :mod:`pdem.cases.stacks` -- the n x n x n cube stack of the benchmarks.
+* :mod:`pdem.cases.stacks` -- the n x n x n cube stack of the benchmarks;
+* :mod:`pdem.cases.rock_mass` -- rock masses from ``cuts:``/``join:``/``excavate:`` (a wedge cut
+  out of a slope by two joint sets, an L-shaped joined block, a tunnel excavated at a time).
 
 This module holds the helpers they share: build a simulation from YAML, format vectors, turn
 dip / dip direction into plane normals, fit polynomials in time, quaternion to matrix.
