@@ -13,7 +13,8 @@ resulting blocks (their gids) depends only on the scene.
   block being cut).
 * A join makes one rigid body of several blocks that touch face to face (a concave block): one
   mass, centroid and inertia, contacts per convex piece, none between its own pieces. It takes
-  the first member's name and place.
+  the first member's name and place; it is fixed if any member is (joining pieces to a fixed
+  block makes them boundary), and its members must not differ in prescribed motion or load.
 * An excavation removes a convex region: blocks inside go, a straddling block is cut by the
   region's planes and the pieces of it outside the region that touch each other stay one
   (joined) block. With ``time > 0`` the inside pieces stay blocks of their own until then.
@@ -270,6 +271,12 @@ def apply_joins(scene, specs):
         first = specs[rows[0]]
         for k in rows[1:]:
             s = specs[k]
+            moving = [(m.spec.velocity, m.spec.angular_velocity, m.spec.velocity_fixed,
+                       m.spec.force) for m in (s, first)]
+            if not (s.spec.fixed or first.spec.fixed) and moving[0] != moving[1]:
+                errors.append(f"{where}: {s.name!r} and {first.name!r} differ in velocity, "
+                              "angular_velocity, velocity_fixed or force: a joined block moves "
+                              "as one")
             if (s.material, s.group) != (first.material, first.group):
                 errors.append(f"{where}: {s.name!r} has material/group {s.material!r}/"
                               f"{s.group!r}, {first.name!r} {first.material!r}/{first.group!r}: "
@@ -289,8 +296,12 @@ def apply_joins(scene, specs):
         if i is None:
             out.append(s)
         elif by_name[scene.join[i][0]] == k:  # the first member leads: name and place
-            pieces = [p for name in scene.join[i] for p in specs[by_name[name]].pieces]
-            out.append(dataclasses.replace(s, pieces=pieces))
+            members = [specs[by_name[name]] for name in scene.join[i]]
+            pieces = [p for m in members for p in m.pieces]
+            spec = s.spec
+            if any(m.spec.fixed for m in members):  # joined to a fixed block: part of it
+                spec = spec.model_copy(update={"fixed": True})
+            out.append(dataclasses.replace(s, pieces=pieces, spec=spec))
     return out
 
 

@@ -249,3 +249,22 @@ blocks: [{name: m, mesh: {file: bad.vtu}, material: rock}]
 """, "scene.yaml", tmp_path)
     with pytest.raises(ConfigError, match=r"blocks\[0\].mesh.*cell 0 \(hexahedron\)"):
         expand_blocks(scene)
+
+
+def test_a_join_with_a_fixed_member_is_fixed_and_moving_members_must_agree():
+    scene, specs = build("""
+blocks:
+  - {name: a, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock}
+  - {name: wall, box: {min: [1, 0, 0], max: [2, 1, 1]}, material: rock, fixed: true}
+join: [[a, wall]]
+""")
+    assert len(specs) == 1 and specs[0].spec.fixed
+    glob, _ = block_store(scene, specs)
+    assert glob.fixed.tolist() == [1]
+    with pytest.raises(ConfigError, match=r"join\[0\].*differ in velocity"):
+        build("""
+blocks:
+  - {name: a, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock}
+  - {name: b, box: {min: [1, 0, 0], max: [2, 1, 1]}, material: rock, velocity: [1, 0, 0]}
+join: [[a, b]]
+""")
