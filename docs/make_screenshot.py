@@ -6,6 +6,10 @@ python3-paraview xvfb``; run/setup installs them), not by pdem's Python:
 
     .venv/bin/mpiexec -n 2 .venv/bin/pdem run configs/default.yaml -o /tmp/pile.h5    # ~1 min
     xvfb-run -a pvbatch docs/make_screenshot.py /tmp/pile.xdmf
+    xvfb-run -a pvbatch docs/make_screenshot.py /tmp/slope.xdmf docs/figures/slope.png
+
+With an output path, the camera looks from the south-east and above, fitted to the model
+(configs/slope.yaml, configs/tunnel.yaml).
 
 It opens the sidecar with the Xdmf3 Reader T, as a user would (docs/output.md), so the picture
 is also a check that the file reads right.
@@ -28,7 +32,7 @@ from paraview.simple import (
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "figures", "default-displacement.png")
 
 
-def main(xdmf: str) -> None:
+def main(xdmf: str, out: str | None = None) -> None:
     reader = Xdmf3ReaderT(FileName=[os.path.abspath(xdmf)])
     reader.UpdatePipelineInformation()
     t = reader.TimestepValues[-1]
@@ -39,7 +43,10 @@ def main(xdmf: str) -> None:
     view.Background = [1.0, 1.0, 1.0]
     view.UseColorPaletteForBackground = 0
     # moving blocks coloured, fixed ones (floor, walls) faint so they do not hide the pile
-    moving = Threshold(Input=reader, Scalars=["CELLS", "fixed"], LowerThreshold=0, UpperThreshold=0)
+    # blocks taken out of the model (excavated, left the domain) keep their last pose: hidden
+    present = Threshold(Input=reader, Scalars=["CELLS", "removed"], LowerThreshold=0,
+                        UpperThreshold=0)
+    moving = Threshold(Input=present, Scalars=["CELLS", "fixed"], LowerThreshold=0, UpperThreshold=0)
     fixed = Threshold(Input=reader, Scalars=["CELLS", "fixed"], LowerThreshold=1, UpperThreshold=1)
     box = Show(fixed, view)
     ColorBy(box, None)
@@ -56,16 +63,22 @@ def main(xdmf: str) -> None:
     bar.ComponentTitle = ""
     bar.TitleColor = bar.LabelColor = [0.1, 0.1, 0.1]
     bar.TitleFontSize = bar.LabelFontSize = 20
-    # oblique view from above one corner of the box, so the pile and the walls both show
-    view.CameraPosition = [8.0, -11.0, 13.0]
-    view.CameraFocalPoint = [0.0, 0.0, 0.6]
     view.CameraViewUp = [0.0, 0.0, 1.0]
     view.CameraViewAngle = 30
-    SaveScreenshot(OUT, view, ImageResolution=[1200, 800])
-    print(f"t = {t:.3g} s -> {OUT}")
+    if out is None:
+        # oblique view from above one corner of the box, so the pile and the walls both show
+        view.CameraPosition = [8.0, -11.0, 13.0]
+        view.CameraFocalPoint = [0.0, 0.0, 0.6]
+    else:
+        view.CameraPosition = [1.0, -1.2, 0.8]
+        view.CameraFocalPoint = [0.0, 0.0, 0.0]
+        view.ResetCamera()
+    out = out or OUT
+    SaveScreenshot(out, view, ImageResolution=[1200, 800])
+    print(f"t = {t:.3g} s -> {out}")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
+    if len(sys.argv) not in (2, 3):
         sys.exit(__doc__)
-    main(sys.argv[1])
+    main(*sys.argv[1:])

@@ -215,12 +215,13 @@ class Excavation(Strict):
     """A convex region removed from the model (3DEC's ``block excavate``): blocks inside go,
     straddling blocks are cut by its surface and keep their outside as one (concave) block.
     ``time``: model time of the excavation (0: before the run starts); until then the inside
-    pieces stay in the model as blocks of their own."""
+    pieces stay in the model as blocks of their own. ``groups``: only blocks of these groups."""
 
     cylinder: CylinderRegion | None = None
     box: BoxShape | None = None
     planes: PlanesShape | None = None
     time: Annotated[float, Field(ge=0.0)] = 0.0
+    groups: list[str] | None = None
 
     @model_validator(mode="after")
     def _one_region(self):

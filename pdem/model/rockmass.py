@@ -126,13 +126,15 @@ def apply_cuts(scene, specs, max_blocks=None):
     return _name_pieces(specs)
 
 
-def join_slivers(specs, fraction: float):
+def join_slivers(specs, fraction: float, same_parent: bool = True):
     """Join every cut piece smaller than ``fraction`` of the median cut piece (by volume) to
-    the piece of the same parent it shares the largest face with (smallest first).
+    the block it shares the largest face with (smallest first; same material, group and
+    excavation time; of the same parent block with ``same_parent``).
 
-    Three sets leave small corner pieces even when no piece is thin along any one normal;
-    the smallest block sets the timestep (eq. 87), so one sliver can cost 100x in run time.
-    3DEC users join them by hand; here they go into a neighbour, making it concave."""
+    Three sets leave small corner pieces even when no piece is thin along any one normal, and
+    an excavation leaves corner bits of the blocks it cuts; the smallest block sets the
+    timestep (eq. 87), so one sliver can cost 100x in run time. 3DEC users join them by hand;
+    here they go into a neighbour, making it concave (fixed if the neighbour is)."""
     count: dict[str, int] = {}
     for s in specs:
         count[s.parent] = count.get(s.parent, 0) + 1
@@ -141,6 +143,9 @@ def join_slivers(specs, fraction: float):
         return specs
     vol = np.array([s.volume for s in specs])
     limit = fraction * float(np.median(vol[cut]))
+    small = sorted((k for k in cut if vol[k] < limit), key=lambda k: (vol[k], k))
+    if not small:
+        return specs
     owner = list(range(len(specs)))  # union-find over blocks
 
     def find(i):
@@ -149,22 +154,23 @@ def join_slivers(specs, fraction: float):
             i = owner[i]
         return i
 
-    by_parent: dict[str, list[int]] = {}
-    for k in cut:
-        by_parent.setdefault(specs[k].parent, []).append(k)
-    lo = {k: specs[k].pieces[0].vertices.min(axis=0) for k in cut}
-    hi = {k: specs[k].pieces[0].vertices.max(axis=0) for k in cut}
-    for k in sorted((k for k in cut if vol[k] < limit), key=lambda k: (vol[k], k)):
-        p = specs[k].pieces[0]
-        pad = 1e-6 * _size(p)
+    def kind(s):
+        return (s.material, s.group, s.excavate_at, s.parent if same_parent else None)
+
+    lo = np.array([np.min([p.vertices.min(axis=0) for p in s.pieces], axis=0) for s in specs])
+    hi = np.array([np.max([p.vertices.max(axis=0) for p in s.pieces], axis=0) for s in specs])
+    for k in small:
+        pad = 1e-6 * vol[k] ** (1.0 / 3.0)
+        near = np.nonzero(np.all((lo <= hi[k] + pad) & (hi >= lo[k] - pad), axis=1))[0]
         best, best_area = -1, 0.0
-        for j in by_parent[specs[k].parent]:
-            if find(j) == find(k) or np.any(lo[j] > hi[k] + pad) or np.any(hi[j] < lo[k] - pad):
+        for j in near:
+            j = int(j)
+            if find(j) == find(k) or kind(specs[j]) != kind(specs[k]):
                 continue
-            area = touch_area(p, specs[j].pieces[0])
+            area = sum(touch_area(p, q) for p in specs[k].pieces for q in specs[j].pieces)
             if area > best_area:
                 best, best_area = j, area
-        if best >= 0 and best_area > TOUCH_AREA * _size(p) ** 2:
+        if best >= 0 and best_area > TOUCH_AREA * vol[k] ** (2.0 / 3.0):
             a, b = find(k), find(best)
             owner[max(a, b)] = min(a, b)
     members: dict[int, list[int]] = {}
@@ -173,10 +179,13 @@ def join_slivers(specs, fraction: float):
     out = []
     for k, s in enumerate(specs):
         if find(k) == k:
-            out.append(dataclasses.replace(s, pieces=[p for j in members[k]
-                                                      for p in specs[j].pieces]))
+            group = [specs[j] for j in members[k]]
+            spec = s.spec
+            if any(m.spec.fixed for m in group) and not spec.fixed:
+                spec = spec.model_copy(update={"fixed": True})
+            out.append(dataclasses.replace(s, pieces=[p for m in group for p in m.pieces],
+                                           spec=spec))
     return out
-
 
 
 def _name_pieces(specs):
@@ -340,8 +349,9 @@ def apply_excavations(scene, specs):
             raise ConfigError([f"{where}: {exc_}"]) from None
         out, touched = [], 0
         for s in specs:
-            if s.excavate_at is not None:  # already inside an earlier excavation
-                out.append(s)
+            if s.excavate_at is not None or (exc.groups is not None
+                                             and s.group not in exc.groups):
+                out.append(s)  # inside an earlier excavation, or not of its groups
                 continue
             outside, inside, changed = [], [], False
             for poly in s.pieces:
@@ -376,4 +386,6 @@ def apply_excavations(scene, specs):
         if not out:
             raise ConfigError([f"{where}: removes every block"])
         specs = out
+    if scene.join_slivers > 0.0:
+        specs = join_slivers(specs, scene.join_slivers, same_parent=False)
     return specs
