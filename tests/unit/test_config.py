@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pdem.config import ConfigError, dump_scene, load_scene, parse_scene
@@ -37,7 +38,12 @@ def test_defaults_filled_and_round_trip():
 
 @pytest.mark.parametrize("path", sorted((ROOT / "configs").glob("*.yaml")), ids=lambda p: p.name)
 def test_shipped_configs_validate(path):
-    load_scene(path)
+    scene = load_scene(path)
+    # the blocks they make too (cuts, joins, excavations): every block a sound size
+    from pdem.model.build import expand_blocks
+
+    vol = np.array([s.volume for s in expand_blocks(scene)])
+    assert vol.min() > 0.01 * np.median(vol)
 
 
 def test_unknown_key_suggests_and_gives_line():
