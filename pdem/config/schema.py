@@ -75,9 +75,13 @@ class BoxShape(Strict):
 
 
 class PolyhedronShape(Strict):
-    """Convex hull of ``vertices``; every vertex must be on the hull (no concave input)."""
+    """Convex hull of ``vertices`` (every vertex must be on the hull), or, with ``faces``
+    (vertex ids of each face, all counter-clockwise seen from outside or all clockwise), the
+    closed polyhedron they bound, convex or not: a concave one becomes a joined block of convex
+    pieces."""
 
     vertices: list[Vec3] = Field(min_length=4)
+    faces: list[Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=3)]] | None = None
 
 
 class PrismShape(Strict):

@@ -154,6 +154,12 @@ def _box(p):
 
 def _polyhedron(p):
     pts = np.asarray(p.vertices, float)
+    if p.faces is not None:  # a closed surface, possibly concave: its convex pieces
+        from ..geometry.concave import convex_pieces
+
+        pieces = convex_pieces(pts, p.faces)
+        yield None, pieces if len(pieces) > 1 else pieces[0]
+        return
     inside = check_convex(pts, boundary=True)
     if len(inside):
         raise GeometryError(
@@ -190,9 +196,10 @@ def _random(r):
         yield k, shape.transformed(np.eye(3), site - shape.centroid)
 
 
-# Block shapes by scene key: each builder yields (member index or None, world-frame shape) for
-# its entry's parameters; a family (index given) names its members ``NAME[k]``. A new shape is
-# its schema model (config/schema.py, SHAPE_KEYS) plus a builder and a line here.
+# Block shapes by scene key: each builder yields (member index or None, world-frame shape, or a
+# list of convex pieces for a concave block) for its entry's parameters; a family (index given)
+# names its members ``NAME[k]``. A new shape is its schema model (config/schema.py,
+# SHAPE_KEYS) plus a builder and a line here.
 SHAPES: Registry = Registry("block shape")
 for _name, _builder in (("box", _box), ("polyhedron", _polyhedron), ("prism", _prism),
                         ("planes", _planes), ("array", _array), ("random", _random)):
@@ -214,7 +221,8 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None) -> list[BlockSpec
         try:
             for k, shape in SHAPES[kind](getattr(b, kind)):
                 name = b.name if k is None else f"{b.name}[{k}]"
-                out.append(BlockSpec(name, i, [shape], b, parent=name))
+                pieces = shape if isinstance(shape, list) else [shape]
+                out.append(BlockSpec(name, i, pieces, b, parent=name))
         except (GeometryError, ValueError) as exc:
             errors.append(f"blocks[{i}] ({b.name!r}).{kind}: {exc}")
     if errors:

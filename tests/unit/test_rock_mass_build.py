@@ -268,3 +268,44 @@ blocks:
   - {name: b, box: {min: [1, 0, 0], max: [2, 1, 1]}, material: rock, velocity: [1, 0, 0]}
 join: [[a, b]]
 """)
+
+
+def _extruded(profile, depth):
+    """Vertices and outward faces of a planar xz polygon (counter-clockwise seen from -y)
+    extruded along +y by ``depth``."""
+    n = len(profile)
+    v = [(x, 0.0, z) for x, z in profile] + [(x, depth, z) for x, z in profile]
+    faces = [list(range(n)), [n + i for i in range(n)][::-1]]
+    faces += [[(i + 1) % n, i, n + i, n + (i + 1) % n] for i in range(n)]
+    return v, faces
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_a_concave_polyhedron_given_by_faces_becomes_one_joined_block(flip):
+    # a U: 5 x 1 base with two 1 x 2 posts, 0.5 deep; volume (5 + 2 + 2) * 0.5
+    v, faces = _extruded([(0, 0), (5, 0), (5, 3), (4, 3), (4, 1), (1, 1), (1, 3), (0, 3)], 0.5)
+    if flip:
+        faces = [f[::-1] for f in faces]
+    scene, specs = build(f"""
+blocks:
+  - {{name: u, polyhedron: {{vertices: {v}, faces: {faces}}}, material: rock}}
+""".replace("(", "[").replace(")", "]"))
+    (u,) = specs
+    assert len(u.pieces) >= 3 and math.isclose(u.volume, 4.5, rel_tol=1e-12)
+    assert np.allclose(u.centroid, [2.5, 0.25, (5 * 0.5 + 2 * 2 * 2) / 9], atol=1e-12)
+    polys = u.pieces
+    assert max(_overlap(polys[i], polys[j]) for i in range(len(polys))
+               for j in range(i + 1, len(polys))) < 1e-12
+
+
+def test_a_polyhedron_surface_with_a_hole_or_a_wrong_face_is_refused():
+    v, faces = _extruded([(0, 0), (2, 0), (2, 2), (0, 2)], 1.0)
+    with pytest.raises(ConfigError, match=r"blocks\[0\].*surface is not closed"):
+        build(f"""
+blocks: [{{name: b, polyhedron: {{vertices: {v}, faces: {faces[:-1]}}}, material: rock}}]
+""".replace("(", "[").replace(")", "]"))
+    faces[2] = faces[2][::-1]
+    with pytest.raises(ConfigError, match=r"blocks\[0\].*counter-clockwise"):
+        build(f"""
+blocks: [{{name: b, polyhedron: {{vertices: {v}, faces: {faces}}}, material: rock}}]
+""".replace("(", "[").replace(")", "]"))
