@@ -77,6 +77,9 @@ class ModelState:
         warn = comm.rank == 0
         estimate = preflight(scene, comm.size, memory, warn)
         specs = expand_blocks(scene, estimate.max_blocks)
+        if len(specs) > estimate.max_blocks:  # a mesh's cells are counted only once read
+            raise ConfigError([f"limits.max_blocks: the scene makes {len(specs)} blocks, more "
+                               f"than the limit {estimate.max_blocks}"])
         glob, group_names = block_store(scene, specs)
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)
