@@ -13,8 +13,8 @@ resulting blocks (their gids) depends only on the scene.
   block being cut).
 * A join makes one rigid body of several blocks that touch face to face (a concave block): one
   mass, centroid and inertia, contacts per convex piece, none between its own pieces. It takes
-  the first member's name and place; it is fixed if any member is (joining pieces to a fixed
-  block makes them boundary), and its members must not differ in prescribed motion or load.
+  the first member's name, place, motion and load; it is fixed if any member is (joining pieces
+  to a fixed block makes them boundary); another member may not give a different motion/load.
 * An excavation removes a convex region: blocks inside go, a straddling block is cut by the
   region's planes and the pieces of it outside the region that touch each other stay one
   (joined) block. With ``time > 0`` the inside pieces stay blocks of their own until then.
@@ -280,12 +280,15 @@ def apply_joins(scene, specs):
         first = specs[rows[0]]
         for k in rows[1:]:
             s = specs[k]
+            # the joined block takes the first member's motion and load; another member may
+            # repeat them or leave them unset, not contradict them
             moving = [(m.spec.velocity, m.spec.angular_velocity, m.spec.velocity_fixed,
                        m.spec.force) for m in (s, first)]
-            if not (s.spec.fixed or first.spec.fixed) and moving[0] != moving[1]:
+            unset = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), False, (0.0, 0.0, 0.0))
+            if not (s.spec.fixed or first.spec.fixed) and moving[0] not in (moving[1], unset):
                 errors.append(f"{where}: {s.name!r} and {first.name!r} differ in velocity, "
                               "angular_velocity, velocity_fixed or force: a joined block moves "
-                              "as one")
+                              "as one (give them on the first member only)")
             if (s.material, s.group) != (first.material, first.group):
                 errors.append(f"{where}: {s.name!r} has material/group {s.material!r}/"
                               f"{s.group!r}, {first.name!r} {first.material!r}/{first.group!r}: "

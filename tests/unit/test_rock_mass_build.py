@@ -264,10 +264,18 @@ join: [[a, wall]]
     with pytest.raises(ConfigError, match=r"join\[0\].*differ in velocity"):
         build("""
 blocks:
-  - {name: a, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock}
+  - {name: a, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock, velocity: [0, 1, 0]}
   - {name: b, box: {min: [1, 0, 0], max: [2, 1, 1]}, material: rock, velocity: [1, 0, 0]}
 join: [[a, b]]
 """)
+    # the first member's motion is the joined block's; the others may leave theirs unset
+    _, (ab,) = build("""
+blocks:
+  - {name: a, box: {min: [0, 0, 0], max: [1, 1, 1]}, material: rock, velocity: [0, 1, 0]}
+  - {name: b, box: {min: [1, 0, 0], max: [2, 1, 1]}, material: rock}
+join: [[a, b]]
+""")
+    assert ab.spec.velocity == (0.0, 1.0, 0.0)
 
 
 def _extruded(profile, depth):
