@@ -15,7 +15,7 @@ import numpy as np
 
 from .config import ConfigError, Scene
 from .config.load import dump_scene
-from .config.preflight import check_derived, machine_memory, preflight
+from .config.preflight import check_derived, machine_memory, preflight, rescaled
 from .config.resolve import TOUCH_FRACTION, Resolved, resolve
 from .contact.algorithms import ALGORITHMS
 from .contact.cellspace import CellSpace
@@ -77,9 +77,11 @@ class ModelState:
         warn = comm.rank == 0
         estimate = preflight(scene, comm.size, memory, warn)
         specs = expand_blocks(scene, estimate.max_blocks)
-        if len(specs) > estimate.max_blocks:  # a mesh's cells are counted only once read
-            raise ConfigError([f"limits.max_blocks: the scene makes {len(specs)} blocks, more "
-                               f"than the limit {estimate.max_blocks}"])
+        if len(specs) != estimate.blocks:  # cuts and mesh cells are counted only once built
+            estimate = rescaled(estimate, len(specs))
+            if len(specs) > estimate.max_blocks or estimate.bytes_per_rank > estimate.max_bytes:
+                raise ConfigError([f"limits: the scene makes {estimate} (limits.max_blocks, "
+                                   "limits.max_memory_per_rank; docs/limits.md)"])
         glob, group_names = block_store(scene, specs)
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)

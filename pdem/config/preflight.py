@@ -131,6 +131,14 @@ class Estimate:
                 f"{_bytes_text(self.max_bytes)} per rank)")
 
 
+def rescaled(est: Estimate, n_blocks: int) -> Estimate:
+    """The estimate for the block count the scene turned out to make (cuts and meshes are
+    counted only once built): contacts and bytes scale with the blocks."""
+    f = n_blocks / max(est.blocks, 1)
+    return Estimate(n_blocks, math.ceil(est.contacts * f), est.bytes_per_rank * f,
+                    est.max_blocks, est.max_bytes)
+
+
 def estimate(scene, comm_size: int, memory: float | None = None
              ) -> tuple[Estimate, list[tuple[int, int]]]:
     """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry.
