@@ -417,6 +417,12 @@ class Scene(Strict):
     domain: Domain | None = None
     limits: Limits = Limits()
 
+    def __eq__(self, other) -> bool:
+        # the values, not where they came from (``_lines``)
+        return isinstance(other, Scene) and self.__dict__ == other.__dict__
+
+    __hash__ = None  # a scene holds dicts: unhashable, as before
+
     def at(self, *path) -> str:
         """``path`` as a key path (``cuts[2].dip``) with its YAML line when known."""
         text = ""
