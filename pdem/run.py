@@ -31,17 +31,17 @@ class Run:
                 p.before_migration(self)
             self.state.redistribute()
 
-    def _end(self, time, steps):
+    def _end(self, time, steps, ratio=None, max_steps=None):
         s = self.state
         sv = s.scene.solve
-        if time is None and steps is None:
+        if time is None and steps is None and ratio is None:
             # the scene's end condition is absolute, so a restart runs to the same end
             end_step, end_time, ratio_target = sv.steps, sv.time, sv.ratio
         else:
             end_step = s.step + steps if steps is not None else None
             end_time = s.time + time if time is not None else None
-            ratio_target = None
-        max_steps = sv.max_steps or (10_000_000 if ratio_target else None)
+            ratio_target = ratio
+        max_steps = max_steps or sv.max_steps or (10_000_000 if ratio_target else None)
         if end_time is not None:
             self.n_estimate = int(math.ceil((end_time - s.time) / s.dt))
         elif end_step is not None:
@@ -50,12 +50,13 @@ class Run:
             self.n_estimate = max_steps
         return end_step, end_time, ratio_target, max_steps
 
-    def run(self, *, time: float | None = None, steps: int | None = None) -> dict:
+    def run(self, *, time: float | None = None, steps: int | None = None,
+            ratio: float | None = None, max_steps: int | None = None) -> dict:
         """March until the scene's end condition (or the given model time / step count), or
         until a stop request (``stepper.stop``): then the summary has ``stopped`` (the signal)
         and ``checkpoint`` (the file to restart from), written after the output is flushed."""
         s = self.state
-        end_step, end_time, ratio_target, max_steps = self._end(time, steps)
+        end_step, end_time, ratio_target, max_steps = self._end(time, steps, ratio, max_steps)
         log.info("%s: %d blocks, %d contacts, dt=%.4g s, ctol=%.4g m, %s damping; %d steps",
                  s.scene.name, s.glob.n, s.contacts.n, s.dt, s.ctol, s.scene.solve.damping.mode,
                  self.n_estimate)

@@ -32,6 +32,10 @@ class Simulation:
         if checkpoint is None:
             self.stepper.start()
         else:
+            if scene.stages:  # the model the checkpoint's stages had made, then its state
+                from .stages import replay_stages
+
+                replay_stages(self.state, checkpoint["attrs"])
             self.state.restore(checkpoint)
         if plugins is None:
             plugins = default_plugins(self.state, output)
@@ -74,6 +78,16 @@ class Simulation:
         return self.state.n_owned
 
     def run(self, *, time: float | None = None, steps: int | None = None) -> dict:
+        """March to the scene's end (every stage not done, for a staged scene), or for the
+        given model time / step count."""
+        if self.state.scene.stages and time is None and steps is None:
+            from .stages import run_stages
+
+            summaries = run_stages(self.runner)
+            last = dict(summaries[-1]) if summaries else {"steps": 0, "stopped": 0,
+                                                          "checkpoint": None}
+            last["stages"] = summaries
+            return last
         return self.runner.run(time=time, steps=steps)
 
     def advance(self):

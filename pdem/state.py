@@ -53,6 +53,13 @@ class ModelState:
         self.dt = resolved.dt
         self.alpha = resolved.alpha
         self.ratio = math.inf
+        # staged runs (pdem.stages): the current stage, how many are done, and where the one
+        # in progress started (its changes made at stage_started; -1: none yet)
+        self.stage = 0
+        self.stage_next = 0
+        self.stage_started = -1
+        self.stage_t0 = 0.0
+        self.stage_step0 = 0
         self.energy_start = None  # (kinetic, joint spring energy) at the start, see plugins.energy
         self.gravity = np.array(scene.gravity, float)
         self.damping = DAMPING[scene.solve.damping.mode]

@@ -289,9 +289,108 @@ class Solve(Strict):
 
     @model_validator(mode="after")
     def _one_end(self):
+        # none is allowed here: a scene with stages ends each stage instead (Scene checks)
+        ends = [k for k in ("time", "steps", "ratio") if getattr(self, k) is not None]
+        if len(ends) > 1:
+            raise ValueError(f"give exactly one of time, steps, ratio (got {ends})")
+        return self
+
+    @property
+    def has_end(self) -> bool:
+        return any(getattr(self, k) is not None for k in ("time", "steps", "ratio"))
+
+
+class Selection(Strict):
+    """Blocks by name (``NAME``, ``NAME[k]``, or a scene entry's name for all its blocks), by
+    group, and/or by centroid in a box; the blocks matching every key given."""
+
+    names: list[str] | None = None
+    groups: list[str] | None = None
+    range: CutRange | None = None
+
+    @model_validator(mode="after")
+    def _something(self):
+        if self.names is None and self.groups is None and self.range is None:
+            raise ValueError("give names, groups or range")
+        return self
+
+
+class StageVelocity(Selection):
+    """Prescribed velocity of the selected blocks from this stage on (3DEC's ``block fix``
+    with a velocity): they move at it whatever the forces."""
+
+    velocity: Vec3Speed = (0.0, 0.0, 0.0)
+    angular_velocity: Vec3Speed = (0.0, 0.0, 0.0)
+
+
+class StageForce(Selection):
+    """Constant force applied at the centroid of each selected block from this stage on
+    (replaces its earlier applied force)."""
+
+    force: Vec3Force
+
+
+class StageSolve(Strict):
+    """A stage's end condition (one of ``time`` (a duration), ``steps``, ``ratio``) and the
+    knobs a stage may change; the rest comes from the scene's ``solve``."""
+
+    time: PositiveFloat | None = None
+    steps: PositiveInt | None = None
+    ratio: PositiveFloat | None = None
+    max_steps: PositiveInt | None = None
+    damping: Damping | None = None
+    mass_scaling: bool | None = None
+
+    @field_validator("damping", mode="before")
+    @classmethod
+    def _damping_shorthand(cls, v):
+        return {"mode": v} if isinstance(v, str) else v
+
+    @model_validator(mode="after")
+    def _one_end(self):
         ends = [k for k in ("time", "steps", "ratio") if getattr(self, k) is not None]
         if len(ends) != 1:
             raise ValueError(f"give exactly one of time, steps, ratio (got {ends or 'none'})")
+        return self
+
+
+class FactorOfSafety(Strict):
+    """Strength reduction: trial solves with tan(friction), cohesion and tension divided by F
+    (of every joint, or of ``joints``), F bracketed by bisection between 1 (must be stable)
+    and ``high`` to ``tolerance`` (relative). A trial is stable when the unbalanced-force
+    ratio falls below ``ratio`` within ``max_steps`` and unstable when it does not (or a
+    block moves more than ``max_displacement``, m)."""
+
+    tolerance: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.01
+    high: Annotated[float, Field(gt=1.0, le=1e3)] = 4.0
+    ratio: PositiveFloat = 1e-4
+    max_steps: PositiveInt = 20_000
+    max_displacement: PositiveFloat | None = None
+    joints: list[str] | None = None
+
+
+class Stage(Strict):
+    """One stage of a staged run: model changes, then a solve (or a factor-of-safety search).
+    Excavations are cut when the model is built and removed when the stage starts."""
+
+    name: str
+    excavate: list[Excavation] = []
+    joints: dict[str, dict[str, float]] = {}
+    fix: Selection | None = None
+    free: Selection | None = None
+    velocity: list[StageVelocity] = []
+    force: list[StageForce] = []
+    reset_displacements: bool = False
+    solve: StageSolve | None = None
+    factor_of_safety: FactorOfSafety | None = None
+
+    @model_validator(mode="after")
+    def _one_action(self):
+        if (self.solve is None) == (self.factor_of_safety is None):
+            raise ValueError("give exactly one of solve, factor_of_safety")
+        for e in self.excavate:
+            if e.time != 0.0:
+                raise ValueError("a stage's excavations happen when it starts: no time")
         return self
 
 
@@ -409,6 +508,7 @@ class Scene(Strict):
     join_slivers: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.05
     join: list[Annotated[list[str], Field(min_length=2)]] = []
     excavate: list[Excavation] = []
+    stages: list[Stage] = []
     contact: Contact = Contact()
     parallel: Parallel = Parallel()
     solve: Solve
@@ -468,6 +568,32 @@ class Scene(Strict):
                         f"joint_pairs[{i}].groups: no block has group {g!r} "
                         f"(groups: {', '.join(sorted(groups))})"
                     )
+        if not self.stages and not self.solve.has_end:
+            errors.append("solve: give exactly one of time, steps, ratio (got none), or stages")
+        names_seen = set()
+        for i, st in enumerate(self.stages):
+            if st.name in names_seen:
+                errors.append(f"stages[{i}].name: {st.name!r} names an earlier stage")
+            names_seen.add(st.name)
+            for k, changes in st.joints.items():
+                if k not in self.joints:
+                    errors.append(f"stages[{i}].joints: unknown joint {k!r} "
+                                  f"(defined: {', '.join(sorted(self.joints))})")
+                    continue
+                fields = [f for f in type(self.joints[k]).model_fields if f != "model"]
+                for key in changes:
+                    if key not in fields:
+                        errors.append(f"stages[{i}].joints.{k}.{key}: not a parameter of its "
+                                      f"{self.joints[k].model} joint ({', '.join(fields)})")
+            for key in ("fix", "free"):
+                sel = getattr(st, key)
+                for g in (sel.groups or ()) if sel else ():
+                    if g not in groups and not open_groups:
+                        errors.append(f"stages[{i}].{key}.groups: no block has group {g!r}")
+            fos = st.factor_of_safety
+            for j in (fos.joints or ()) if fos else ():
+                if j not in self.joints:
+                    errors.append(f"stages[{i}].factor_of_safety.joints: unknown joint {j!r}")
         for i, c in enumerate(self.cuts):
             if c.joint is not None and c.joint not in self.joints:
                 errors.append(f"cuts[{i}].joint: unknown joint {c.joint!r} "

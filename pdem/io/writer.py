@@ -33,7 +33,7 @@ for _f in OUTPUT:
     _COLS[_f.output] = (_c, _f.width)
     _c += _f.width
 # output fields a caller may leave out (zero): a block's removal code
-_OPTIONAL = ("removed",)
+_OPTIONAL = ("removed", "stage_origin")
 # Parallel HDF5 duplicates the file's communicator for every virtual dataset that names the
 # file itself as its source, and frees them only when the file closes: MPICH allows ~2048
 # communicators, i.e. ~220 snapshots of views. So the file is closed and reopened every this
@@ -107,7 +107,7 @@ def _starts(counts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
 
 
-def _block_fields(centroid, x0, velocity, omega, removed) -> dict[str, np.ndarray]:
+def _block_fields(centroid, x0, velocity, omega, removed, stage_origin) -> dict[str, np.ndarray]:
     """Per-block values of the CELL_FIELDS.
 
     Explicit element-wise sums (no BLAS, no reductions over blocks), so a block's values do not
@@ -118,7 +118,8 @@ def _block_fields(centroid, x0, velocity, omega, removed) -> dict[str, np.ndarra
 
     d = centroid - x0
     return {"displacement": d, "displacement_magnitude": norm(d), "velocity": velocity,
-            "speed": norm(velocity), "angular_velocity": omega, "removed": removed}
+            "speed": norm(velocity), "angular_velocity": omega, "removed": removed,
+            "stage_displacement": centroid - stage_origin}
 
 
 def _add_view(f: h5py.File, path: str, i: int) -> None:
@@ -277,6 +278,7 @@ class OutputWriter:
         self._t = series("time", (), np.float64, 1024)
         self._t.attrs["units"] = "s"
         self._step = series("step", (), np.int64, 1024)
+        self._stage = series("stage", (), np.int32, 1024)  # index in `stages:` (0 without)
         g = f.create_group("blocks")
         for key, texts in (("name", block_names), ("parent", block_parents or block_names)):
             encoded = [str(s).encode("utf-8") for s in texts]
@@ -380,7 +382,7 @@ class OutputWriter:
         return out
 
     def write_snapshot(self, step: int, time: float, gids: np.ndarray,
-                       fields: dict[str, np.ndarray]) -> None:
+                       fields: dict[str, np.ndarray], stage: int = 0) -> None:
         """Append one snapshot (collective). Each rank passes the rows of the blocks it owns.
 
         ``gids`` (k,) in any order; ``fields`` maps every output name (``centroid``,
@@ -398,7 +400,12 @@ class OutputWriter:
             for name, (col, w) in _COLS.items():
                 if name not in fields and name not in _OPTIONAL:
                     raise ValueError(f"write_snapshot: no {name} rows")
-                a = np.asarray(fields.get(name, np.zeros((k, w))), dtype=np.float64)
+                default = np.zeros((k, w))
+                if name == "stage_origin":  # no stages: measured from the start
+                    default = (self._x0_all[gids] if self._x0_all is not None and k
+                               and gids.min() >= 0 and gids.max() < self.n_blocks
+                               else np.asarray(fields["centroid"], np.float64).reshape(k, 3))
+                a = np.asarray(fields.get(name, default), dtype=np.float64)
                 if a.size != k * w:
                     raise ValueError(f"write_snapshot: {name} has shape {a.shape}, need ({k}, {w})")
                 rows[:, col : col + w] = a.reshape(k, w)
@@ -412,11 +419,12 @@ class OutputWriter:
         self.n_snap += 1
         self._times.append(float(time))
         if self._io:
-            for d in (self._t, self._step, self._points, *self._series.values()):
+            for d in (self._t, self._step, self._stage, self._points, *self._series.values()):
                 d.resize(self.n_snap, axis=0)
             root = self.comm.rank == 0
             self._write_row(self._t, i, np.array([time], np.float64) if root else None)
             self._write_row(self._step, i, np.array([step], np.int64) if root else None)
+            self._write_row(self._stage, i, np.array([stage], np.int32) if root else None)
             for name, (col, w) in _COLS.items():
                 rows_out = mine[:, col : col + w].reshape(-1, *_SHAPES[name])
                 self._write_row(self._series[name], i, rows_out, self._lo)
@@ -483,7 +491,8 @@ class OutputWriter:
                 self._x0 = _cols(mine, "centroid").copy()
                 self._write(self._f["blocks/initial_centroid"], (self._lo, 0), self._x0)
         values = _block_fields(_cols(mine, "centroid"), self._x0, _cols(mine, "velocity"),
-                               _cols(mine, "angular_velocity"), _cols(mine, "removed")[:, 0])
+                               _cols(mine, "angular_velocity"), _cols(mine, "removed")[:, 0],
+                               _cols(mine, "stage_origin"))
         for name, d in self._cells.items():
             d.resize(self.n_snap, axis=0)
             self._write_row(d, i, values[name][self._my_tblock], self._tlo)
@@ -498,6 +507,7 @@ class OutputWriter:
         self._f = h5py.File(self.path, "r+", driver="mpio", comm=self.comm)
         f = self._f
         self._t, self._step, self._points = f["time"], f["step"], f["surface/points"]
+        self._stage = f["stage"]
         self._series = {name: f[f"blocks/{name}"] for name in self._series}
         self._cells = {name: f[f"surface/{name}"] for name in self._cells}
 
@@ -591,6 +601,24 @@ class OutputWriter:
         self._write(g["value"], (i, 0), np.ascontiguousarray(rows[:, 1:]) if mine else None)
 
     # ------------------------------------------------------------------ file
+    def write_result(self, group: str, attrs: dict[str, Any],
+                     datasets: dict[str, np.ndarray]) -> None:
+        """A result every rank holds whole (e.g. a factor-of-safety search): root attributes
+        ``attrs`` and static datasets ``group/<name>`` (collective; replaced if present)."""
+        self._check_open()
+        if not self._io:
+            return
+        f = self._f
+        for key, value in attrs.items():
+            f.attrs[key] = value
+        g = f.require_group(group)
+        for name, data in datasets.items():
+            data = np.ascontiguousarray(data)
+            if name in g:
+                del g[name]
+            self._write_static(g.create_dataset(name, data.shape, data.dtype), data)
+        f.flush()
+
     def flush(self) -> None:
         """Flush the HDF5 file to disk (collective)."""
         if self._f is not None:

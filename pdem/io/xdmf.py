@@ -21,6 +21,7 @@ CELL_FIELDS = (
     ("speed", 1, "m/s"),
     ("angular_velocity", 3, "rad/s"),
     ("removed", 1, "1"),  # 0 in the model, 1 frozen, 2 deleted (domain, excavation)
+    ("stage_displacement", 3, "m"),  # since the current stage began (stages:)
 )
 _BLOCK_SERIES = ("velocity", "angular_velocity")  # point attributes of the centroid cloud
 

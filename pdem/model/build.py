@@ -39,6 +39,8 @@ class BlockSpec:
     parent: str = ""
     # model time at which the block is excavated (None: it stays), see pdem.model.rockmass
     excavate_at: float | None = None
+    # index of the stage whose start removes the block (None: no stage does)
+    excavate_stage: int | None = None
     # group and material when not the scene entry's (mesh cells carry their own)
     group_name: str | None = None
     material_name: str | None = None
@@ -276,6 +278,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
         arr["owned"][r] = 1
         arr["x"][r] = centroid
         arr["x0"][r] = centroid
+        arr["x_stage"][r] = centroid
         arr["q"][r] = quat_from_matrix(R)
         arr["mass"][r] = rho * s.volume
         arr["inertia"][r] = rho * moments

@@ -73,6 +73,8 @@ BLOCK: tuple[Field, ...] = (
     Field("u_mig", (), F, "m", "motion since the last ghost rebuild", **_D),
     Field("out", (), U8, "1", "taken out of the model (left the domain, excavated): 1 frozen, "
           "2 deleted", **_D, output="removed"),
+    Field("x_stage", (3,), F, "m", "centroid when the current stage began (stage "
+          "displacements are measured from it)", **_D, output="stage_origin"),
     Field("work", (9,), F, "J", "energy budget accumulators of the block since the start: work "
           "of gravity, of applied forces, of contact forces, damping dissipation, work of a "
           "prescribed motion, joint dissipation, energy the joints' force update created, "

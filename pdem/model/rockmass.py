@@ -53,7 +53,7 @@ def build_rock_mass(scene, specs, max_blocks: int | None = None):
         specs = apply_cuts(scene, specs, max_blocks)
     if scene.join:
         specs = apply_joins(scene, specs)
-    if scene.excavate:
+    if scene.excavate or any(st.excavate for st in scene.stages):
         specs = apply_excavations(scene, specs)
     return specs
 
@@ -155,7 +155,8 @@ def join_slivers(specs, fraction: float, same_parent: bool = True):
         return i
 
     def kind(s):
-        return (s.material, s.group, s.excavate_at, s.parent if same_parent else None)
+        return (s.material, s.group, s.excavate_at, s.excavate_stage,
+                s.parent if same_parent else None)
 
     lo = np.array([np.min([p.vertices.min(axis=0) for p in s.pieces], axis=0) for s in specs])
     hi = np.array([np.max([p.vertices.max(axis=0) for p in s.pieces], axis=0) for s in specs])
@@ -343,17 +344,27 @@ def inside_part(poly: ConvexPolyhedron, normals, offsets, tol) -> ConvexPolyhedr
     return inner
 
 
-def apply_excavations(scene, specs):
+def _excavations(scene):
+    """(where, excavation, stage index or None) in the order they are cut: the scene's, then
+    each stage's (removed when that stage starts)."""
     for j, exc in enumerate(scene.excavate):
-        where = f"{scene.at('excavate', j)} ({exc.region_kind})"
+        yield f"{scene.at('excavate', j)} ({exc.region_kind})", exc, None
+    for i, st in enumerate(scene.stages):
+        for j, exc in enumerate(st.excavate):
+            yield f"{scene.at('stages', i, 'excavate', j)} ({exc.region_kind})", exc, i
+
+
+def apply_excavations(scene, specs):
+    for where, exc, stage in _excavations(scene):
+        later = exc.time > 0.0 or stage is not None  # the inside stays a block until then
         try:
             normals, offsets = region_planes(exc)
         except GeometryError as exc_:
             raise ConfigError([f"{where}: {exc_}"]) from None
         out, touched = [], 0
         for s in specs:
-            if s.excavate_at is not None or (exc.groups is not None
-                                             and s.group not in exc.groups):
+            if s.excavate_at is not None or s.excavate_stage is not None or (
+                    exc.groups is not None and s.group not in exc.groups):
                 out.append(s)  # inside an earlier excavation, or not of its groups
                 continue
             outside, inside, changed = [], [], False
@@ -365,7 +376,7 @@ def apply_excavations(scene, specs):
                     continue
                 changed = True
                 outside.extend(kept)
-                if removed > 0.0 and exc.time > 0.0:
+                if removed > 0.0 and later:
                     part = inside_part(poly, normals, offsets,
                                        max(tol, default_tolerance(poly.vertices)))
                     if part is not None:
@@ -377,7 +388,8 @@ def apply_excavations(scene, specs):
             made = [dataclasses.replace(s, pieces=[outside[i] for i in g])
                     for g in components(outside)]
             made += [dataclasses.replace(s, pieces=[inside[i] for i in g],
-                                         excavate_at=exc.time) for g in components(inside)]
+                                         excavate_at=exc.time if stage is None else None,
+                                         excavate_stage=stage) for g in components(inside)]
             if len(made) == 1:
                 made[0] = dataclasses.replace(made[0], name=s.name)
             else:

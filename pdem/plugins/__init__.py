@@ -12,14 +12,17 @@ from .energy import EnergyBudget
 from .excavation import Excavations
 from .output import Histories, Snapshots
 from .progress import LoadReport, Progress
+from .stage_state import StageState
 
 __all__ = ["Checkpoints", "EnergyBudget", "Excavations", "Histories", "LoadReport", "Plugin",
-           "Progress", "Snapshots", "default_plugins", "interval_steps"]
+           "Progress", "Snapshots", "StageState", "default_plugins", "interval_steps"]
 
 
 def default_plugins(state, output: bool = True) -> list[Plugin]:
     """The plugins a scene asks for, in the order their hooks run after a step."""
     plugins: list[Plugin] = []
+    if state.scene.stages:
+        plugins.append(StageState(state))
     if any(sp.excavate_at is not None for sp in state.specs):
         plugins.append(Excavations(state))  # first: a checkpoint after it sees it done
     if state.scene.checkpoint is not None:

@@ -67,3 +67,15 @@ def stop_checkpoint(run) -> str:
         return ck.last if ck.last == f"{ck.prefix}-{s.step:09d}.h5" else ck.write(run)
     stem = os.path.splitext(s.scene.output.file)[0]
     return _write(run, f"{stem}-stop-{s.step:09d}.h5")
+
+
+def stage_checkpoint(run, k: int) -> str:
+    """The checkpoint ending stage ``k`` (collective): ``{checkpoint.file}-stage{k}-{name}.h5``,
+    or beside the output file without ``checkpoint:``. ``pdem restart`` of it goes on with
+    stage ``k + 1``."""
+    s = run.state
+    name = s.scene.stages[k].name
+    safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+    prefix = s.scene.checkpoint.file if s.scene.checkpoint is not None \
+        else os.path.splitext(s.scene.output.file)[0]
+    return _write(run, f"{prefix}-stage{k}-{safe}.h5")

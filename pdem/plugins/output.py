@@ -57,7 +57,8 @@ class Snapshots(Plugin):
         b, n = s.blocks, s.n_owned
         with s.timers.phase("io"), writing(self.writer.path):
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
-                                       {f.output: getattr(b, f.name)[:n] for f in OUTPUT})
+                                       {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
+                                       stage=s.stage)
             for callback in self.after_write:
                 callback()
 

@@ -1,0 +1,24 @@
+"""The stage bookkeeping of a staged run in checkpoints (pdem.stages): which stages are done,
+which one is in progress and where it started, so a restart goes on exactly there."""
+
+from __future__ import annotations
+
+from .base import Plugin
+
+_KEYS = {"stage": int, "stage_next": int, "stage_started": int, "stage_t0": float,
+         "stage_step0": int}
+
+
+class StageState(Plugin):
+    name = "stages"
+
+    def __init__(self, state):
+        self.state = state
+
+    def restart_state(self) -> dict:
+        return {k: getattr(self.state, k) for k in _KEYS}
+
+    def restore(self, attrs: dict) -> None:
+        for k, cast in _KEYS.items():
+            if k in attrs:
+                setattr(self.state, k, cast(attrs[k]))

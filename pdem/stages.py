@@ -1,0 +1,186 @@
+"""Staged runs (``stages:``): model changes, then a solve or a factor-of-safety search, stage
+after stage, as a 3DEC user scripts them (equilibrium, excavation, loading, strength).
+
+A stage's changes are declarative (joint properties, fixed/free blocks, prescribed velocities,
+loads, the stage's solve settings), so a restart from a stage checkpoint replays the changes
+of the stages before it on the rebuilt model and goes on: the replay sets exactly what the
+straight run had set. Excavations were cut when the model was built (pdem.model.rockmass);
+their inside blocks are deleted when the stage starts.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from .config import ConfigError
+from .config.resolve import _estimated_stiffness, _timestep
+from .contact.laws import joint_table
+from .domain import DELETED, remove_blocks
+from .dynamics.damping import DAMPING
+from .dynamics.rotation import quat_to_matrix
+
+log = logging.getLogger("pdem")
+
+
+def stage_scene(scene, k: int):
+    """The scene as stage ``k`` runs it: joints changed by stages 0..k, and the solve settings
+    (end condition, damping, mass scaling) of stage ``k``."""
+    joints = dict(scene.joints)
+    for st in scene.stages[:k + 1]:
+        for name, changes in st.joints.items():
+            joints[name] = joints[name].model_copy(update=changes)
+            type(joints[name]).model_validate(joints[name].model_dump())  # bounds checked
+    st = scene.stages[k]
+    update = {}
+    if st.solve is not None:
+        update = {key: getattr(st.solve, key) for key in ("time", "steps", "ratio", "max_steps")}
+        if st.solve.damping is not None:
+            update["damping"] = st.solve.damping
+        if st.solve.mass_scaling is not None:
+            update["mass_scaling"] = st.solve.mass_scaling
+    return scene.model_copy(update={"joints": joints,
+                                    "solve": scene.solve.model_copy(update=update)})
+
+
+def selected(state, sel) -> np.ndarray:
+    """Gids of the blocks a :class:`pdem.config.schema.Selection` names (every rank alike)."""
+    specs = state.specs
+    keep = np.ones(len(specs), bool)
+    if sel.names is not None:
+        want = set(sel.names)
+        keep &= np.array([s.name in want or s.spec.name in want or s.parent in want
+                          for s in specs])
+    if sel.groups is not None:
+        keep &= np.isin(np.array([s.group for s in specs]), sel.groups)
+    if sel.range is not None:
+        x = state.glob.x  # the scene's centroids: a selection does not depend on the motion
+        keep &= np.all((x >= sel.range.box.min) & (x <= sel.range.box.max), axis=1)
+    return np.nonzero(keep & (state.glob.out == 0))[0]
+
+
+def _set(state, gids, **values):
+    """Set block fields of ``gids`` in the global store and in this rank's rows (if any)."""
+    for store in (state.glob, state.blocks):
+        if store is None:
+            continue
+        hit = np.isin(store.gid, gids)
+        for key, v in values.items():
+            getattr(store, key)[hit] = v
+
+
+def stage_changes(s, k: int, motion: bool = True) -> None:
+    """Stage ``k``'s changes of the model's static data (joints, fixed/free, prescribed
+    velocities, loads, solve settings), on every rank alike. ``motion``: also set the
+    prescribed velocities themselves (a restart takes them from its checkpoint)."""
+    st = s.scene.stages[k]
+    staged = stage_scene(s.scene, k)
+    s.joints = joint_table(staged, s.group_names)
+    for key, sel, fixed in (("fix", st.fix, 1), ("free", st.free, 0)):
+        if sel is None:
+            continue
+        gids = selected(s, sel)
+        if not len(gids):
+            raise ConfigError([f"{s.scene.at('stages', k, key)}: selects no block"])
+        _set(s, gids, fixed=fixed, vfix=0)
+        if fixed and motion:
+            _set(s, gids, v=0.0, w=0.0, L=0.0)
+    for j, pv in enumerate(st.velocity):
+        gids = selected(s, pv)
+        if not len(gids):
+            raise ConfigError([f"{s.scene.at('stages', k, 'velocity', j)}: selects no block"])
+        _set(s, gids, fixed=0, vfix=1)
+        if motion:
+            _set(s, gids, v=pv.velocity, w=pv.angular_velocity)
+            b = s.blocks
+            for r in np.nonzero(np.isin(b.gid, gids))[0]:  # L of the prescribed spin
+                R = quat_to_matrix(b.q[r])
+                b.L[r] = R @ (b.inertia[r] * (R.T @ b.w[r]))
+    for j, pf in enumerate(st.force):
+        gids = selected(s, pf)
+        if not len(gids):
+            raise ConfigError([f"{s.scene.at('stages', k, 'force', j)}: selects no block"])
+        _set(s, gids, applied_force=pf.force)
+    _solve_settings(s, staged)
+    s.stage = k
+
+
+def replay_stages(s, attrs: dict) -> None:
+    """Before a staged run's checkpoint is restored: the static changes of every stage it
+    had made (done ones, and the one in progress), so that the restored contacts and halo
+    are those of the same model (a block freed by a stage keeps its contacts)."""
+    done = int(attrs.get("stage_next", 0))
+    started = int(attrs.get("stage_started", -1))
+    for k in range(max(done, started + 1)):
+        stage_changes(s, k, motion=False)
+
+
+def apply_stage(run, k: int) -> None:
+    """Start stage ``k`` (collective): its excavations, its changes, the contacts they make."""
+    s = run.state
+    st = s.scene.stages[k]
+    gone = np.array([g for g, sp in enumerate(s.specs) if sp.excavate_stage == k], np.int64)
+    if len(gone):
+        remove_blocks(s, run.stepper.bodies(), gone, DELETED,
+                      f"excavated (stages[{k}] {st.name!r})")
+    stage_changes(s, k)
+    s.ratio = math.inf  # the last stage's equilibrium says nothing about this one
+    if st.reset_displacements:
+        n = s.n_owned
+        s.blocks.x_stage[:n] = s.blocks.x[:n]
+    s.redistribute()  # fixed/free changed who is computed where, and the halo plan
+    # a freed block has no contacts yet (none are kept between fixed blocks): find them now,
+    # not once it has sunk into its neighbours (the geometry update would then make energy)
+    run.stepper.search(np.ones(s.blocks.n, bool))
+    run.stepper.refresh(all_contacts=False)
+
+
+def _solve_settings(s, staged) -> None:
+    """Timestep, mass scaling and damping of a stage (every rank alike)."""
+    g = s.glob
+    g.mscale[:] = 1.0
+    s.dt = _timestep(staged, g, _estimated_stiffness(s.specs, s.joints))
+    if s.blocks is not None:
+        s.blocks.mscale[:] = g.mscale[s.blocks.gid]
+    d = staged.solve.damping
+    s.damping = DAMPING[d.mode]
+    default = DAMPING[d.mode].default_alpha
+    s.alpha = d.alpha if d.alpha is not None else (default if default is not None else s.alpha)
+
+
+def run_stages(run) -> list[dict]:
+    """Every stage not yet done (collective); a checkpoint after each. A restarted run had
+    its earlier stages' changes replayed before its checkpoint was restored
+    (:func:`replay_stages`) and continues a stage in progress where it stopped."""
+    from .plugins.checkpoints import stage_checkpoint
+
+    s = run.state
+    stages = s.scene.stages
+    summaries = []
+    for k in range(s.stage_next, len(stages)):
+        st = stages[k]
+        resumed = s.stage_started == k
+        log.info("stage %d/%d %r %s at step %d (t = %.6g s)", k + 1, len(stages), st.name,
+                 "resumed" if resumed else "starts", s.step, s.time)
+        if not resumed:
+            apply_stage(run, k)
+            s.stage_started, s.stage_t0, s.stage_step0 = k, s.time, s.step
+        if st.factor_of_safety is not None:
+            from .strength import factor_of_safety
+
+            summary = factor_of_safety(run, k)
+        else:
+            sv = st.solve
+            summary = run.run(
+                time=None if sv.time is None else s.stage_t0 + sv.time - s.time,
+                steps=None if sv.steps is None else s.stage_step0 + sv.steps - s.step,
+                ratio=sv.ratio, max_steps=sv.max_steps)
+        summary["stage"] = st.name
+        summaries.append(summary)
+        if summary.get("stopped"):
+            return summaries
+        s.stage_next = k + 1
+        stage_checkpoint(run, k)
+    return summaries

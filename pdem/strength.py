@@ -1,0 +1,180 @@
+"""Factor of safety by strength reduction (a stage with ``factor_of_safety:``), as 3DEC's
+``model factor-of-safety``.
+
+From the equilibrium state the stage starts in, trial solves run with every joint's strength
+divided by F: ``tan(friction) / F``, ``cohesion / F``, ``tension / F`` (fields of those names;
+angles through their tangents). A trial is **stable** when the unbalanced-force ratio falls
+below ``ratio`` within ``max_steps`` and no block moved more than ``max_displacement``; else
+it is **unstable**. F = 1 must be stable (else the model is not in equilibrium and the search
+is refused); the factor of safety is bracketed by bisection between the largest stable and the
+smallest unstable F until their gap is below ``tolerance`` (relative). Every trial starts from
+the same state (held in memory on each rank) and the model goes on from it, at F = 1, after
+the search.
+
+Results: the log line, the output file's root attribute ``factor_of_safety`` and the group
+``factor_of_safety/`` (trials, the failure mechanism: the displacement field of the last
+unstable trial, and per block the largest F at which it was not part of a mechanism (moved
+less than a tenth of the most any block moved): a safety map).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from .contact.laws import joint_table
+from .errors import UserError
+from .model.fields import MIGRATE
+from .parallel import mpi
+from .stages import stage_scene
+
+log = logging.getLogger("pdem")
+
+
+def reduced_joints(joints: dict, factor: float, names=None) -> dict:
+    """The scene's joints with their strength divided by ``factor`` (``names``: only these)."""
+    out = {}
+    for name, j in joints.items():
+        if names is not None and name not in names:
+            out[name] = j
+            continue
+        update = {}
+        for key, value in j.model_dump().items():
+            if key.endswith("friction") and isinstance(value, float):
+                update[key] = math.degrees(math.atan(math.tan(math.radians(value)) / factor))
+            elif key in ("cohesion", "tension"):
+                update[key] = value / factor
+        out[name] = j.model_copy(update=update)
+    return out
+
+
+class _Snapshot:
+    """The state a search starts every trial from (this rank's share)."""
+
+    def __init__(self, s):
+        b, n = s.blocks, s.n_owned
+        self.gids = b.gid[:n].copy()
+        self.rows = {k: getattr(b, k)[:n].copy() for k in MIGRATE}
+        self.contacts = s.contacts.take(np.arange(s.contacts.n))
+        self.clock = (s.step, s.time, s.ratio, s.alpha)
+        self.glob = {k: getattr(s.glob, k).copy() for k in ("fixed", "out")}
+
+    def restore(self, s):
+        for k, v in self.glob.items():
+            getattr(s.glob, k)[:] = v
+        s.step, s.time, s.ratio, s.alpha = self.clock
+        s.distribute(self.gids, {k: v.copy() for k, v in self.rows.items()},
+                     self.contacts.take(np.arange(self.contacts.n)))
+
+
+def _displacements(s, snap: _Snapshot) -> np.ndarray:
+    """(n_blocks, 3) displacement of every block since the search began (every rank)."""
+    b, n = s.blocks, s.n_owned
+    start = dict(zip(snap.gids.tolist(), range(len(snap.gids)), strict=True))
+    d = np.zeros((s.glob.n, 3))
+    rows = [start.get(int(g), -1) for g in b.gid[:n]]
+    for r, (g, i) in enumerate(zip(b.gid[:n], rows, strict=True)):
+        if i >= 0:
+            d[g] = b.x[r] - snap.rows["x"][i]
+    return mpi.allreduce_sum_array(s.comm, d)
+
+
+def _trial(run, factor: float, fos, snap: _Snapshot, base_scene):
+    """One trial at ``factor``: (stable, steps, ratio, displacement field)."""
+    s = run.state
+    snap.restore(s)
+    scene = base_scene.model_copy(update={"joints": reduced_joints(base_scene.joints, factor,
+                                                                   fos.joints)})
+    s.joints = joint_table(scene, s.group_names)
+    s.ratio = math.inf
+    stable = False
+    steps = 0
+    while steps < fos.max_steps:
+        run.advance()
+        steps += 1
+        if run.stepper.stop_signal:
+            break
+        if steps >= 10 and s.ratio <= fos.ratio:
+            stable = True
+            break
+        if steps % 200 == 0 and fos.max_displacement is not None:
+            if np.linalg.norm(_displacements(s, snap), axis=1).max() > fos.max_displacement:
+                break
+    d = _displacements(s, snap)
+    if stable and fos.max_displacement is not None:
+        stable = np.linalg.norm(d, axis=1).max() <= fos.max_displacement
+    log.info("factor of safety trial F = %.4f: %s after %d steps (ratio %.3g, largest "
+             "displacement %.3g m)", factor, "stable" if stable else "unstable", steps, s.ratio,
+             np.linalg.norm(d, axis=1).max())
+    size = np.linalg.norm(d, axis=1)
+    # the mechanism of an unstable trial: the blocks that moved a tenth of the most any block
+    # did, however slowly they go near the factor of safety
+    moved = size > 0.1 * size.max() if not stable else np.zeros(len(d), bool)
+    return stable, steps, d, moved
+
+
+def factor_of_safety(run, k: int) -> dict:
+    """The search of stage ``k`` (collective); returns the run summary with ``factor``."""
+    s = run.state
+    fos = s.scene.stages[k].factor_of_safety
+    where = s.scene.at("stages", k, "factor_of_safety")
+    base_scene = stage_scene(s.scene, k)
+    snap = _Snapshot(s)
+    trials = []
+    safety = np.zeros(s.glob.n)
+    mechanism = np.zeros((s.glob.n, 3))
+
+    def trial(f):
+        stable, steps, d, moved = _trial(run, f, fos, snap, base_scene)
+        trials.append((f, float(stable), steps))
+        if not stable:
+            mechanism[:] = d
+        np.maximum(safety, np.where(moved, 0.0, f), out=safety)
+        return stable
+
+    stopped = 0
+    lo, hi = 1.0, fos.high
+    if not trial(1.0):
+        snap.restore(s)
+        raise UserError(f"{where}: the model is not in equilibrium at F = 1 (the ratio stays "
+                        f"above {fos.ratio:g} for {fos.max_steps} steps): bring it to "
+                        "equilibrium in an earlier stage")
+    if trial(hi):
+        factor, bounded = hi, False
+    else:
+        while hi - lo > fos.tolerance * lo and not run.stepper.stop_signal:
+            mid = 0.5 * (lo + hi)
+            if trial(mid):
+                lo = mid
+            else:
+                hi = mid
+        factor, bounded = 0.5 * (lo + hi), True
+    stopped = run.stepper.stop_signal
+    # the model goes on from the equilibrium state, at full strength
+    snap.restore(s)
+    s.joints = joint_table(base_scene, s.group_names)
+    s.ratio = math.inf
+    if bounded:
+        log.info("%s: factor of safety %.4g (stable at %.4g, unstable at %.4g; %d trials)",
+                 s.scene.stages[k].name, factor, lo, hi, len(trials))
+    else:
+        log.info("%s: factor of safety at least %.4g (stable at factor_of_safety.high; %d "
+                 "trials)", s.scene.stages[k].name, factor, len(trials))
+    snaps = run.plugin("snapshots")
+    if snaps is not None:
+        snaps.writer.write_result("factor_of_safety", {
+            "factor_of_safety": factor,
+            "factor_of_safety_bounded": int(bounded),
+            "factor_of_safety_stage": s.scene.stages[k].name,
+        }, {"trials": np.array(trials, float).reshape(-1, 3),
+            "mechanism": mechanism, "block_safety": safety})
+    summary = {"steps": sum(int(t[2]) for t in trials), "time": s.time, "ratio": s.ratio,
+               "stopped": stopped, "checkpoint": None, "factor": factor, "bounded": bounded,
+               "trials": trials, "mechanism": mechanism, "block_safety": safety}
+    if stopped:
+        from .plugins.checkpoints import stop_checkpoint
+
+        summary["checkpoint"] = stop_checkpoint(run)
+    return summary
