@@ -283,7 +283,8 @@ def test_viewer_fields(tmp_path, snaps):
             expect = {"displacement": d, "displacement_magnitude": np.linalg.norm(d, axis=1),
                       "velocity": s["velocity"], "speed": np.linalg.norm(s["velocity"], axis=1),
                       "angular_velocity": s["angular_velocity"],
-                      "removed": np.zeros(len(d))}  # not passed: every block in the model
+                      "removed": np.zeros(len(d)),  # not passed: every block in the model
+                      "stage_displacement": d}  # no stages: from the start
             for name, _, _ in CELL_FIELDS:
                 got = f[f"surface/{name}"][i]
                 assert got.dtype == np.float32

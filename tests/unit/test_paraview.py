@@ -26,7 +26,8 @@ from pdem.io import OutputWriter
 PROBE = Path(__file__).with_name("pv_probe.py")
 READERS = ("S", "T", "legacy")
 CELL_ARRAYS = {"block_id": 1, "group": 1, "fixed": 1, "displacement": 3, "displacement_magnitude": 1,
-               "velocity": 3, "speed": 1, "angular_velocity": 3, "removed": 1}
+               "velocity": 3, "speed": 1, "angular_velocity": 3, "removed": 1,
+               "stage_displacement": 3}
 POINT_ARRAYS = {"gid": 1, "group": 1, "fixed": 1, "velocity": 3, "angular_velocity": 3}
 # What ParaView prints when it cannot read part of a file (loguru ERR/WARN, Xdmf3, HDF5).
 BAD_LOG = ("ERR|", "WARN|", "Warning", "Skipping", "XdmfError", "HDF5-DIAG", "Cannot", "Failed")

@@ -25,7 +25,7 @@ def test_declared_travel_sets_are_consistent():
     assert ROW == sum(f.width for f in F.HALO) == 18
     assert {"x", "q", "v", "w", "dtheta"} <= {f.name for f in F.HALO}
     assert {f.output for f in F.OUTPUT} == {"centroid", "orientation", "velocity",
-                                            "angular_velocity", "removed"}
+                                            "angular_velocity", "removed", "stage_origin"}
     for table in (F.BLOCK, F.CONTACT, F.SUB):
         for f in table:
             assert f.units and f.doc, f.name
