@@ -62,6 +62,10 @@ class Stepper:
         s.distribute_initial()
         self.search(np.ones(s.blocks.n, bool))
         self.refresh(all_contacts=True)
+        if s.scene.insitu is not None:  # joints start loaded by the in-situ stress
+            from .insitu import initialise
+
+            initialise(s)
         self.compute_forces(0.0)
         b = s.blocks
         motion.stagger_start(motion_record(b, s.n_owned), s.gravity, s.dt, s.scalar_inertia)

@@ -300,6 +300,26 @@ class Solve(Strict):
         return any(getattr(self, k) is not None for k in ("time", "steps", "ratio"))
 
 
+Stress = tuple[float, float, float, float, float, float]
+
+
+class InSitu(Strict):
+    """Initial stress of the rock mass (3DEC ``block insitu``): every joint starts with the
+    forces of ``stress + gradient (z - reference_z)`` across its plane. Voigt order
+    ``[sxx, syy, szz, sxy, syz, szx]``, Pa (gradient Pa/m), compression negative."""
+
+    stress: Stress
+    gradient: Stress = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    reference_z: Length = 0.0
+
+    @model_validator(mode="after")
+    def _bounded(self):
+        for key in ("stress", "gradient"):
+            if max(abs(v) for v in getattr(self, key)) > 1e15:
+                raise ValueError(f"{key}: beyond 1e15 Pa (a typo?)")
+        return self
+
+
 class Selection(Strict):
     """Blocks by name (``NAME``, ``NAME[k]``, or a scene entry's name for all its blocks), by
     group, and/or by centroid in a box; the blocks matching every key given."""
@@ -509,6 +529,7 @@ class Scene(Strict):
     join: list[Annotated[list[str], Field(min_length=2)]] = []
     excavate: list[Excavation] = []
     stages: list[Stage] = []
+    insitu: InSitu | None = None
     contact: Contact = Contact()
     parallel: Parallel = Parallel()
     solve: Solve
