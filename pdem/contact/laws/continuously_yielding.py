@@ -166,7 +166,8 @@ def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, sta
         return 0.0, dil, state | OPEN, 0.0, 0.0, 0.0
     phi = p.phi[j]
     phim = phi + (p.phim0[j] - phi) * math.exp(-up * p.inv_r[j])  # eq. 6
-    fmax = sn * math.tan(phim) * area  # eq. 4, as a force
+    tan_phim = math.tan(phim)
+    fmax = sn * tan_phim * area  # eq. 4, as a force
     kss = shear_stiffness(p.as_[j], p.es[j], sn) * area
     dus = math.sqrt(dx * dx + dy * dy + dz * dz)
     fmag0 = math.sqrt(fx * fx + fy * fy + fz * fz)
@@ -204,7 +205,8 @@ def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, sta
         hist[s, 0] = up + dup
     hist[s, 1] = r
     # eq. 7: dilation from the mobilized friction above the basic friction
-    tan_mob = fmag / (sn * area)
+    # (the mobilized friction never exceeds φm: no round-off dilation when φm = φ)
+    tan_mob = min(fmag / (sn * area), tan_phim)
     tan_phi = p.tan_phi[j]
     tan_i = (tan_mob - tan_phi) / (1.0 + tan_mob * tan_phi)
     if tan_i > 0.0:
