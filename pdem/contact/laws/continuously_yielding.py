@@ -135,19 +135,14 @@ def table(joints: list[Params]) -> Table:
 
 @inline_kernel
 def normal_stress(an, en, u):
-    """Eq. 1a: ``σn`` at closure ``u`` (0 when open)."""
-    if u <= 0.0:
-        return 0.0
-    if en == 0.0:
-        return an * u
-    return ((1.0 - en) * an * u) ** (1.0 / (1.0 - en))
+    """Eq. 1a: ``σn`` at closure ``u`` (0 when open). Without branches (inlined into the
+    energy kernel): for ``e_n = 0`` the power is 1 and ``σn = a_n u`` exactly."""
+    return ((1.0 - en) * an * max(u, 0.0)) ** (1.0 / (1.0 - en))
 
 
 @inline_kernel
 def shear_stiffness(as_, es, sn):
-    """``ks = a_s σn^e_s`` (eq. 2)."""
-    if es == 0.0:
-        return as_
+    """``ks = a_s σn^e_s`` (eq. 2); ``e_s = 0``: ``a_s`` exactly (``x ** 0 = 1``)."""
     return as_ * max(sn, 0.0) ** es
 
 
