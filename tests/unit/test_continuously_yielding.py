@@ -329,3 +329,38 @@ def test_direct_shear_model_peak_residual_and_energy():
     assert abs(err) < 1e-4 * put_in, (err, put_in, t)  # measured 5.6e-6
     print(f"steps {sim.step}, peak {peak:.6g} vs {peak_ref:.6g}, curve_err {curve_err:.3g}, "
           f"balance {err / put_in:.3g}")
+
+
+def test_stress_dependent_stiffness_and_its_stored_energy():
+    """kn = a_n σn^e_n integrated exactly (eq. 1a), its energy the integral of σn (eq. 1b),
+    ks = a_s σn^e_s; kn, ks are the stiffnesses at reference_stress."""
+    en, es, sr = 0.4, 0.7, 2.0e6
+    p = cy_params(normal_exponent=en, shear_exponent=es, reference_stress=sr)
+    t = cy.table([p])
+    an, as_ = KN / sr ** en, KS / sr ** es
+    hist = np.zeros((1, 5))
+    area = 0.5
+    u = np.linspace(0.0, 3e-4, 3001)
+    sn = np.array([cy.update(t, 0, 0, hist, x, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, area,
+                             0.0, 0.0, 0.0, 0)[0] for x in u]) / area
+    # dσn/du = a_n σn^e_n along the curve (central differences, away from σn = 0)
+    k = slice(100, -1)
+    dsdu = np.gradient(sn, u)[k]
+    assert dsdu == pytest.approx(an * sn[k] ** en, rel=1e-4)
+    # at σn = reference_stress the normal stiffness is kn
+    u_ref = sr ** (1 - en) / ((1 - en) * an)
+    fn_ref = cy.update(t, 0, 0, hist, u_ref, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, area, 0.0, 0.0,
+                       0.0, 0)[0]
+    assert fn_ref / area == pytest.approx(sr, rel=1e-12)
+    # stored normal energy = ∫ σn du (trapezoid on the fine grid)
+    w = cy.energy(t, 0, 0, hist, u[-1], 0.0, 0.0, 0.0, 0.0, area, 0)[1]
+    assert w == pytest.approx(area * np.trapezoid(sn, u), rel=1e-6)
+    # the first shear increment is elastic at ks(σn) = a_s σn^e_s
+    fx = cy.update(t, 0, 0, np.zeros((1, 5)), u[-1], 0.0, 0.0, 0.0, 0.0, 1e-7, 0.0, 0.0, area,
+                   1e-7, 0.0, 0.0, 0)[3]
+    assert -fx / (area * 1e-7) == pytest.approx(as_ * sn[-1] ** es, rel=1e-12)
+    # an open joint carries nothing and stores nothing
+    out = cy.update(t, 0, 0, hist, -1e-5, 0.0, 1.0, 0.0, 0.0, 1e-7, 0.0, 0.0, area, 0.0, 0.0,
+                    0.0, 0)
+    assert out[0] == 0.0 and out[3:] == (0.0, 0.0, 0.0) and out[2] & 4
+    assert cy.energy(t, 0, 0, hist, -1e-5, 0.0, 0.0, 0.0, 0.0, area, 0) == (0.0, 0.0)

@@ -35,7 +35,10 @@ to ``τ/τm`` at every reversal of the shear direction, so that unloading and re
 the full stiffness ``ks`` (``F = 1``); *(pdem)* a reversal is an increment whose direction
 makes an obtuse angle with the previous increment's, and ``r`` is capped at
 :data:`R_CAP` = 0.75 (UDEC also caps ``r``) so that reloading can never be rigid. The shear
-stress is clipped to the bounding strength (``F < 0`` is not allowed to push it past).
+stress is clipped to the bounding strength of the step's start (explicit); what the clip
+removes counts as plastic displacement (eq. 5). So once the stress has met the bound it rides
+it as the bound falls, the spring unloading elastically: ``dup/dus = 1 / (1 + τm'(up)/ks)``,
+a little above 1 (``τm' < 0``), in the limit of small steps.
 
 Damage: the bounding friction ``φm`` degrades with plastic shear displacement ``up``::
 
