@@ -81,9 +81,21 @@ def _unwrap(annotation):
     return None
 
 
+def _law_tag(loc: tuple) -> str | None:
+    """The joint-law tag pydantic puts after ``joints.NAME`` (the discriminated union of the
+    registered laws' parameters), or None."""
+    from ..contact.laws import JOINT_LAWS
+
+    if len(loc) > 2 and loc[0] == "joints" and loc[2] in JOINT_LAWS:
+        return str(loc[2])
+    return None
+
+
 def _clean_loc(loc: tuple) -> tuple:
-    # pydantic inserts union-member tags ('float', "literal['auto']", 'function-before[...]')
-    # into locations; users never wrote them.
+    # pydantic inserts union-member tags ('float', "literal['auto']", 'function-before[...]',
+    # the joint law's name under joints.NAME) into locations; users never wrote them.
+    if _law_tag(loc) is not None:
+        loc = loc[:2] + loc[3:]
     return tuple(
         p for p in loc if isinstance(p, int) or not any(c in str(p) for c in "[]'(")
     )
@@ -93,11 +105,17 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
     out: list[str] = []
     seen: set[str] = set()
     for e in err.errors():
+        tag = _law_tag(tuple(e["loc"]))
         loc = _clean_loc(tuple(e["loc"]))
         where = _format_path(loc)
         line = lines.get(loc) or lines.get(loc[:-1]) if loc else None
         if e["type"] == "extra_forbidden":
-            model = _model_at(loc[:-1])
+            if tag is not None and len(loc) == 3:
+                from ..contact.laws import JOINT_LAWS
+
+                model = JOINT_LAWS[tag].params
+            else:
+                model = _model_at(loc[:-1])
             hint = ""
             if model is not None:
                 close = difflib.get_close_matches(str(loc[-1]), list(model.model_fields), n=1)

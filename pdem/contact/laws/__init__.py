@@ -30,7 +30,7 @@ import numpy as np
 from numba.extending import overload
 
 from ...registry import Registry
-from . import coulomb
+from . import continuously_yielding, coulomb
 from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
 
 __all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams", "JointTable",
@@ -38,6 +38,7 @@ __all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams"
 
 JOINT_LAWS: Registry[JointLaw] = Registry("joint law")
 JOINT_LAWS.register("coulomb", coulomb.LAW)
+JOINT_LAWS.register("continuously_yielding", continuously_yielding.LAW)
 
 # What the force kernel reads: for each scene joint (row), the slot of its law in ``laws`` and
 # its row in that law's table.
