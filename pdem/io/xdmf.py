@@ -116,13 +116,16 @@ def _blocks_grid(i: int, t: float, h5: str, n_blocks: int) -> list[str]:
 
 def _point_grid(group: str, attrs, i: int, t: float, h5: str, n: int) -> list[str]:
     """Snapshot ``i`` of the contacts (or sub-contacts) as a Polyvertex cloud of ``n`` points."""
-    if n == 0:  # no contact in this snapshot: an empty cloud, inline
-        def item(dims, kind="Float", prec=8):
-            d = " ".join(str(x) for x in dims)
-            return (f'<DataItem Dimensions="{d}" NumberType="{kind}" Precision="{prec}" '
-                    f'Format="XML"></DataItem>')
-        topo, geom = item((0,), "Int"), item((0, 3))
-        values = [item((0, w) if w > 1 else (0,), kind, prec) for _, w, kind, prec in attrs]
+    if n == 0:
+        # No contact in this snapshot: a grid of no points. The Xdmf3 readers read this form
+        # (empty DataItems crash them); the legacy reader crashes on every empty grid tried
+        # (docs/output.md).
+        return [
+            f'<Grid Name="{group}_{i:06d}" GridType="Uniform">',
+            f'<Time Value="{t!r}"/>',
+            '<Topology TopologyType="Polyvertex" NumberOfElements="0" NodesPerElement="1"/>',
+            "</Grid>",
+        ]
     else:
         topo = _hdf((n,), "Int", h5, view_path(f"/{group}/index", i))
         geom = _hdf((n, 3), "Float", h5, view_path(f"/{group}/point", i))
@@ -280,6 +283,12 @@ def read_xdmf(xdmf_path: str | os.PathLike) -> dict[str, list[dict]]:
             for grid in coll.findall("Grid"):
                 topo = grid.find("Topology")
                 n_el = int(topo.get("NumberOfElements"))
+                if n_el == 0 and topo.find("DataItem") is None:  # an empty contact grid
+                    steps.append({"time": float(grid.find("Time").get("Value")),
+                                  "topology_type": topo.get("TopologyType"),
+                                  "topology": np.zeros((0, 1), np.int64),
+                                  "geometry": np.zeros((0, 3)), "attributes": {}})
+                    continue
                 conn = _resolve(topo.find("DataItem"), base, files).astype(np.int64)
                 geom = _resolve(grid.find("Geometry").find("DataItem"), base, files)
                 geom = geom.reshape(-1, 3)

@@ -7,10 +7,12 @@ import json
 import numpy as np
 
 from .. import __version__
+from ..contact.forces import normal_forces
 from ..contact.laws import FAILED
 from ..errors import writing
 from ..io.checkpoint import written_contacts
 from ..io.writer import OutputWriter, quat_to_matrix
+from ..model import csr
 from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps
 
@@ -42,11 +44,15 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     checkpoints' rule), those with sub-contacts only. World sub-contact points are
     ``x_A + R(q_A) p_A`` (explicit sums: the same bits on every rank). A FAILED bit is kept
     only on joints with a bond (the contact detection marks a joint that forms open as
-    failed, "no bond", whatever its law)."""
+    failed, "no bond", whatever its law). Normal forces are the law's for the stored state
+    (:func:`pdem.contact.forces.normal_forces`)."""
     c = state.contacts
-    keep = written_contacts(state) & (np.diff(c.sc_start) > 0)
-    sel = c.select(keep)
+    keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
+    sel = c.take(keep)
     nsub = np.diff(sel.sc_start)
+    fn = np.zeros(c.n_sub)
+    normal_forces(c.pairs(), c.subs(), state.joints.kernel_args, fn)
+    fn = fn[csr.take(c.sc_start, keep)[0]]
     b = state.blocks
     ia = np.repeat(sel.ia, nsub)
     R = quat_to_matrix(b.q[ia])
@@ -60,7 +66,7 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
         "piece": np.stack([sel.pga, sel.pgb], axis=1), "block": np.stack([sel.ga, sel.gb], 1),
         "joint": sel.joint, "point": sel.point, "normal": sel.normal, "n_sub": nsub,
         "sub": {"point": point, "area": sel.sc_area, "overlap": sel.sc_un,
-                "normal_force": sel.sc_fn, "shear_force": sel.sc_fs,
+                "normal_force": fn, "shear_force": sel.sc_fs,
                 "shear_displacement": sel.sc_us, "state": bits},
     }
 
