@@ -40,7 +40,7 @@ _OPTIONAL = ("removed",)
 # communicators, i.e. ~220 snapshots of views. So the file is closed and reopened every this
 # many snapshots (collective; measured: 3000 views, no leak).
 _REOPEN_EVERY = 32  # 9 views per snapshot, 23 with contacts: 736 per open file at most
-_CONTACT_CHUNK = 4096  # rows per chunk of the flat contact and sub-contact datasets
+_CONTACT_CHUNK = 1024  # rows per chunk of the flat contact and sub-contact datasets
 _CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
 
 
