@@ -448,9 +448,11 @@ class History(Strict):
 
 class Output(Strict):
     """``energy_every``: steps between energy-budget samples (``histories/energy``); default
-    ten per snapshot interval."""
+    ten per snapshot interval. ``contacts``: store the joint state (every contact and
+    sub-contact, their forces and states) with each snapshot (docs/output.md, Contacts)."""
 
     file: str = "pdem-out.h5"
+    contacts: bool = True
     every: PositiveFloat | None = None
     every_steps: PositiveInt | None = None
     energy_every: PositiveInt | None = None

@@ -146,6 +146,23 @@ def stored_energy(bodies, pairs, subs, joints, out):
 
 
 @kernel
+def normal_forces(pairs, subs, joints, out):
+    """``out[s]``: sub-contact s's normal force by its law in its stored state (overlap,
+    dilation, state bits), as the force step computes it. ``subs.fn`` is the force step's own
+    record, which a contact geometry update leaves stale (it renews the sub-contacts and
+    nothing reads ``fn`` before the next step); the output reports this one."""
+    for c in range(pairs.ia.shape[0]):
+        jrow = pairs.joint[c]
+        slot = joints.slot[jrow]
+        j = joints.row[jrow]
+        for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
+            fn, _ = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
+                               subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
+                               subs.state[s])
+            out[s] = fn
+
+
+@kernel
 def contact_energies(pairs, subs, joints, which):
     """Spring energy stored in the joint of each contact with ``which[c] != 0`` (0 for the
     others)."""

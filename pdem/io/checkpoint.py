@@ -48,19 +48,24 @@ def _runs(sorted_rows: np.ndarray):
     return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
+def written_contacts(state) -> np.ndarray:
+    """Which of this rank's contacts it writes (checkpoints, output): each contact once over
+    all ranks, by the owner of its lower-gid free block. A contact across a subdomain boundary
+    is held, identical, by both owners; this picks one copy."""
+    b, c = state.blocks, state.contacts
+    free = state.glob.fixed == 0
+    owned = np.zeros(state.glob.n, bool)
+    owned[b.gid[:state.n_owned]] = True
+    return (owned[c.ga] & free[c.ga]) | (owned[c.gb] & free[c.gb] & ~free[c.ga])
+
+
 def checkpoint_payload(state, extra_attrs: dict) -> tuple[dict, dict, dict, np.ndarray]:
     """This rank's share: (attrs, block rows {field: array, 'gid'}, contacts, nsub)."""
     b = state.blocks
     n = state.n_owned
     rows = {k: getattr(b, k)[:n] for k in CHECKPOINT}
     rows["gid"] = b.gid[:n]
-    c = state.contacts
-    free = state.glob.fixed == 0
-    owned = np.zeros(state.glob.n, bool)
-    owned[b.gid[:n]] = True
-    # each contact once: by the owner of its lower-gid free block
-    write = (owned[c.ga] & free[c.ga]) | (owned[c.gb] & free[c.gb] & ~free[c.ga])
-    sel = c.select(write)
+    sel = state.contacts.select(written_contacts(state))
     contacts = {**sel.arrays, **sel.sub}
     attrs = {
         "pdem_format": FORMAT, "format_version": FORMAT_VERSION, "run_id": state.run_id,

@@ -94,6 +94,7 @@ def _output_summary(f: h5py.File) -> list[str]:
     else:
         lines.append("histories:   none")
     lines += _energy_lines(f)
+    lines += _contact_lines(f, names)
     if n_snap == 0:
         return lines
     c0, c1 = f["blocks/centroid"][0], f["blocks/centroid"][n_snap - 1]
@@ -120,6 +121,37 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"speed (last snapshot): mean {_g(speed.mean())} m/s, "
             f"max {_g(speed.max())} m/s ({names[int(speed.argmax())]})"
         )
+    return lines
+
+
+def _contact_lines(f: h5py.File, names) -> list[str]:
+    """The joint state (contacts/): counts over the run, the last snapshot's states and forces."""
+    if "contacts/offset" not in f:
+        return ["contacts:    not stored (output.contacts: false)"]
+    off, soff = f["contacts/offset"][()], f["subcontacts/offset"][()]
+    if len(off) < 2:
+        return ["contacts:    stored, no snapshot yet"]
+    per = np.diff(off)
+    lo, hi = int(off[-2]), int(off[-1])
+    lines = [f"contacts:    {int(per.min())} .. {int(per.max())} per snapshot; last snapshot "
+             f"{hi - lo} contacts, {int(soff[-1] - soff[-2])} sub-contacts"]
+    if hi == lo:
+        return lines
+    state = f["contacts/state"][lo:hi]
+    state_names = [_text(x) for x in f["contacts/state"].attrs.get(
+        "names", ["intact", "slipping", "open", "failed"])]
+    counts = np.bincount(state, minlength=len(state_names))
+    fn = f["contacts/normal_force"][lo:hi]
+    fs = np.linalg.norm(f["contacts/shear_force"][lo:hi], axis=1)
+    blocks = f["contacts/block"][lo:hi]
+    k = int(np.argmax(fn))
+    a, b = (names[int(g)] for g in blocks[k])
+    lines += [
+        "  states:    " + ", ".join(f"{s} {int(c)}" for s, c in zip(state_names, counts,
+                                                                 strict=False)),
+        f"  forces:    normal total {_g(fn.sum())} N, max {_g(fn[k])} N ({a} - {b}); "
+        f"shear max {_g(fs.max())} N; max opening {_g(f['contacts/opening'][lo:hi].max())} m",
+    ]
     return lines
 
 

@@ -16,7 +16,8 @@ from mpi4py import MPI
 
 from ..dynamics.kinematics import rotation_matrices
 from ..model.fields import OUTPUT, row_width
-from .xdmf import CELL_FIELDS, VIEWED_SERIES, view_path, write_xdmf
+from . import joints
+from .xdmf import CELL_FIELDS, CONTACT_VIEWED, SUB_VIEWED, VIEWED_SERIES, view_path, write_xdmf
 
 __all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
 
@@ -38,7 +39,8 @@ _OPTIONAL = ("removed", "stage_origin")
 # file itself as its source, and frees them only when the file closes: MPICH allows ~2048
 # communicators, i.e. ~220 snapshots of views. So the file is closed and reopened every this
 # many snapshots (collective; measured: 3000 views, no leak).
-_REOPEN_EVERY = 64
+_REOPEN_EVERY = 32  # 10 views per snapshot, 24 with contacts: 768 per open file at most
+_CONTACT_CHUNK = 1024  # rows per chunk of the flat contact and sub-contact datasets
 _CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
 
 
@@ -136,6 +138,15 @@ def _add_view(f: h5py.File, path: str, i: int) -> None:
     f.create_virtual_dataset(view_path(path, i), layout)
 
 
+def _add_range_view(f: h5py.File, path: str, view: str, lo: int, hi: int) -> None:
+    """Virtual dataset ``view`` = rows ``lo .. hi-1`` of the flat dataset ``path`` (one
+    snapshot's contacts); ``hi > lo``."""
+    src = f[path]
+    layout = h5py.VirtualLayout(shape=(hi - lo, *src.shape[1:]), dtype=src.dtype)
+    layout[...] = h5py.VirtualSource(".", path, shape=src.shape, dtype=src.dtype)[lo:hi]
+    f.create_virtual_dataset(view, layout)
+
+
 class OutputWriter:
     """The HDF5 output of one run; every method is collective over ``comm``.
 
@@ -164,6 +175,10 @@ class OutputWriter:
         Per block in gid order, identical on every rank: the reference centroids ``(n, 3)`` of
         ``displacement`` (default: the first snapshot's), the group index into ``group_names``
         (default: all 0, named ``"default"``), and whether the block is fixed (default: no).
+    contacts, joint_names
+        Store the joint state (``contacts/``, ``subcontacts/``, sidecars ``-contacts.xdmf``
+        and ``-subcontacts.xdmf``): every snapshot then takes the contacts (see
+        :meth:`write_snapshot`); ``joint_names`` go to the root attribute ``joint_names``.
 
     Notes
     -----
@@ -190,6 +205,8 @@ class OutputWriter:
         group_names: Sequence[str] | None = None,
         fixed: Sequence[bool] | None = None,
         block_parents: Sequence[str] | None = None,
+        contacts: bool = False,
+        joint_names: Sequence[str] | None = None,
     ) -> None:
         self.path = Path(path)
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
@@ -246,6 +263,11 @@ class OutputWriter:
             self._my_verts = np.zeros((0, 3))
         self._my_vblock = np.repeat(np.arange(hi - lo), nv[lo:hi])
         self._init_fields(tri_block, initial_centroid, group, group_names, fixed)
+        self.contacts = bool(contacts)
+        self._n_contacts: list[int] = []  # per snapshot, contacts and sub-contacts
+        self._n_subs: list[int] = []
+        self._bases = {"contacts": 0, "subcontacts": 0}  # rows written so far
+        self._pool = 0  # length of xdmf/index (0, 1, 2, ...): the grids' Polyvertex ids
 
         self._f: h5py.File | None = None
         self._closed = False
@@ -297,6 +319,9 @@ class OutputWriter:
         self._points.attrs["units"] = "m"
         f.create_group("histories")
         self._create_fields()
+        if self.contacts:
+            f.attrs["joint_names"] = [str(j) for j in (joint_names or [])] or [""]
+            self._create_contacts()
 
     # ------------------------------------------------------------------ low-level writes
     def _write(self, dset: h5py.Dataset, start: tuple[int, ...], data: np.ndarray | None):
@@ -382,7 +407,8 @@ class OutputWriter:
         return out
 
     def write_snapshot(self, step: int, time: float, gids: np.ndarray,
-                       fields: dict[str, np.ndarray], stage: int = 0) -> None:
+                       fields: dict[str, np.ndarray], contacts: dict | None = None,
+                       stage: int = 0) -> None:
         """Append one snapshot (collective). Each rank passes the rows of the blocks it owns.
 
         ``gids`` (k,) in any order; ``fields`` maps every output name (``centroid``,
@@ -390,6 +416,13 @@ class OutputWriter:
         with an output name) to its (k, ...) rows; ``k`` may be 0. Every gid must be passed
         by exactly one rank (``ValueError`` on every rank otherwise). ``step`` and ``time``
         are taken from rank 0.
+
+        ``contacts`` (writers made with ``contacts=True``; ``None``: none on this rank): the
+        contacts this rank writes, each contact passed by exactly one rank, in any order, a
+        dict of per-contact ``piece`` (k, 2) piece gids A < B, ``block`` (k, 2), ``joint``
+        (k,), ``point`` (k, 3), ``normal`` (k, 3), ``n_sub`` (k,) and, for their sub-contacts
+        in contact order, ``sub`` = dict of ``point`` (m, 3) world, ``area``, ``overlap``,
+        ``normal_force``, ``shear_force`` (m, 3), ``shear_displacement`` (m, 3), ``state``.
         """
         self._check_open()
         msg = None
@@ -413,8 +446,16 @@ class OutputWriter:
                 raise ValueError(f"write_snapshot: gids outside [0, {self.n_blocks})")
         except ValueError as e:
             msg, gids, rows = str(e), np.zeros(0, np.int64), np.zeros((0, _ROW_COLS))
+        crows = srows = None
+        if self.contacts:
+            try:
+                crows, srows = self._pack_contacts(contacts)
+            except ValueError as e:
+                msg = msg or str(e)
         self._raise_if_any(msg)
         mine = self._assemble(gids, rows)
+        if self.contacts:
+            crows, srows = self._assemble_contacts(crows, srows)
         i = self.n_snap
         self.n_snap += 1
         self._times.append(float(time))
@@ -430,8 +471,12 @@ class OutputWriter:
                 self._write_row(self._series[name], i, rows_out, self._lo)
             pts = self._world_points(_cols(mine, "centroid"), _cols(mine, "orientation"))
             self._write_row(self._points, i, pts, self._vlo)
+            if self.contacts:
+                self._write_contacts(i, crows, srows)
             self._write_fields(i, mine)
             self._f.flush()
+        elif self.contacts:
+            self._count_contacts(crows, srows)
         if self.xdmf_path is not None and self.comm.rank == 0:
             self._write_xdmf()
 
@@ -525,7 +570,128 @@ class OutputWriter:
         write_xdmf(
             self.path, self.xdmf_path, self.n_snap, self._times,
             self.n_tri, self.n_points, self.n_blocks,
+            contacts=(self._n_contacts, self._n_subs) if self.contacts else None,
         )
+
+    # ------------------------------------------------------------------ contacts
+    def _create_contacts(self) -> None:
+        """The flat contact and sub-contact series and their snapshot offsets (IO ranks)."""
+        f = self._f
+        for group, series in (("contacts", joints.CONTACT_SERIES),
+                              ("subcontacts", joints.SUB_SERIES)):
+            off = f.create_dataset(f"{group}/offset", (1,), maxshape=(None,), chunks=(1024,),
+                                   dtype=np.int64)
+            self._write(off, (0,), np.zeros(1, np.int64) if self.comm.rank == 0 else None)
+            off.attrs["doc"] = f"snapshot i is rows offset[i] .. offset[i+1]-1 of {group}/*"
+            for name, tail, dtype, units, doc in series:
+                d = f.create_dataset(
+                    f"{group}/{name}", (0, *tail), maxshape=(None, *tail),
+                    chunks=(_CONTACT_CHUNK, *tail), dtype=dtype, compression="gzip",
+                    compression_opts=4, shuffle=True)
+                d.attrs["units"] = units
+                d.attrs["doc"] = doc
+        f["contacts/state"].attrs["names"] = list(joints.STATE_NAMES)
+        f.create_dataset("xdmf/index", (0,), maxshape=(None,), chunks=(_CONTACT_CHUNK,),
+                         dtype=np.int64)
+
+    def _pack_contacts(self, contacts: dict | None) -> tuple[np.ndarray, np.ndarray]:
+        """This rank's contacts and sub-contacts as float64 rows (``ValueError`` if bad)."""
+        if contacts is None:
+            return np.zeros((0, joints.C_WIDTH)), np.zeros((0, joints.S_WIDTH))
+        crows = joints.pack(contacts, joints.CONTACT_COLS, joints.C_AT, joints.C_WIDTH)
+        srows = joints.pack(contacts["sub"], joints.SUB_COLS, joints.S_AT, joints.S_WIDTH)
+        nsub = joints.col(crows, joints.C_AT, "n_sub")
+        if (nsub < 0).any() or nsub.sum() != len(srows):
+            raise ValueError(f"write_snapshot: contacts n_sub sums to {nsub.sum()}, "
+                             f"{len(srows)} sub-contacts given")
+        block = joints.col(crows, joints.C_AT, "block")
+        if len(block) and (block.min() < 0 or block.max() >= self.n_blocks):
+            raise ValueError(f"write_snapshot: contact blocks outside [0, {self.n_blocks})")
+        return crows, srows
+
+    def _exchange(self, dest: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Rows to rank ``dest`` (stable: received in source-rank order, then row order)."""
+        comm, size, c = self.comm, self.comm.size, rows.shape[1]
+        order = np.argsort(dest, kind="stable")
+        send_n = np.bincount(dest, minlength=size).astype(np.int64)
+        recv_n = np.empty(size, dtype=np.int64)
+        comm.Alltoall(send_n, recv_n)
+        sdispl = np.concatenate([[0], np.cumsum(send_n)[:-1]])
+        rdispl = np.concatenate([[0], np.cumsum(recv_n)[:-1]])
+        out = np.empty((int(recv_n.sum()), c))
+        comm.Alltoallv(
+            [np.ascontiguousarray(rows[order]), (send_n * c, sdispl * c), MPI.DOUBLE],
+            [out, (recv_n * c, rdispl * c), MPI.DOUBLE],
+        )
+        return out
+
+    def _assemble_contacts(self, crows, srows) -> tuple[np.ndarray, np.ndarray]:
+        """Each contact (and its sub-contacts) to the rank whose gid range holds block A: piece
+        gids are numbered block by block, so rank r's keys all precede rank r+1's; then sorted
+        by key. Raises ``ValueError`` on every rank if a contact came twice."""
+        ga = joints.col(crows, joints.C_AT, "block")[:, 0].astype(np.int64)
+        dest = np.searchsorted(self._bounds, ga, side="right") - 1
+        nsub = joints.col(crows, joints.C_AT, "n_sub").astype(np.int64)
+        crows = self._exchange(dest, crows)
+        srows = self._exchange(np.repeat(dest, nsub), srows)
+        crows, srows = joints.sort_contacts(crows, srows)
+        piece = joints.col(crows, joints.C_AT, "piece")
+        msg = None
+        if len(piece) > 1:
+            same = np.flatnonzero((piece[1:] == piece[:-1]).all(axis=1))
+            if len(same):
+                msg = (f"write_snapshot: contact {piece[same[0]].astype(int).tolist()} passed "
+                       "twice (each contact must be passed by exactly one rank)")
+        self._raise_if_any(msg)
+        return crows, srows
+
+    def _count_contacts(self, crows, srows) -> tuple[int, int, int, int]:
+        """Totals over the ranks and this rank's offsets: (n_c, n_s, off_c, off_s)."""
+        counts = np.array([len(crows), len(srows)], np.int64)
+        every = np.array(self.comm.allgather(counts)).reshape(-1, 2)
+        before = every[: self.comm.rank].sum(axis=0)
+        tot = every.sum(axis=0)
+        self._n_contacts.append(int(tot[0]))
+        self._n_subs.append(int(tot[1]))
+        return int(tot[0]), int(tot[1]), int(before[0]), int(before[1])
+
+    def _write_contacts(self, i: int, crows: np.ndarray, srows: np.ndarray) -> None:
+        """Snapshot ``i``'s contacts: this rank's sorted slab of the flat series (collective),
+        the offsets, and the views of the contact sidecars."""
+        f = self._f
+        n_c, n_s, off_c, off_s = self._count_contacts(crows, srows)
+        cvals, svals = joints.reduce_contacts(crows, srows)
+        root = self.comm.rank == 0
+        for group, series, values, n, off in (
+                ("contacts", joints.CONTACT_SERIES, cvals, n_c, off_c),
+                ("subcontacts", joints.SUB_SERIES, svals, n_s, off_s)):
+            offset = f[f"{group}/offset"]
+            base = self._bases[group]
+            offset.resize(i + 2, axis=0)
+            self._write(offset, (i + 1,), np.array([base + n], np.int64) if root else None)
+            for name, tail, dtype, _, _ in series:
+                d = f[f"{group}/{name}"]
+                d.resize(base + n, axis=0)
+                data = np.asarray(values[name]).reshape(-1, *tail).astype(dtype)
+                self._write(d, (base + off,) + (0,) * len(tail), data)
+            self._bases[group] = base + n
+        need = max(n_c, n_s)
+        if need > self._pool:
+            pool = f["xdmf/index"]
+            pool.resize(need, axis=0)
+            lo, hi = _share(self.comm.rank, self.comm.size, need - self._pool) if self.parallel \
+                else (0, need - self._pool)
+            self._write(pool, (self._pool + lo,), np.arange(self._pool + lo, self._pool + hi))
+            self._pool = need
+        for group, viewed, n in (("contacts", CONTACT_VIEWED, n_c),
+                                 ("subcontacts", SUB_VIEWED, n_s)):
+            if n == 0:
+                continue
+            hi = self._bases[group]
+            for name in viewed:
+                _add_range_view(f, f"/{group}/{name}", view_path(f"/{group}/{name}", i),
+                                hi - n, hi)
+            _add_range_view(f, "/xdmf/index", view_path(f"/{group}/index", i), 0, n)
 
     # ------------------------------------------------------------------ histories
     def add_history(self, name: str, ncols: int, attrs: dict[str, Any] | None = None) -> None:

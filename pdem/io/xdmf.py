@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_xdmf", "read_xdmf", "centroids_path", "CELL_FIELDS", "VIEWED_SERIES", "view_path"]
+__all__ = ["write_xdmf", "read_xdmf", "centroids_path", "contacts_path", "subcontacts_path",
+           "CELL_FIELDS", "VIEWED_SERIES", "CONTACT_VIEWED", "SUB_VIEWED", "view_path"]
 
 # Block quantities copied onto every triangle of the block's surface, as float32 series
 # ``surface/<name>`` (name, components, units). No XDMF construct that ParaView 5.11's readers
@@ -32,6 +33,19 @@ VIEWED_SERIES = (
     "/blocks/centroid",
     *(f"/blocks/{name}" for name in _BLOCK_SERIES),
 )
+
+# Point attributes of the contact and sub-contact grids (name, components, number type,
+# precision): each snapshot's rows of the flat contacts/<name>, subcontacts/<name>, read through
+# views like the series above. ``point`` is the grids' geometry.
+_CONTACT_ATTRS = (
+    ("normal_force", 1, "Float", 8), ("shear_force", 3, "Float", 8), ("normal", 3, "Float", 8),
+    ("state", 1, "UChar", 1), ("normal_stress", 1, "Float", 8),
+    ("shear_displacement", 1, "Float", 8), ("opening", 1, "Float", 8),
+)
+_SUB_ATTRS = (("normal_force", 1, "Float", 8), ("shear_force", 3, "Float", 8),
+              ("state", 1, "UChar", 1))
+CONTACT_VIEWED = ("point", *(a[0] for a in _CONTACT_ATTRS))
+SUB_VIEWED = ("point", *(a[0] for a in _SUB_ATTRS))
 
 
 def view_path(path: str, i: int) -> str:
@@ -101,6 +115,46 @@ def _blocks_grid(i: int, t: float, h5: str, n_blocks: int) -> list[str]:
     ]
 
 
+def _point_grid(group: str, attrs, i: int, t: float, h5: str, n: int) -> list[str]:
+    """Snapshot ``i`` of the contacts (or sub-contacts) as a Polyvertex cloud of ``n`` points."""
+    if n == 0:
+        # No contact in this snapshot: a grid of no points. The Xdmf3 readers read this form
+        # (empty DataItems crash them); the legacy reader crashes on every empty grid tried
+        # (docs/output.md).
+        return [
+            f'<Grid Name="{group}_{i:06d}" GridType="Uniform">',
+            f'<Time Value="{t!r}"/>',
+            '<Topology TopologyType="Polyvertex" NumberOfElements="0" NodesPerElement="1"/>',
+            "</Grid>",
+        ]
+    else:
+        topo = _hdf((n,), "Int", h5, view_path(f"/{group}/index", i))
+        geom = _hdf((n, 3), "Float", h5, view_path(f"/{group}/point", i))
+        values = [_hdf((n, w) if w > 1 else (n,), kind, h5, view_path(f"/{group}/{name}", i),
+                       prec) for name, w, kind, prec in attrs]
+    return [
+        f'<Grid Name="{group}_{i:06d}" GridType="Uniform">',
+        f'<Time Value="{t!r}"/>',
+        f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" '
+        f'NodesPerElement="1">{topo}</Topology>',
+        f'<Geometry GeometryType="XYZ">{geom}</Geometry>',
+        *(_attribute(a[0], "Node", a[1], v) for a, v in zip(attrs, values, strict=True)),
+        "</Grid>",
+    ]
+
+
+def contacts_path(xdmf_path: str | os.PathLike) -> Path:
+    """The contacts' sidecar: ``run.xdmf`` -> ``run-contacts.xdmf``."""
+    xdmf_path = Path(xdmf_path)
+    return xdmf_path.with_name(xdmf_path.stem + "-contacts.xdmf")
+
+
+def subcontacts_path(xdmf_path: str | os.PathLike) -> Path:
+    """The sub-contacts' sidecar: ``run.xdmf`` -> ``run-subcontacts.xdmf``."""
+    xdmf_path = Path(xdmf_path)
+    return xdmf_path.with_name(xdmf_path.stem + "-subcontacts.xdmf")
+
+
 def centroids_path(xdmf_path: str | os.PathLike) -> Path:
     """The second sidecar, of the centroid cloud: ``run.xdmf`` -> ``run-centroids.xdmf``."""
     xdmf_path = Path(xdmf_path)
@@ -115,6 +169,7 @@ def write_xdmf(
     n_tri: int,
     n_points: int,
     n_blocks: int,
+    contacts: tuple[Sequence[int], Sequence[int]] | None = None,
 ) -> None:
     """Write the XDMF 3 description of a pdem output file (plain text, any one process).
 
@@ -128,6 +183,11 @@ def write_xdmf(
     Xdmf3 readers (S, T) and the legacy XDMF reader all read. The HDF5 file is referenced by its
     bare name, so the files must stay in the same directory. Each file is written to a
     temporary name and renamed, so a reader never sees half a file.
+
+    ``contacts``: the number of contacts and of sub-contacts of each snapshot, for files with
+    the joint state; :func:`contacts_path` then gets ``contacts`` (the contacts at their
+    common-plane points, with ``normal_force``, ``shear_force``, ``normal``, ``state``, ...)
+    and :func:`subcontacts_path` ``subcontacts`` (sub-contact points and their forces).
     """
     times = [float(t) for t in times]
     if len(times) != n_snap:
@@ -137,6 +197,13 @@ def write_xdmf(
     cloud = [line for i, t in enumerate(times) for line in _blocks_grid(i, t, h5, n_blocks)]
     _write_collection(Path(xdmf_path), "surface", surface)
     _write_collection(centroids_path(xdmf_path), "blocks", cloud)
+    if contacts is not None:
+        for group, attrs, counts, path in (
+                ("contacts", _CONTACT_ATTRS, contacts[0], contacts_path(xdmf_path)),
+                ("subcontacts", _SUB_ATTRS, contacts[1], subcontacts_path(xdmf_path))):
+            grids = [line for i, t in enumerate(times)
+                     for line in _point_grid(group, attrs, i, t, h5, int(counts[i]))]
+            _write_collection(path, group, grids)
 
 
 def _write_collection(path: Path, name: str, grids: list[str]) -> None:
@@ -217,6 +284,12 @@ def read_xdmf(xdmf_path: str | os.PathLike) -> dict[str, list[dict]]:
             for grid in coll.findall("Grid"):
                 topo = grid.find("Topology")
                 n_el = int(topo.get("NumberOfElements"))
+                if n_el == 0 and topo.find("DataItem") is None:  # an empty contact grid
+                    steps.append({"time": float(grid.find("Time").get("Value")),
+                                  "topology_type": topo.get("TopologyType"),
+                                  "topology": np.zeros((0, 1), np.int64),
+                                  "geometry": np.zeros((0, 3)), "attributes": {}})
+                    continue
                 conn = _resolve(topo.find("DataItem"), base, files).astype(np.int64)
                 geom = _resolve(grid.find("Geometry").find("DataItem"), base, files)
                 geom = geom.reshape(-1, 3)

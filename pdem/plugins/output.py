@@ -7,8 +7,12 @@ import json
 import numpy as np
 
 from .. import __version__
+from ..contact.forces import normal_forces
+from ..contact.laws import FAILED
 from ..errors import writing
-from ..io.writer import OutputWriter
+from ..io.checkpoint import written_contacts
+from ..io.writer import OutputWriter, quat_to_matrix
+from ..model import csr
 from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps
 
@@ -29,6 +33,44 @@ def body_surfaces(specs):
     return vertices, faces
 
 
+def bonded_joints(joints) -> np.ndarray:
+    """Per joint row, whether it has a bond to lose (tension or cohesion > 0)."""
+    return np.array([any(float(getattr(p, k, 0.0) or 0.0) > 0.0 for k in ("tension", "cohesion"))
+                     for p in joints.params] or [False], bool)
+
+
+def contact_rows(state, bonded: np.ndarray) -> dict:
+    """This rank's share of the contacts for a snapshot: each contact once over the ranks (the
+    checkpoints' rule), those with sub-contacts only. World sub-contact points are
+    ``x_A + R(q_A) p_A`` (explicit sums: the same bits on every rank). A FAILED bit is kept
+    only on joints with a bond (the contact detection marks a joint that forms open as
+    failed, "no bond", whatever its law). Normal forces are the law's for the stored state
+    (:func:`pdem.contact.forces.normal_forces`)."""
+    c = state.contacts
+    keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
+    sel = c.take(keep)
+    nsub = np.diff(sel.sc_start)
+    fn = np.zeros(c.n_sub)
+    normal_forces(c.pairs(), c.subs(), state.joints.kernel_args, fn)
+    fn = fn[csr.take(c.sc_start, keep)[0]]
+    b = state.blocks
+    ia = np.repeat(sel.ia, nsub)
+    R = quat_to_matrix(b.q[ia])
+    pa = sel.sc_pa
+    point = b.x[ia] + (R[:, :, 0] * pa[:, 0:1] + R[:, :, 1] * pa[:, 1:2]
+                       + R[:, :, 2] * pa[:, 2:3])
+    bits = sel.sc_state.copy()
+    joint = np.repeat(sel.joint, nsub)
+    bits[~bonded[joint]] &= ~FAILED
+    return {
+        "piece": np.stack([sel.pga, sel.pgb], axis=1), "block": np.stack([sel.ga, sel.gb], 1),
+        "joint": sel.joint, "point": sel.point, "normal": sel.normal, "n_sub": nsub,
+        "sub": {"point": point, "area": sel.sc_area, "overlap": sel.sc_un,
+                "normal_force": fn, "shear_force": sel.sc_fs,
+                "shear_displacement": sel.sc_us, "state": bits},
+    }
+
+
 class Snapshots(Plugin):
     """Every ``output.every`` model seconds (or ``every_steps``) the owned blocks' output
     fields (pdem.model.fields, ``output=``) go to the HDF5 file; opened at construction."""
@@ -42,6 +84,8 @@ class Snapshots(Plugin):
         self.after_write = []  # callbacks run after each snapshot (histories flush)
         vertices, faces = body_surfaces(state.specs)
         r = state.resolved
+        self.contacts = bool(out.contacts)
+        self.bonded = bonded_joints(state.joints)
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
             block_parents=[s.parent for s in state.specs],
@@ -50,15 +94,17 @@ class Snapshots(Plugin):
             group_names=state.group_names, fixed=state.glob.fixed,
             attrs={"pdem_version": __version__, "scene_name": state.scene.name, "dt": state.dt,
                    "ctol": r.ctol, "run_id": state.run_id, "first_step": state.step,
-                   "resolved": r.to_json()})
+                   "resolved": r.to_json()},
+            contacts=self.contacts, joint_names=state.joints.names)
 
     def write(self):
         s = self.state
         b, n = s.blocks, s.n_owned
         with s.timers.phase("io"), writing(self.writer.path):
+            contacts = contact_rows(s, self.bonded) if self.contacts else None
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
-                                       stage=s.stage)
+                                       contacts=contacts, stage=s.stage)
             for callback in self.after_write:
                 callback()
 
