@@ -95,6 +95,7 @@ def _output_summary(f: h5py.File) -> list[str]:
         lines.append("histories:   none")
     lines += _energy_lines(f)
     lines += _contact_lines(f, names)
+    lines += _stage_lines(f, names)
     if n_snap == 0:
         return lines
     c0, c1 = f["blocks/centroid"][0], f["blocks/centroid"][n_snap - 1]
@@ -121,6 +122,26 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"speed (last snapshot): mean {_g(speed.mean())} m/s, "
             f"max {_g(speed.max())} m/s ({names[int(speed.argmax())]})"
         )
+    return lines
+
+
+def _stage_lines(f: h5py.File, names) -> list[str]:
+    """Stages seen in the snapshots and a factor-of-safety result (pdem.stages, strength)."""
+    lines = []
+    if "stage" in f and len(f["stage"]):
+        stages = np.unique(f["stage"][()])
+        lines.append(f"stages:      {len(stages)} in the snapshots ({', '.join(map(str, stages))})")
+    if "factor_of_safety" in f.attrs:
+        fs = float(f.attrs["factor_of_safety"])
+        bounded = bool(f.attrs.get("factor_of_safety_bounded", 1))
+        line = f"factor of safety: {'' if bounded else '>= '}{fs:.4g}"
+        g = f.get("factor_of_safety")
+        if g is not None and "mechanism" in g:
+            d = np.linalg.norm(g["mechanism"][()], axis=1)
+            moving = np.nonzero(d > 0.1 * d.max())[0] if d.max() > 0 else []
+            line += f" (stage {_text(f.attrs.get('factor_of_safety_stage', ''))}; failure " \
+                    f"mechanism: {len(moving)} blocks, e.g. {', '.join(names[moving[:5]])})"
+        lines.append(line)
     return lines
 
 
