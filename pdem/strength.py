@@ -169,7 +169,7 @@ def factor_of_safety(run, k: int) -> dict:
             "factor_of_safety_bounded": int(bounded),
             "factor_of_safety_stage": s.scene.stages[k].name,
         }, {"trials": np.array(trials, float).reshape(-1, 3),
-            "mechanism": mechanism, "block_safety": safety})
+            "mechanism": mechanism, "block_safety": safety}, surface=("block_safety",))
     summary = {"steps": sum(int(t[2]) for t in trials), "time": s.time, "ratio": s.ratio,
                "stopped": stopped, "checkpoint": None, "factor": factor, "bounded": bounded,
                "trials": trials, "mechanism": mechanism, "block_safety": safety}

@@ -244,6 +244,7 @@ class OutputWriter:
         conn, tri_block = _fan_triangulate(body_faces, nv, self._vstart)
         self.n_blocks, self.n_points, self.n_tri = n, int(self._vstart[-1]), len(conn)
         self.n_snap = 0
+        self._extra_cells: list[tuple[str, str]] = []  # static results on the surfaces
         self._times: list[float] = []
         self._hist_rows: dict[str, int] = {}
         self._hist_cols: dict[str, int] = {}
@@ -571,6 +572,7 @@ class OutputWriter:
             self.path, self.xdmf_path, self.n_snap, self._times,
             self.n_tri, self.n_points, self.n_blocks,
             contacts=(self._n_contacts, self._n_subs) if self.contacts else None,
+            extra_cells=self._extra_cells,
         )
 
     # ------------------------------------------------------------------ contacts
@@ -768,10 +770,17 @@ class OutputWriter:
 
     # ------------------------------------------------------------------ file
     def write_result(self, group: str, attrs: dict[str, Any],
-                     datasets: dict[str, np.ndarray]) -> None:
+                     datasets: dict[str, np.ndarray], surface: tuple[str, ...] = ()) -> None:
         """A result every rank holds whole (e.g. a factor-of-safety search): root attributes
-        ``attrs`` and static datasets ``group/<name>`` (collective; replaced if present)."""
+        ``attrs`` and static datasets ``group/<name>`` (collective; replaced if present).
+        ``surface``: per-block datasets also shown on the block surfaces (XDMF cell fields,
+        ``group/surface_<name>``)."""
         self._check_open()
+        for name in surface:
+            tri = np.asarray(datasets[name], np.float32)[self._tri_block]
+            datasets = {**datasets, f"surface_{name}": tri}
+            if (name, f"/{group}/surface_{name}") not in self._extra_cells:
+                self._extra_cells.append((name, f"/{group}/surface_{name}"))
         if not self._io:
             return
         f = self._f
@@ -784,6 +793,8 @@ class OutputWriter:
                 del g[name]
             self._write_static(g.create_dataset(name, data.shape, data.dtype), data)
         f.flush()
+        if surface and self.xdmf_path is not None and self.comm.rank == 0:
+            self._write_xdmf()
 
     def flush(self) -> None:
         """Flush the HDF5 file to disk (collective)."""

@@ -66,11 +66,13 @@ def _attribute(name: str, center: str, width: int, item: str) -> str:
     return f'<Attribute Name="{name}" AttributeType="{kind}" Center="{center}">{item}</Attribute>'
 
 
-def _surface_grid(i: int, t: float, h5: str, n_tri: int, n_points: int) -> list[str]:
+def _surface_grid(i: int, t: float, h5: str, n_tri: int, n_points: int,
+                  extra=()) -> list[str]:
     static = [
         _attribute(name, "Cell", 1, _hdf((n_tri,), "Int", h5, f"/surface/{name}", prec))
         for name, prec in (("block_id", 8), ("group", 4), ("fixed", 4))
-    ]
+    ] + [_attribute(name, "Cell", 1, _hdf((n_tri,), "Float", h5, path, 4))
+         for name, path in extra]
     cells = [
         _attribute(
             name, "Cell", w,
@@ -170,6 +172,7 @@ def write_xdmf(
     n_points: int,
     n_blocks: int,
     contacts: tuple[Sequence[int], Sequence[int]] | None = None,
+    extra_cells: Sequence[tuple[str, str]] = (),
 ) -> None:
     """Write the XDMF 3 description of a pdem output file (plain text, any one process).
 
@@ -193,7 +196,9 @@ def write_xdmf(
     if len(times) != n_snap:
         raise ValueError(f"write_xdmf: {len(times)} times for {n_snap} snapshots")
     h5 = Path(h5_path).name
-    surface = [line for i, t in enumerate(times) for line in _surface_grid(i, t, h5, n_tri, n_points)]
+    # ``extra_cells``: (name, dataset) static per-triangle float32 results, e.g. a safety map
+    surface = [line for i, t in enumerate(times)
+               for line in _surface_grid(i, t, h5, n_tri, n_points, extra_cells)]
     cloud = [line for i, t in enumerate(times) for line in _blocks_grid(i, t, h5, n_blocks)]
     _write_collection(Path(xdmf_path), "surface", surface)
     _write_collection(centroids_path(xdmf_path), "blocks", cloud)

@@ -44,6 +44,9 @@ def test_factor_of_safety_of_a_slab_on_an_incline(tmp_path, phi, cohesion):
         mech = fs["mechanism"][1]
         assert mech[0] > 0.0 and abs(mech[0]) > 10 * abs(mech[2])
         assert list(f["stage"][()]) == sorted(f["stage"][()])
+    # the safety map is a cell field of the block surfaces in ParaView's sidecar
+    xdmf = open(out.replace(".h5", ".xdmf")).read()
+    assert 'Attribute Name="block_safety"' in xdmf and "surface_block_safety" in xdmf
 
 
 def test_stages_change_the_model_and_restart_from_a_stage_checkpoint(tmp_path):
