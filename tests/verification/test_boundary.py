@@ -25,6 +25,7 @@ import pytest
 
 from pdem.cases import make_simulation
 from pdem.config import ConfigError, parse_scene
+from pdem.dynamics.rotation import quat_to_matrix
 from pdem.plugins.base import Plugin
 from pdem.plugins.energy import balance, energy_totals
 
@@ -224,3 +225,43 @@ solve: {{steps: 1}}
     with pytest.raises(ConfigError) as e:
         parse_scene(text)
     assert key in str(e.value)
+
+
+def test_stage_conditions_start_with_the_stage():
+    """A stage's velocity history runs on the time since the stage began; its stress loads
+    the cube's exposed faces from then on (none before)."""
+    text = f"""
+gravity: [0, 0, -{G}]
+materials: {{rock: {{density: {RHO}}}}}
+joints: {{default: {{kn: {KN}, ks: {KN}, friction: 30.0}}}}
+blocks:
+  - {{name: base, box: {{min: [-3, -3, -1], max: [3, 3, 0]}}, material: rock, fixed: true}}
+  - {{name: cube, box: {{min: [-0.5, -0.5, 0], max: [0.5, 0.5, 1]}}, material: rock}}
+solve: {{damping: local}}
+stages:
+  - {{name: settle, solve: {{steps: 100}}}}
+  - name: shake
+    velocity: [{{names: [base], history: {{harmonic: {{amplitude: [0.1, 0, 0], frequency: 5.0}}}}}}]
+    stress: [{{names: [cube], pressure: 1.0e4}}]
+    solve: {{steps: 200, damping: none}}
+"""
+    sim = make_simulation(text)
+    assert len(sim.state.boundary.f_gid) == 0
+    rec = Recorder(sim.state, "base")
+    sim.runner.plugins.append(rec)
+    sim.run()
+    rows = np.array(rec.rows)
+    t0 = sim.state.stage_times[1]
+    assert t0 > 0.0
+    shaking = rows[rows[:, 0] > t0]
+    assert len(shaking) == 200
+    want = 0.1 * np.sin(2 * math.pi * 5.0 * (shaking[:, 0] - t0))
+    assert np.abs(shaking[:, 1] - want).max() <= 1e-14
+    assert np.abs(rows[rows[:, 0] < t0, 1:]).max() == 0.0  # fixed while settling
+    assert len(sim.state.boundary.f_gid) == 5  # the cube's sides and top
+    cube = int(np.nonzero(sim.blocks.gid == 1)[0][0])
+    # a follower load: -p A along the top face's turned normal (the cube rocks a little)
+    sim.state.boundary.tractions(sim.state)  # on the pose now (the step used the last one)
+    R = quat_to_matrix(sim.blocks.q[cube])
+    assert np.abs(sim.blocks.bforce[cube] + 1.0e4 * R[:, 2]).max() < 1e-9
+    assert np.abs(sim.blocks.bmoment[cube]).max() < 1e-9
