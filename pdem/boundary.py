@@ -212,12 +212,10 @@ def exposed_faces(g, gids: np.ndarray, ctol: float):
     n_pieces = len(g.piece_block)
     alive = g.out[g.piece_block] == 0
     # piece boxes in the world, to find the pieces near a face
-    lo = np.zeros((n_pieces, 3))
-    hi = np.zeros((n_pieces, 3))
-    for p in range(n_pieces):
-        b = g.piece_block[p]
-        vw = g.x[b] + g.verts_local[g.vert_start[p]:g.vert_start[p + 1]] @ R[b].T
-        lo[p], hi[p] = vw.min(axis=0), vw.max(axis=0)
+    vblock = g.piece_block[np.repeat(np.arange(n_pieces), np.diff(g.vert_start))]
+    vworld = g.x[vblock] + np.einsum("vij,vj->vi", R[vblock], g.verts_local)
+    lo = np.minimum.reduceat(vworld, g.vert_start[:-1], axis=0)
+    hi = np.maximum.reduceat(vworld, g.vert_start[:-1], axis=0)
     out = ([], [], [], [])
     for b in gids:
         for p in range(g.piece_start[b], g.piece_start[b + 1]):

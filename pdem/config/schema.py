@@ -410,8 +410,9 @@ class BoundaryStress(Selection):
             t = self.tensor
             for i, j in ((0, 1), (1, 2), (0, 2)):
                 if t[i][j] != t[j][i]:
-                    raise ValueError(f"tensor: not symmetric (component {i}{j} = {t[i][j]:g}, "
-                                     f"{j}{i} = {t[j][i]:g})")
+                    a, b = "xyz"[i], "xyz"[j]
+                    raise ValueError(f"tensor: not symmetric (s{a}{b} = {t[i][j]:g}, "
+                                     f"s{b}{a} = {t[j][i]:g})")
         return self
 
     def sigma(self):
