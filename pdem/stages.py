@@ -10,6 +10,7 @@ their inside blocks are deleted when the stage starts.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 
@@ -20,7 +21,6 @@ from .config.resolve import _estimated_stiffness, _timestep
 from .contact.laws import joint_table
 from .domain import DELETED, remove_blocks
 from .dynamics.damping import DAMPING
-from .dynamics.rotation import quat_to_matrix
 
 log = logging.getLogger("pdem")
 
@@ -85,19 +85,21 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
         if not len(gids):
             raise ConfigError([f"{s.scene.at('stages', k, key)}: selects no block"])
         _set(s, gids, fixed=fixed, vfix=0)
+        s.boundary.release(gids)
         if fixed and motion:
             _set(s, gids, v=0.0, w=0.0, L=0.0)
     for j, pv in enumerate(st.velocity):
         gids = selected(s, pv)
         if not len(gids):
             raise ConfigError([f"{s.scene.at('stages', k, 'velocity', j)}: selects no block"])
-        _set(s, gids, fixed=0, vfix=1)
-        if motion:
-            _set(s, gids, v=pv.velocity, w=pv.angular_velocity)
-            b = s.blocks
-            for r in np.nonzero(np.isin(b.gid, gids))[0]:  # L of the prescribed spin
-                R = quat_to_matrix(b.q[r])
-                b.L[r] = R @ (b.inertia[r] * (R.T @ b.w[r]))
+        s.boundary.add_velocity(s, pv, gids, s.stage_times.get(k, s.time), motion)
+    for j, ps in enumerate(st.stress):
+        gids = selected(s, ps)
+        if not len(gids):
+            raise ConfigError([f"{s.scene.at('stages', k, 'stress', j)}: selects no block"])
+        if not s.boundary.add_stress(s, ps, gids):
+            raise ConfigError([f"{s.scene.at('stages', k, 'stress', j)}: the selected blocks "
+                               "have no exposed face"])
     for j, pf in enumerate(st.force):
         gids = selected(s, pf)
         if not len(gids):
@@ -113,6 +115,8 @@ def replay_stages(s, attrs: dict) -> None:
     are those of the same model (a block freed by a stage keeps its contacts)."""
     done = int(attrs.get("stage_next", 0))
     started = int(attrs.get("stage_started", -1))
+    if "stage_times" in attrs:  # when each stage began: the time of its velocity histories
+        s.stage_times = {int(k): float(t) for k, t in json.loads(attrs["stage_times"]).items()}
     for k in range(max(done, started + 1)):
         stage_changes(s, k, motion=False)
 
@@ -122,6 +126,7 @@ def apply_stage(run, k: int) -> None:
     s = run.state
     st = s.scene.stages[k]
     gone = np.array([g for g, sp in enumerate(s.specs) if sp.excavate_stage == k], np.int64)
+    s.stage_times[k] = s.time
     if len(gone):
         remove_blocks(s, run.stepper.bodies(), gone, DELETED,
                       f"excavated (stages[{k}] {st.name!r})")

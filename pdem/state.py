@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from .boundary import apply_scene
 from .config import ConfigError, Scene
 from .config.load import dump_scene
 from .config.preflight import check_derived, machine_memory, preflight, rescaled
@@ -60,6 +61,8 @@ class ModelState:
         self.stage_started = -1
         self.stage_t0 = 0.0
         self.stage_step0 = 0
+        self.stage_times: dict[int, float] = {}  # model time at which stage k began
+        self.boundary = None  # pdem.boundary.Boundary: the conditions in force
         self.energy_start = None  # (kinetic, joint spring energy) at the start, see plugins.energy
         self.gravity = np.array(scene.gravity, float)
         self.damping = DAMPING[scene.solve.damping.mode]
@@ -95,6 +98,7 @@ class ModelState:
         check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
         state.estimate = estimate
+        apply_scene(state)
         if check_overlaps:
             state.check_initial_overlaps()
         return state

@@ -42,7 +42,8 @@ def motion_record(b, n: int) -> motion.Motion:
     return motion.Motion(b.x[:n], b.q[:n], b.v[:n], b.w[:n], b.L[:n], b.mass[:n],
                          b.inertia[:n], b.fixed[:n], b.vfix[:n], b.force[:n],
                          b.applied_force[:n], b.moment[:n], b.mscale[:n], b.prev_force[:n],
-                         b.prev_moment[:n], b.dx[:n], b.dtheta[:n], b.work[:n])
+                         b.prev_moment[:n], b.dx[:n], b.dtheta[:n], b.work[:n], b.bforce[:n],
+                         b.bmoment[:n])
 
 
 class Stepper:
@@ -68,6 +69,8 @@ class Stepper:
             initialise(s)
         self.compute_forces(0.0)
         b = s.blocks
+        if s.boundary is not None and s.boundary.active:
+            s.boundary.tractions(s)
         motion.stagger_start(motion_record(b, s.n_owned), s.gravity, s.dt, s.scalar_inertia)
         s.halo.forward(b)
 
@@ -185,6 +188,9 @@ class Stepper:
         tm = s.timers
         self.stats[:] = 0.0
         with tm.phase("motion"):
+            if s.boundary is not None and s.boundary.active:
+                s.boundary.prescribe(s)  # velocity histories at t + dt/2
+                s.boundary.tractions(s)  # boundary stresses at t, on the pose at t
             motion.integrate(motion_record(b, n), s.gravity, s.dt, s.damping_args(),
                              s.scalar_inertia, self.stats)
             s.step += 1

@@ -335,12 +335,124 @@ class Selection(Strict):
         return self
 
 
-class StageVelocity(Selection):
-    """Prescribed velocity of the selected blocks from this stage on (3DEC's ``block fix``
-    with a velocity): they move at it whatever the forces."""
+Component = Literal["x", "y", "z"]
+Stress = Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]  # Pa; refuses nan and inf
+TIME_MAX = 1.0e12  # s
+
+
+class Harmonic(Strict):
+    """``velocity = amplitude sin(2 pi frequency t + phase)``, ``phase`` in degrees."""
+
+    amplitude: Vec3Speed
+    frequency: Annotated[float, Field(ge=0.0, le=SPEED_MAX)]
+    phase: Annotated[float, Field(ge=-3600.0, le=3600.0)] = 0.0
+
+
+class VelocityHistory(Strict):
+    """A time history of the prescribed velocity: exactly one of ``table``
+    (``[[t, vx, vy, vz], ...]``, times strictly increasing; linear between rows, the first
+    row's velocity before it and the last row's after it) or ``harmonic``.
+    Its time is the model time since the condition was applied (the run's start for
+    ``boundary:``, the stage's start for a stage's ``velocity:``)."""
+
+    table: Annotated[list[tuple[Annotated[float, Field(ge=0.0, le=TIME_MAX)], Speed, Speed,
+                                Speed]], Field(min_length=1)] | None = None
+    harmonic: Harmonic | None = None
+
+    @field_validator("table")
+    @classmethod
+    def _increasing(cls, v):
+        for k in range(1, len(v or ())):
+            if not v[k][0] > v[k - 1][0]:
+                raise ValueError(f"times must increase strictly: row {k} (t = {v[k][0]:g}) "
+                                 f"after t = {v[k - 1][0]:g}")
+        return v
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.table is None) == (self.harmonic is None):
+            raise ValueError("give exactly one of table, harmonic")
+        return self
+
+
+class BoundaryVelocity(Selection):
+    """Prescribed velocity of the selected blocks (3DEC's ``block fix`` with a velocity, or
+    ``boundary xvel``... on a component): they move at it whatever the forces.
+
+    ``components``: the translation components prescribed (default all three). With all three
+    the whole motion is prescribed: ``velocity`` and ``angular_velocity``. With a subset only
+    those components of the centroid velocity are prescribed; the other components and the
+    rotation follow the forces (``angular_velocity`` must then be zero). ``history``: the
+    velocity in time instead of the constant ``velocity`` (the components not prescribed are
+    ignored)."""
 
     velocity: Vec3Speed = (0.0, 0.0, 0.0)
     angular_velocity: Vec3Speed = (0.0, 0.0, 0.0)
+    components: Annotated[list[Component], Field(min_length=1, max_length=3)] = ["x", "y", "z"]
+    history: VelocityHistory | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if len(set(self.components)) != len(self.components):
+            raise ValueError(f"components: repeated in {self.components}")
+        if not self.all_components and any(self.angular_velocity):
+            raise ValueError("angular_velocity: only with all components prescribed (a "
+                             "partly prescribed block rotates freely)")
+        if self.history is not None and any(self.velocity):
+            raise ValueError("give velocity or history, not both")
+        return self
+
+    @property
+    def all_components(self) -> bool:
+        return len(self.components) == 3
+
+
+StageVelocity = BoundaryVelocity  # a stage's prescribed velocities are the same conditions
+
+
+class BoundaryStress(Selection):
+    """A traction on the exposed faces of the selected blocks: ``pressure`` (Pa, positive
+    pushes on the face) or ``tensor`` (Pa, world frame, ``[sxx, syy, szz, sxy, syz, szx]`` or
+    a symmetric 3x3 list; compression negative, as in 3DEC). Face traction ``t = sigma n``
+    (outward normal ``n``; a pressure is ``sigma = -p I``), applied as the force ``t A`` at
+    the face centroid, which moves and turns with the block."""
+
+    pressure: Stress | None = None
+    tensor: tuple[Stress, Stress, Stress, Stress, Stress, Stress] | \
+        tuple[tuple[Stress, Stress, Stress], tuple[Stress, Stress, Stress],
+              tuple[Stress, Stress, Stress]] | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.pressure is None) == (self.tensor is None):
+            raise ValueError("give exactly one of pressure, tensor")
+        if self.tensor is not None and isinstance(self.tensor[0], tuple):
+            t = self.tensor
+            for i, j in ((0, 1), (1, 2), (0, 2)):
+                if t[i][j] != t[j][i]:
+                    a, b = "xyz"[i], "xyz"[j]
+                    raise ValueError(f"tensor: not symmetric (s{a}{b} = {t[i][j]:g}, "
+                                     f"s{b}{a} = {t[j][i]:g})")
+        return self
+
+    def sigma(self):
+        """The stress tensor as a 3x3 nested tuple (Pa)."""
+        if self.pressure is not None:
+            p = -self.pressure
+            return ((p, 0.0, 0.0), (0.0, p, 0.0), (0.0, 0.0, p))
+        t = self.tensor
+        if isinstance(t[0], tuple):
+            return t
+        sxx, syy, szz, sxy, syz, szx = t
+        return ((sxx, sxy, szx), (sxy, syy, syz), (szx, syz, szz))
+
+
+class BoundaryConditions(Strict):
+    """Scene-level boundary conditions, in force from the start: prescribed velocities and
+    boundary stresses (a stage may add more)."""
+
+    velocity: list[BoundaryVelocity] = []
+    stress: list[BoundaryStress] = []
 
 
 class StageForce(Selection):
@@ -399,6 +511,7 @@ class Stage(Strict):
     fix: Selection | None = None
     free: Selection | None = None
     velocity: list[StageVelocity] = []
+    stress: list[BoundaryStress] = []
     force: list[StageForce] = []
     reset_displacements: bool = False
     solve: StageSolve | None = None
@@ -532,6 +645,7 @@ class Scene(Strict):
     excavate: list[Excavation] = []
     stages: list[Stage] = []
     insitu: InSitu | None = None
+    boundary: BoundaryConditions = BoundaryConditions()
     contact: Contact = Contact()
     parallel: Parallel = Parallel()
     solve: Solve
@@ -613,10 +727,22 @@ class Scene(Strict):
                 for g in (sel.groups or ()) if sel else ():
                     if g not in groups and not open_groups:
                         errors.append(f"stages[{i}].{key}.groups: no block has group {g!r}")
+            for key in ("velocity", "stress", "force"):
+                for j, sel in enumerate(getattr(st, key)):
+                    for g in sel.groups or ():
+                        if g not in groups and not open_groups:
+                            errors.append(f"stages[{i}].{key}[{j}].groups: no block has "
+                                          f"group {g!r} (groups: {', '.join(sorted(groups))})")
             fos = st.factor_of_safety
             for j in (fos.joints or ()) if fos else ():
                 if j not in self.joints:
                     errors.append(f"stages[{i}].factor_of_safety.joints: unknown joint {j!r}")
+        for key in ("velocity", "stress"):
+            for j, sel in enumerate(getattr(self.boundary, key)):
+                for g in sel.groups or ():
+                    if g not in groups and not open_groups:
+                        errors.append(f"boundary.{key}[{j}].groups: no block has group {g!r} "
+                                      f"(groups: {', '.join(sorted(groups))})")
         for i, c in enumerate(self.cuts):
             if c.joint is not None and c.joint not in self.joints:
                 errors.append(f"cuts[{i}].joint: unknown joint {c.joint!r} "

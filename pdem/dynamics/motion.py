@@ -83,8 +83,18 @@ from pdem.jit import kernel
 # The block arrays integrate reads and writes (owned rows): ``force`` and ``moment`` are the
 # contact sums, ``applied`` the applied loads (gravity is added with the true mass); ``work``
 # the energy accumulators (pdem.dynamics.energy.WORK_*).
+# ``bforce``/``bmoment``: boundary-stress force and moment about the centroid at t (world;
+# pdem.boundary), booked as applied work.
 Motion = namedtuple("Motion", "x q v w L mass inertia fixed vfix force applied moment mscale "
-                              "prev_force prev_moment dx dtheta work")
+                              "prev_force prev_moment dx dtheta work bforce bmoment")
+
+# ``vfix`` codes: 0 free; VFIX_ALL the velocity and angular velocity prescribed (the block is
+# moved with them); otherwise a mask of prescribed translation components (the others and the
+# rotation are integrated).
+VFIX_ALL = 1
+VFIX_X = 2
+VFIX_Y = 4
+VFIX_Z = 8
 
 # columns of the per-block ``work`` field
 WORK_GRAVITY = 0
@@ -178,6 +188,7 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
     mass, inertia, fixed, vfix, mass_scale = m.mass, m.inertia, m.fixed, m.vfix, m.mscale
     force, moment, prev_force, prev_moment = m.force, m.moment, m.prev_force, m.prev_moment
     applied, work = m.applied, m.work
+    bforce, bmoment = m.bforce, m.bmoment
     out_dx, out_dtheta = m.dx, m.dtheta
     n = x.shape[0]
     gx = gravity[0]
@@ -197,12 +208,12 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
         mb = mass[i]
         ms = mass_scale[i]
         mi = mb * ms
-        ftx = (force[i, 0] + applied[i, 0]) + mb * gx
-        fty = (force[i, 1] + applied[i, 1]) + mb * gy
-        ftz = (force[i, 2] + applied[i, 2]) + mb * gz
-        mx = moment[i, 0]
-        my = moment[i, 1]
-        mz = moment[i, 2]
+        ftx = (force[i, 0] + (applied[i, 0] + bforce[i, 0])) + mb * gx
+        fty = (force[i, 1] + (applied[i, 1] + bforce[i, 1])) + mb * gy
+        ftz = (force[i, 2] + (applied[i, 2] + bforce[i, 2])) + mb * gz
+        mx = moment[i, 0] + bmoment[i, 0]
+        my = moment[i, 1] + bmoment[i, 1]
+        mz = moment[i, 2] + bmoment[i, 2]
         pf = (prev_force[i, 0], prev_force[i, 1], prev_force[i, 2])
         pm = (prev_moment[i, 0], prev_moment[i, 1], prev_moment[i, 2])
         prev_force[i, 0] = ftx
@@ -227,7 +238,8 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
         qy = q[i, 2]
         qz = q[i, 3]
 
-        if vfix[i]:
+        code = vfix[i]
+        if code == VFIX_ALL:
             # Prescribed velocities: keep v and w, move the block with them.
             vx = v[i, 0]
             vy = v[i, 1]
@@ -242,13 +254,20 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
             # the prescribed motion takes the work the contacts do on the block out of the
             # model (and puts the opposite in)
             work[i, WORK_BOUNDARY] -= (force[i, 0] * vx + force[i, 1] * vy + force[i, 2] * vz
-                                       + mx * wx + my * wy + mz * wz) * dt
+                                       + moment[i, 0] * wx + moment[i, 1] * wy
+                                       + moment[i, 2] * wz) * dt
             L[i, 0] = lx
             L[i, 1] = ly
             L[i, 2] = lz
         else:
             n_free += 1
-            fn = math.sqrt(ftx * ftx + fty * fty + ftz * ftz)
+            # free translation components (1.0) and prescribed ones (0.0): a prescribed
+            # component keeps the velocity set on entry, its force is a reaction
+            ex_ = 0.0 if code & VFIX_X else 1.0
+            ey_ = 0.0 if code & VFIX_Y else 1.0
+            ez_ = 0.0 if code & VFIX_Z else 1.0
+            fn = math.sqrt((ftx * ex_) ** 2 + (fty * ey_) ** 2 + (ftz * ez_) ** 2) if code \
+                else math.sqrt(ftx * ftx + fty * fty + ftz * ftz)
             mn = math.sqrt(mx * mx + my * my + mz * mz)
             sum_f += fn
             if fn > max_f:
@@ -274,6 +293,16 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
             lx, ly, lz = ln
             fdx, fdy, fdz = fd
             mdx, mdy, mdz = md
+            if code:
+                if ex_ == 0.0:
+                    vx = v0x
+                    fdx = 0.0
+                if ey_ == 0.0:
+                    vy = v0y
+                    fdy = 0.0
+                if ez_ == 0.0:
+                    vz = v0z
+                    fdz = 0.0
 
             # --- angular velocity at t + dt/2
             if scalar_inertia:
@@ -303,16 +332,36 @@ def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
             wbx = 0.5 * (w0x + wx)
             wby = 0.5 * (w0y + wy)
             wbz = 0.5 * (w0z + wz)
+            if code:
+                # prescribed components: the contacts' work on them goes out through the
+                # boundary (as for a fully prescribed block); they hold no kinetic energy
+                work[i, WORK_BOUNDARY] -= (force[i, 0] * vx * (1.0 - ex_)
+                                           + force[i, 1] * vy * (1.0 - ey_)
+                                           + force[i, 2] * vz * (1.0 - ez_)) * dt
+                vbx *= ex_
+                vby *= ey_
+                vbz *= ez_
             work[i, WORK_GRAVITY] += mb * (gx * vbx + gy * vby + gz * vbz) * dt
-            work[i, WORK_APPLIED] += (applied[i, 0] * vbx + applied[i, 1] * vby
-                                      + applied[i, 2] * vbz) * dt
+            work[i, WORK_APPLIED] += ((applied[i, 0] + bforce[i, 0]) * vbx
+                                      + (applied[i, 1] + bforce[i, 1]) * vby
+                                      + (applied[i, 2] + bforce[i, 2]) * vbz
+                                      + (bmoment[i, 0] * wbx + bmoment[i, 1] * wby
+                                         + bmoment[i, 2] * wbz)) * dt
             work[i, WORK_CONTACT] += (force[i, 0] * vbx + force[i, 1] * vby + force[i, 2] * vbz
-                                      + mx * wbx + my * wby + mz * wbz) * dt
+                                      + moment[i, 0] * wbx + moment[i, 1] * wby
+                                      + moment[i, 2] * wbz) * dt
             work[i, WORK_DAMPING] += pd * dt
             e0 = 0.5 * (
+                mi * ((v0x * ex_) ** 2 + (v0y * ey_) ** 2 + (v0z * ez_) ** 2)
+                + w0x * l0x + w0y * l0y + w0z * l0z
+            ) if code else 0.5 * (
                 mi * (v0x * v0x + v0y * v0y + v0z * v0z) + w0x * l0x + w0y * l0y + w0z * l0z
             )
-            e1 = 0.5 * (mi * (vx * vx + vy * vy + vz * vz) + wx * lx + wy * ly + wz * lz)
+            e1 = 0.5 * (
+                mi * ((vx * ex_) ** 2 + (vy * ey_) ** 2 + (vz * ez_) ** 2)
+                + wx * lx + wy * ly + wz * lz
+            ) if code else 0.5 * (
+                mi * (vx * vx + vy * vy + vz * vz) + wx * lx + wy * ly + wz * lz)
             dek += abs(e1 - e0) / dt
             ke += e1
 
@@ -379,15 +428,17 @@ def stagger_start(m, gravity, dt, scalar_inertia):
     """
     q, v, w, L, mass, inertia = m.q, m.v, m.w, m.L, m.mass, m.inertia
     mass_scale, fixed, vfix, force, moment = m.mscale, m.fixed, m.vfix, m.force, m.moment
-    applied = m.applied
+    applied, bforce, bmoment = m.applied, m.bforce, m.bmoment
     for i in range(q.shape[0]):
-        if fixed[i] or vfix[i]:
+        if fixed[i] or vfix[i] == VFIX_ALL:
             continue
         mi = mass[i] * mass_scale[i]
         h = 0.5 * dt
         for k in range(3):
-            v[i, k] -= ((force[i, k] + applied[i, k]) + mass[i] * gravity[k]) / mi * h
-            L[i, k] -= moment[i, k] * h
+            if not (vfix[i] & (VFIX_X << k)):  # a prescribed component is set, not staggered
+                v[i, k] -= ((force[i, k] + (applied[i, k] + bforce[i, k]))
+                            + mass[i] * gravity[k]) / mi * h
+            L[i, k] -= (moment[i, k] + bmoment[i, k]) * h
         i1, i2, i3 = _block_inertia(inertia, i, mass_scale[i], scalar_inertia)
         r = omega_from_L_s(
             q[i, 0], q[i, 1], q[i, 2], q[i, 3], L[i, 0], L[i, 1], L[i, 2], i1, i2, i3

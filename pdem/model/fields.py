@@ -57,7 +57,9 @@ BLOCK: tuple[Field, ...] = (
     Field("inertia", (3,), F, "kg m2", "principal moments (body frame = principal axes)", **_S),
     Field("mscale", (), F, "1", "inertial mass scale (static solves), 1 otherwise", **_S),
     Field("fixed", (), U8, "1", "1: the block never moves", **_S),
-    Field("vfix", (), U8, "1", "1: velocity prescribed", **_S),
+    Field("vfix", (), U8, "1", "prescribed velocity: 0 none, 1 velocity and angular velocity, "
+          "else a mask of prescribed components 2 x, 4 y, 8 z (pdem.dynamics.motion.VFIX_*)",
+          **_S),
     Field("material", (), I32, "1", "row in the scene's materials", **_S),
     Field("group", (), I32, "1", "row in the sorted group names", **_S),
     Field("applied_force", (3,), F, "N", "constant applied force", **_S),
@@ -85,6 +87,9 @@ BLOCK: tuple[Field, ...] = (
     Field("dtheta", (3,), F, "rad", "this step's rotation increment (contact planes turn)",
           halo=True),
     Field("dx", (3,), F, "m", "this step's centroid displacement"),
+    Field("bforce", (3,), F, "N", "boundary-stress force at t (pdem.boundary), set before the "
+          "step"),
+    Field("bmoment", (3,), F, "N m", "boundary-stress moment about the centroid at t"),
     Field("R", (3, 3), F, "1", "rotation matrix of q"),
     Field("lo", (3,), F, "m", "envelope lower corner (padded by CTOL/2)"),
     Field("hi", (3,), F, "m", "envelope upper corner"),

@@ -32,8 +32,12 @@ def energy_totals(state) -> dict[str, float]:
     the joints' springs; the rest accumulated since the start (pdem.model.fields ``work``).
     """
     b, n = state.blocks, state.n_owned
-    free = (b.fixed[:n] == 0) & (b.vfix[:n] == 0)
+    free = (b.fixed[:n] == 0) & (b.vfix[:n] != motion.VFIX_ALL)
     ke = np.where(free, kinetic_per_block(b, slice(0, n)), 0.0)
+    part = np.nonzero(free & (b.vfix[:n] != 0))[0]
+    for k in range(3):  # prescribed components hold no kinetic energy (as integrated)
+        r = part[(b.vfix[part] & (motion.VFIX_X << k)) != 0]
+        ke[r] -= 0.5 * b.mass[r] * b.mscale[r] * b.v[r, k] ** 2
     strain = np.zeros(b.n)
     c = state.contacts
     bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)

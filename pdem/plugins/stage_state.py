@@ -3,6 +3,8 @@ which one is in progress and where it started, so a restart goes on exactly ther
 
 from __future__ import annotations
 
+import json
+
 from .base import Plugin
 
 _KEYS = {"stage": int, "stage_next": int, "stage_started": int, "stage_t0": float,
@@ -16,7 +18,10 @@ class StageState(Plugin):
         self.state = state
 
     def restart_state(self) -> dict:
-        return {k: getattr(self.state, k) for k in _KEYS}
+        attrs = {k: getattr(self.state, k) for k in _KEYS}
+        if self.state.stage_times:  # read back by pdem.stages.replay_stages
+            attrs["stage_times"] = json.dumps(self.state.stage_times)
+        return attrs
 
     def restore(self, attrs: dict) -> None:
         for k, cast in _KEYS.items():

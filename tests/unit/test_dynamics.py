@@ -74,7 +74,7 @@ class Blocks:
         return M.Motion(self.x, self.q, self.v, self.w, self.L, self.mass, self.inertia,
                         self.fixed, self.vfix, self.force, self.applied, self.moment,
                         self.mscale, self.prev_force, self.prev_moment, self.dx, self.dtheta,
-                        self.work)
+                        self.work, np.zeros((len(self.x), 3)), np.zeros((len(self.x), 3)))
 
     def stagger(self, dt):
         M.stagger_start(self.record(), self.gravity, dt, self.scalar)

@@ -1,0 +1,278 @@
+"""Boundary conditions: prescribed velocities (whole block or chosen components, constant or
+in time) and boundary stresses (tractions on the exposed faces of blocks).
+
+Conditions come from the scene's ``boundary:`` (in force from the start) and from the stages'
+``velocity:`` and ``stress:`` (from the stage's start). Both are declarative, so a restart
+rebuilds them from the scene (and the stage replay) exactly as the straight run made them.
+
+Velocities (docs/scene-file.md, ``boundary.velocity``)
+    The block's ``vfix`` code says what is prescribed (pdem.dynamics.motion.VFIX_*): the whole
+    motion (all three components: velocity and angular velocity), or a mask of translation
+    components. A history is evaluated before every step at the leap-frog's mid-step time
+    ``t + dt/2`` (the time level of the velocities the step makes) and written into ``v``;
+    the integrator keeps the prescribed components and books the contacts' work on them as
+    work of the prescribed motion (``boundary_work``).
+
+Stresses (docs/theory.md, "Boundary stress")
+    When a condition is applied, the exposed faces of its blocks are found once: a face is
+    exposed unless another convex piece (of another block, or another piece of the same
+    block) has a face with the opposite normal (cosine below ``-COVER_COS``), in the same
+    plane (offsets within CTOL) whose polygon contains this face's centroid or whose centroid
+    lies in this face's polygon. Each exposed face keeps its area ``A``, its outward normal
+    ``n_b`` and its centroid ``c_b`` in the block's body frame. Every step, with the block's
+    rotation ``R`` at t: ``n = R n_b``, ``f = A sigma n`` at the point ``x + R c_b``, summed
+    into the block's ``bforce`` and ``bmoment = (R c_b) x f``; the integrator adds them to the
+    unbalanced force and moment and books their work as applied work.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .dynamics import motion
+from .dynamics.rotation import quat_to_matrix
+
+COVER_COS = 1.0 - 1e-6  # antiparallel faces: n_a . n_b < -COVER_COS
+_BIT = {"x": motion.VFIX_X, "y": motion.VFIX_Y, "z": motion.VFIX_Z}
+
+
+def vfix_code(cond) -> int:
+    """The ``vfix`` code of a :class:`pdem.config.schema.BoundaryVelocity`."""
+    if cond.all_components:
+        return motion.VFIX_ALL
+    return int(sum(_BIT[c] for c in cond.components))
+
+
+def history_velocity(h, t: float) -> np.ndarray:
+    """Velocity of a :class:`pdem.config.schema.VelocityHistory` at time ``t`` (s)."""
+    if h.harmonic is not None:
+        a = h.harmonic
+        s = math.sin(2.0 * math.pi * a.frequency * t + math.radians(a.phase))
+        return np.array(a.amplitude, float) * s
+    tab = np.asarray(h.table, float)
+    return np.array([np.interp(t, tab[:, 0], tab[:, k]) for k in (1, 2, 3)])
+
+
+class Boundary:
+    """The conditions in force on a model (every rank holds all of them, by gid)."""
+
+    def __init__(self):
+        # velocity histories: [gids, vfix code, history, t0]
+        self.histories: list[list] = []
+        # exposed faces under stress, by face: gid, A, n_b, c_b, sigma (3x3)
+        self.f_gid = np.zeros(0, np.int64)
+        self.f_area = np.zeros(0)
+        self.f_normal = np.zeros((0, 3))
+        self.f_center = np.zeros((0, 3))
+        self.f_sigma = np.zeros((0, 3, 3))
+
+    @property
+    def active(self) -> bool:
+        return bool(self.histories) or len(self.f_gid) > 0
+
+    # ------------------------------------------------------------------ velocities
+    def release(self, gids) -> None:
+        """Blocks fixed, freed or given a new velocity: their histories end."""
+        for h in self.histories:
+            h[0] = h[0][~np.isin(h[0], gids)]
+        self.histories = [h for h in self.histories if len(h[0])]
+
+    def add_velocity(self, s, cond, gids, t0: float, motion_too: bool = True) -> None:
+        """Prescribe ``cond`` on ``gids`` (global store and this rank's rows); ``motion_too``:
+        also set the velocities (a restart takes them from its checkpoint)."""
+        from .stages import _set
+
+        code = vfix_code(cond)
+        self.release(gids)
+        _set(s, gids, fixed=0, vfix=code)
+        if cond.history is not None:
+            self.histories.append([np.asarray(gids, np.int64), code, cond.history, t0])
+        if not motion_too:
+            return
+        if code == motion.VFIX_ALL:
+            v0 = history_velocity(cond.history, 0.0) if cond.history is not None \
+                else np.array(cond.velocity, float)
+            _set(s, gids, v=v0, w=cond.angular_velocity)
+            b = s.blocks
+            if b is not None:
+                for r in np.nonzero(np.isin(b.gid, gids))[0]:  # L of the prescribed spin
+                    R = quat_to_matrix(b.q[r])
+                    b.L[r] = R @ (b.inertia[r] * (R.T @ b.w[r]))
+        else:
+            v0 = history_velocity(cond.history, 0.0) if cond.history is not None \
+                else np.array(cond.velocity, float)
+            for c in cond.components:
+                k = "xyz".index(c)
+                for store in (s.glob, s.blocks):
+                    if store is not None:
+                        store.v[np.isin(store.gid, gids), k] = v0[k]
+
+    def prescribe(self, s) -> None:
+        """Before a step from t: the histories' velocities at t + dt/2 into ``v``.
+
+        The integrator books the contacts' work on a prescribed block with the new velocity,
+        ``F(t) . v(t + dt/2) dt``, exact for a constant velocity. For a changing one the
+        joints' stored energy changes by the work at the step's mean velocity
+        ``(v(t - dt/2) + v(t + dt/2)) / 2`` (the leap-frog's, as for a free block), so the
+        difference is booked here, keeping the budget closed to round-off."""
+        b = s.blocks
+        n = s.n_owned
+        t = s.time + 0.5 * s.dt
+        for gids, code, hist, t0 in self.histories:
+            rows = np.nonzero(np.isin(b.gid, gids))[0]
+            if not len(rows):
+                continue
+            v = history_velocity(hist, t - t0)
+            mask = np.ones(3, bool) if code == motion.VFIX_ALL else \
+                np.array([bool(code & (motion.VFIX_X << k)) for k in range(3)])
+            own = rows[rows < n]
+            dv = (v[None] - b.v[own]) * mask
+            b.work[own, motion.WORK_BOUNDARY] += 0.5 * s.dt * np.einsum(
+                "ij,ij->i", b.force[own], dv)
+            for k in np.nonzero(mask)[0]:
+                b.v[rows, k] = v[k]
+
+    # ------------------------------------------------------------------ stresses
+    def add_stress(self, s, cond, gids) -> int:
+        """Find the exposed faces of ``gids`` (on the global store's poses) and put the
+        condition's stress on them; returns the number of faces."""
+        g = s.glob
+        faces = exposed_faces(g, np.asarray(gids, np.int64), s.ctol)
+        gid, area, nb, cb = faces
+        sig = np.array(cond.sigma(), float)
+        self.f_gid = np.concatenate([self.f_gid, gid])
+        self.f_area = np.concatenate([self.f_area, area])
+        self.f_normal = np.concatenate([self.f_normal, nb])
+        self.f_center = np.concatenate([self.f_center, cb])
+        self.f_sigma = np.concatenate([self.f_sigma, np.repeat(sig[None], len(gid), axis=0)])
+        return len(gid)
+
+    def tractions(self, s) -> None:
+        """``bforce``/``bmoment`` of this rank's owned blocks from their pose at t."""
+        b = s.blocks
+        n = s.n_owned
+        b.bforce[:] = 0.0
+        b.bmoment[:] = 0.0
+        if not len(self.f_gid) or n == 0:
+            return
+        order = np.argsort(b.gid[:n])
+        pos = np.searchsorted(b.gid[:n], self.f_gid, sorter=order)
+        pos = np.minimum(pos, n - 1)
+        rows = order[pos]
+        mine = b.gid[rows] == self.f_gid
+        rows = rows[mine]
+        R = _rotations(b.q[rows])
+        nw = np.einsum("fij,fj->fi", R, self.f_normal[mine])
+        arm = np.einsum("fij,fj->fi", R, self.f_center[mine])
+        f = self.f_area[mine, None] * np.einsum("fij,fj->fi", self.f_sigma[mine], nw)
+        np.add.at(b.bforce, rows, f)
+        np.add.at(b.bmoment, rows, np.cross(arm, f))
+
+
+def _rotations(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (k, 3, 3) of quaternions (k, 4) (w, x, y, z)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], 1)
+
+
+def _face_geometry(g, f):
+    """Area, centroid and vertices (body frame) of face row ``f`` of a store."""
+    vs = g.verts_local[g.face_verts[g.fvert_start[f]:g.fvert_start[f + 1]]]
+    p0 = vs[0]
+    area_vec = np.zeros(3)
+    cen = np.zeros(3)
+    for k in range(1, len(vs) - 1):
+        a = 0.5 * np.cross(vs[k] - p0, vs[k + 1] - p0)
+        area_vec += a
+        cen += np.linalg.norm(a) * (p0 + vs[k] + vs[k + 1]) / 3.0
+    area = float(np.linalg.norm(area_vec))
+    return area, cen / area if area > 0 else vs.mean(axis=0), vs
+
+
+def _inside(p, vs, n, tol) -> bool:
+    """Whether point p (in the face plane) lies in the convex polygon vs (ccw about n)."""
+    for k in range(len(vs)):
+        e = vs[(k + 1) % len(vs)] - vs[k]
+        if np.dot(np.cross(e, p - vs[k]), n) < -tol * np.linalg.norm(e):
+            return False
+    return True
+
+
+def exposed_faces(g, gids: np.ndarray, ctol: float):
+    """(gid, area, normal, centroid) of the exposed faces of blocks ``gids`` of the global
+    store ``g`` at its poses (body-frame normal and centroid); see the module docstring."""
+    R = _rotations(g.q)
+    world = lambda b, p: g.x[b] + R[b] @ p  # noqa: E731
+    n_pieces = len(g.piece_block)
+    alive = g.out[g.piece_block] == 0
+    # piece boxes in the world, to find the pieces near a face
+    vblock = g.piece_block[np.repeat(np.arange(n_pieces), np.diff(g.vert_start))]
+    vworld = g.x[vblock] + np.einsum("vij,vj->vi", R[vblock], g.verts_local)
+    lo = np.minimum.reduceat(vworld, g.vert_start[:-1], axis=0)
+    hi = np.maximum.reduceat(vworld, g.vert_start[:-1], axis=0)
+    out = ([], [], [], [])
+    for b in gids:
+        for p in range(g.piece_start[b], g.piece_start[b + 1]):
+            for f in range(g.face_start[p], g.face_start[p + 1]):
+                area, cb, vs = _face_geometry(g, f)
+                if area <= 0.0:
+                    continue
+                nb = g.normals_local[f]
+                n = R[b] @ nb
+                c = world(b, cb)
+                vw = g.x[b] + vs @ R[b].T
+                flo, fhi = vw.min(axis=0) - ctol, vw.max(axis=0) + ctol
+                near = np.nonzero(alive & np.all(lo <= fhi, axis=1) & np.all(hi >= flo, axis=1))[0]
+                covered = False
+                for q in near:
+                    if q == p:
+                        continue
+                    bq = g.piece_block[q]
+                    for h in range(g.face_start[q], g.face_start[q + 1]):
+                        m = R[bq] @ g.normals_local[h]
+                        if np.dot(m, n) >= -COVER_COS:
+                            continue
+                        ah, ch, vh = _face_geometry(g, h)
+                        chw = world(bq, ch)
+                        if abs(np.dot(chw - c, n)) > ctol:
+                            continue
+                        vhw = g.x[bq] + vh @ R[bq].T
+                        if _inside(c, vhw, m, ctol) or _inside(chw, vw, n, ctol):
+                            covered = True
+                            break
+                    if covered:
+                        break
+                if not covered:
+                    out[0].append(b)
+                    out[1].append(area)
+                    out[2].append(nb)
+                    out[3].append(cb)
+    return (np.array(out[0], np.int64), np.array(out[1], float),
+            np.array(out[2], float).reshape(-1, 3), np.array(out[3], float).reshape(-1, 3))
+
+
+def apply_scene(s) -> None:
+    """The scene's ``boundary:`` on a new model state (every rank alike)."""
+    from .config import ConfigError
+    from .stages import selected
+
+    s.boundary = Boundary()
+    bc = s.scene.boundary
+    for j, cond in enumerate(bc.velocity):
+        gids = selected(s, cond)
+        if not len(gids):
+            raise ConfigError([f"{s.scene.at('boundary', 'velocity', j)}: selects no block"])
+        s.boundary.add_velocity(s, cond, gids, 0.0)
+    for j, cond in enumerate(bc.stress):
+        gids = selected(s, cond)
+        if not len(gids):
+            raise ConfigError([f"{s.scene.at('boundary', 'stress', j)}: selects no block"])
+        if not s.boundary.add_stress(s, cond, gids):
+            raise ConfigError([f"{s.scene.at('boundary', 'stress', j)}: the selected blocks "
+                               "have no exposed face"])
