@@ -4,8 +4,11 @@
 From the equilibrium state the stage starts in, trial solves run with every joint's strength
 divided by F: ``tan(friction) / F``, ``cohesion / F``, ``tension / F`` (fields of those names;
 angles through their tangents). A trial is **stable** when the unbalanced-force ratio falls
-below ``ratio`` within ``max_steps`` and no block moved more than ``max_displacement``; else
-it is **unstable**. F = 1 must be stable (else the model is not in equilibrium and the search
+below ``ratio`` within ``max_steps`` and no block moved more than ``max_displacement``; when
+the ratio has not fallen by then, it is stable if the motion died away (the largest
+displacement grew by at most half as much in the second half of the budget as in the first)
+and **unstable** if it went on (a sliding mechanism); beyond ``max_displacement`` it is
+unstable. F = 1 must be stable (else the model is not in equilibrium and the search
 is refused); the factor of safety is bracketed by bisection between the largest stable and the
 smallest unstable F until their gap is below ``tolerance`` (relative). Every trial starts from
 the same state (held in memory on each rank) and the model goes on from it, at F = 1, after
@@ -91,6 +94,8 @@ def _trial(run, factor: float, fos, snap: _Snapshot, base_scene):
     s.ratio = math.inf
     stable = False
     steps = 0
+    half = None  # the largest displacement half way through the step budget
+    too_far = False
     while steps < fos.max_steps:
         run.advance()
         steps += 1
@@ -99,12 +104,22 @@ def _trial(run, factor: float, fos, snap: _Snapshot, base_scene):
         if steps >= 10 and s.ratio <= fos.ratio:
             stable = True
             break
+        if steps == fos.max_steps // 2:
+            half = np.linalg.norm(_displacements(s, snap), axis=1).max()
         if steps % 200 == 0 and fos.max_displacement is not None:
             if np.linalg.norm(_displacements(s, snap), axis=1).max() > fos.max_displacement:
+                too_far = True
                 break
     d = _displacements(s, snap)
-    if stable and fos.max_displacement is not None:
-        stable = np.linalg.norm(d, axis=1).max() <= fos.max_displacement
+    end = np.linalg.norm(d, axis=1).max()
+    if fos.max_displacement is not None and end > fos.max_displacement:
+        too_far = True
+    if not stable and not too_far and half is not None and steps >= fos.max_steps:
+        # the ratio did not fall in time: still failing if the motion went on growing (a
+        # sliding block: the displacement of the second half exceeds half that of the first),
+        # settling if it died away (a creeping approach to equilibrium)
+        stable = end - half <= 0.5 * half
+    stable = stable and not too_far
     log.info("factor of safety trial F = %.4f: %s after %d steps (ratio %.3g, largest "
              "displacement %.3g m)", factor, "stable" if stable else "unstable", steps, s.ratio,
              np.linalg.norm(d, axis=1).max())
