@@ -7,6 +7,8 @@ python3-paraview xvfb``; run/setup installs them), not by pdem's Python:
     .venv/bin/mpiexec -n 2 .venv/bin/pdem run configs/default.yaml -o /tmp/pile.h5    # ~1 min
     xvfb-run -a pvbatch docs/make_screenshot.py /tmp/pile.xdmf
     xvfb-run -a pvbatch docs/make_screenshot.py /tmp/slope.xdmf docs/figures/slope.png
+    xvfb-run -a pvbatch docs/make_screenshot.py /tmp/slope.xdmf docs/figures/slope-safety.png \
+        block_safety
 
 With an output path, the camera looks from the south-east and above, fitted to the model
 (configs/slope.yaml, configs/tunnel.yaml).
@@ -32,7 +34,7 @@ from paraview.simple import (
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "figures", "default-displacement.png")
 
 
-def main(xdmf: str, out: str | None = None) -> None:
+def main(xdmf: str, out: str | None = None, field: str = "displacement_magnitude") -> None:
     reader = Xdmf3ReaderT(FileName=[os.path.abspath(xdmf)])
     reader.UpdatePipelineInformation()
     t = reader.TimestepValues[-1]
@@ -53,13 +55,14 @@ def main(xdmf: str, out: str | None = None) -> None:
     box.AmbientColor = box.DiffuseColor = [0.75, 0.75, 0.75]
     box.Opacity = 0.25
     display = Show(moving, view)
-    ColorBy(display, ("CELLS", "displacement_magnitude"))
+    ColorBy(display, ("CELLS", field))
     display.RescaleTransferFunctionToDataRange(False, True)
-    lut = GetColorTransferFunction("displacement_magnitude")
+    lut = GetColorTransferFunction(field)
     lut.ApplyPreset("Viridis (matplotlib)", True)
     display.SetScalarBarVisibility(view, True)
     bar = GetScalarBar(lut, view)
-    bar.Title = "displacement (m)"
+    bar.Title = {"displacement_magnitude": "displacement (m)",
+                 "block_safety": "largest stable F"}.get(field, field)
     bar.ComponentTitle = ""
     bar.TitleColor = bar.LabelColor = [0.1, 0.1, 0.1]
     bar.TitleFontSize = bar.LabelFontSize = 20
@@ -79,6 +82,6 @@ def main(xdmf: str, out: str | None = None) -> None:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (2, 3):
+    if len(sys.argv) not in (2, 3, 4):
         sys.exit(__doc__)
     main(*sys.argv[1:])
