@@ -317,3 +317,25 @@ blocks: [{{name: b, polyhedron: {{vertices: {v}, faces: {faces[:-1]}}}, material
         build(f"""
 blocks: [{{name: b, polyhedron: {{vertices: {v}, faces: {faces}}}, material: rock}}]
 """.replace("(", "[").replace(")", "]"))
+
+
+def test_pdem_check_reports_what_the_cuts_made(tmp_path, capfd):
+    from pdem import cli
+
+    scene = tmp_path / "cut.yaml"
+    scene.write_text(HEAD + """
+blocks:
+  - {name: floor, box: {min: [-1, -1, -1], max: [3, 3, 0]}, material: rock, fixed: true}
+  - {name: rock, box: {min: [0, 0, 0], max: [2, 2, 2]}, material: rock}
+cuts:
+  - {name: J1, dip: 90, dip_direction: 90, origin: [1, 0, 0], joint: J1joint,
+     groups: [default], range: {box: {min: [0, 0, 0], max: [2, 2, 2]}}}
+excavate:
+  - {box: {min: [1.5, 1.5, 1.5], max: [3, 3, 3]}, time: 0.5}
+""")
+    assert cli.main(["check", str(scene)]) == 0
+    err = capfd.readouterr().out  # rank 0 logs to stdout
+    assert "blocks: 4 from 2 scene entries" in err  # floor, two halves, the corner to dig
+    assert "cut 'J1': 1 joint faces" in err and "joint J1joint" in err
+    assert "excavation at t = 0.5 s: 1 blocks, 0.125 m3" in err
+    assert "smallest / median" in err
