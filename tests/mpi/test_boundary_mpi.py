@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import pytest
 from mpi4py import MPI
-from support import compare_on_rank0, run, shared_dir, with_parallel
+from support import TWO_RANKS_ONLY, compare_on_rank0, run, shared_dir, with_parallel
 
-pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
+pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
 
 SCENE = """
 materials: {rock: {density: 2500.0}}

@@ -11,9 +11,9 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import differences, on_rank0, reference, run, shared_dir, with_parallel
+from support import TWO_RANKS_ONLY, differences, on_rank0, reference, run, shared_dir, with_parallel
 
-pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(600, method="thread")]
+pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(600, method="thread")]
 
 RHO, KN, G = 2500.0, 1.0e9, 9.81
 

@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import compare_on_rank0, run, shared_dir, with_parallel
+from support import TWO_RANKS_ONLY, compare_on_rank0, run, shared_dir, with_parallel
 
 from pdem.cases.rock_mass import l_on_stack_scene
 
-pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
+pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
 
 
 def test_l_block_on_cut_stack_matches_one_rank(tmp_path):

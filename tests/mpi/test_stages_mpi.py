@@ -11,11 +11,11 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import compare_on_rank0, on_rank0, run, shared_dir, with_parallel
+from support import TWO_RANKS_ONLY, compare_on_rank0, on_rank0, run, shared_dir, with_parallel
 
 from pdem.cases.staged import stack_stages_scene
 
-pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
+pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
 
 
 def test_stages_match_one_rank(tmp_path):
