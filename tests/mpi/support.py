@@ -73,13 +73,16 @@ def on_rank0(comm, fn, *args, **kw):
     return result
 
 
-def with_parallel(text: str, dims, path: str | None, every_steps: int | None = None, **solve):
-    """The scene in ``text`` with ``parallel.dims`` set, output to ``path`` (or none)."""
+def with_parallel(text: str, dims, path: str | None, every_steps: int | None = None,
+                  contacts: bool = False, **solve):
+    """The scene in ``text`` with ``parallel.dims`` set, output to ``path`` (or none). The
+    joint state is left out of the output unless ``contacts`` (its collective compressed writes
+    dominate oversubscribed runs; tests/mpi/test_joint_output_mpi.py checks it)."""
     scene = parse_scene(text)
     scene = scene.model_copy(update={"parallel": scene.parallel.model_copy(
         update={"dims": dims if dims == "auto" else tuple(int(d) for d in dims)})})
     if path is not None:
-        out = {"file": path}
+        out = {"file": path, "contacts": contacts}
         if every_steps is not None:
             out.update(every_steps=every_steps, every=None)
         scene = scene.model_copy(update={"output": scene.output.model_copy(update=out)})

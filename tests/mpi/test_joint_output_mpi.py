@@ -52,7 +52,8 @@ def read_joints(path: str) -> dict:
 def test_contacts_identical_on_any_rank_count(tmp_path):
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
-    scene = with_parallel(wall_scene(comm.size), [comm.size, 1, 1], f"{base}/wall.h5")
+    scene = with_parallel(wall_scene(comm.size), [comm.size, 1, 1], f"{base}/wall.h5",
+                          contacts=True)
     run(scene, comm)
 
     def check():

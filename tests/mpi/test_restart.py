@@ -23,7 +23,7 @@ blocks:
     material: rock
     velocity: [0.5, 0.0, -3.0]
 solve: {{steps: {steps}, damping: local}}
-output: {{file: {out}, every_steps: {half}}}
+output: {{file: {out}, every_steps: {half}, contacts: false}}
 checkpoint: {{every_steps: {half}, keep: 3, file: {ck}}}
 """
 N = 1000

@@ -29,7 +29,7 @@ blocks:
     material: rock
     velocity: [0.5, 0.0, -3.0]
 solve: {{steps: 4000, damping: local}}
-output: {{file: {out}, every_steps: 500}}
+output: {{file: {out}, every_steps: 500, contacts: false}}
 """
 FIELDS = ("centroid", "orientation", "velocity", "angular_velocity")
 PDEM = ["-m", "pdem.cli"]
