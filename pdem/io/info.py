@@ -128,8 +128,8 @@ def _output_summary(f: h5py.File) -> list[str]:
 def _stage_lines(f: h5py.File, names) -> list[str]:
     """Stages seen in the snapshots and a factor-of-safety result (pdem.stages, strength)."""
     lines = []
-    if "stage" in f and len(f["stage"]):
-        stages = np.unique(f["stage"][()])
+    stages = np.unique(f["stage"][()]) if "stage" in f else []
+    if len(stages) > 1:  # a staged run
         lines.append(f"stages:      {len(stages)} in the snapshots ({', '.join(map(str, stages))})")
     if "factor_of_safety" in f.attrs:
         fs = float(f.attrs["factor_of_safety"])
