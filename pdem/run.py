@@ -10,6 +10,9 @@ from .errors import OutputError, SimulationError
 
 log = logging.getLogger("pdem")
 
+# wall seconds one compiled run of steps may take at most (pdem.cycle)
+FUSED_SLICE = 0.25
+
 
 class Run:
     """The driver: a stepper, its state and the plugins (:mod:`pdem.plugins`)."""
@@ -19,6 +22,7 @@ class Run:
         self.stepper = stepper
         self.plugins = list(plugins)
         self.n_estimate = None
+        self._step_seconds = 1e-2  # measured once steps run fused
 
     def plugin(self, name: str):
         """The plugin called ``name``, or None."""
@@ -30,6 +34,31 @@ class Run:
             for p in self.plugins:
                 p.before_migration(self)
             self.state.redistribute()
+
+    def _advance_to_event(self, end_step, end_time, ratio_target, steps_left):
+        """One step, or in a serial run the steps up to the next event (a plugin's horizon,
+        the end condition, a wall-clock slice that keeps progress lines and stop signals
+        prompt) in one compiled call (pdem.cycle)."""
+        s = self.state
+        if not self.stepper.fusable():
+            self.advance()
+            return
+        stop_step, stop_time = end_step, None
+        if end_time is not None:
+            stop_time = end_time - 1e-9 * s.dt  # as the loop in run() decides the end
+        for p in self.plugins:
+            ps, pt = p.horizon(self)
+            if ps is not None:
+                stop_step = ps if stop_step is None else min(stop_step, ps)
+            if pt is not None:
+                stop_time = pt if stop_time is None else min(stop_time, pt)
+        budget = max(1, int(FUSED_SLICE / max(self._step_seconds, 1e-9)))
+        if steps_left is not None:
+            budget = min(budget, steps_left)
+        t0 = wallclock.perf_counter()
+        done = self.stepper.advance_many(budget, stop_step, stop_time, ratio_target)
+        if done > 1:  # seconds per step, for the next slice
+            self._step_seconds = (wallclock.perf_counter() - t0) / done
 
     def _end(self, time, steps, ratio=None, max_steps=None):
         s = self.state
@@ -81,7 +110,8 @@ class Run:
             if self.stepper.stop_signal:  # agreed by every rank in the last step's reduction
                 break
             try:
-                self.advance()
+                self._advance_to_event(end_step, end_time, ratio_target, max_steps - (s.step - s0)
+                                       if max_steps is not None else None)
                 for p in self.plugins:
                     p.after_step(self)
             except SimulationError:

@@ -24,6 +24,7 @@ from .contact.detect import Planes, refresh_contacts
 from .contact.forces import contact_energies, contact_forces
 from .contact.joint_sets import set_joints
 from .contact.rigid import Bodies
+from .cycle import fused_steps
 from .dynamics import motion
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
@@ -35,6 +36,7 @@ from .parallel import mpi
 # larger than CTOL unseen (each block moves less than CTOL/2 between searches), so a contact
 # always exists before two blocks touch.
 REMAP_FRACTION = 0.5
+NO_STEP = 2**62  # no step bound for a compiled run of steps
 
 
 def motion_record(b, n: int) -> motion.Motion:
@@ -142,6 +144,9 @@ class Stepper:
         todo = (c.warm == 0) | all_contacts
         if periodic:
             todo |= c.moved > s.resolved.refresh_tolerance
+        if not todo.any():  # nothing to update: what the update below would change
+            c.sub["sc_fn"][:] = 0.0
+            return
         c.moved[todo] = 0.0
         a = c.arrays
         planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
@@ -181,7 +186,51 @@ class Stepper:
 
     # ------------------------------------------------------------------ the step
     def advance(self):
-        """One calculation cycle (docs/architecture.md, docs/parallel.md)."""
+        """One calculation cycle (docs/architecture.md, docs/parallel.md); True if blocks must
+        migrate now."""
+        self._first_half()
+        return self._second_half()
+
+    def fusable(self) -> bool:
+        """Whether steps may run in one compiled call (pdem.cycle): serial runs without
+        prescribed boundary motion, unless ``solve.fused`` is off."""
+        s = self.s
+        return (s.comm.size == 1 and s.scene.solve.fused
+                and not (s.boundary is not None and s.boundary.active))
+
+    def advance_many(self, max_steps: int, stop_step: int | None = None,
+                     stop_time: float | None = None, ratio_target: float | None = None) -> int:
+        """Up to ``max_steps`` steps, ending early after the step that reaches ``stop_step`` or
+        ``stop_time`` or the ``ratio_target``; compiled when :meth:`fusable`, else one step.
+        Returns the steps done; after the last of them the state is as after :meth:`advance`
+        (which the caller must see as having returned False: serial runs never migrate)."""
+        if max_steps <= 1 or not self.fusable():
+            self.advance()
+            return 1
+        s = self.s
+        b = s.blocks
+        c = s.contacts
+        n = s.n_owned
+        r = s.resolved
+        if s.damping.adaptive:  # its servo updates every 10 steps, in Python
+            nxt = (s.step // 10 + 1) * 10
+            stop_step = nxt if stop_step is None else min(stop_step, nxt)
+        self.stats[:] = 0.0
+        with s.timers.phase("fused"):
+            steps, s.step, s.time, _, self._bad, self._u_mig_max = fused_steps(
+                motion_record(b, n), s.gravity, s.dt, s.damping_args(), s.scalar_inertia,
+                self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n], b.q, b.R,
+                self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args, c.moved, c.warm,
+                c.sub["sc_fn"], REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
+                r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,
+                s.step, s.time, max_steps, NO_STEP if stop_step is None else stop_step,
+                math.inf if stop_time is None else stop_time,
+                -1.0 if ratio_target is None else ratio_target, r.ref_force)
+        self._second_half()
+        return steps
+
+    def _first_half(self):
+        """Motion, the forward halo and the contact forces of a step."""
         s = self.s
         b = s.blocks
         n = s.n_owned
@@ -198,7 +247,7 @@ class Stepper:
             # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
             # state check and the ghost-rebuild measure, in one kernel
             r = s.resolved
-            bad, u_mig_max = motion.motion_bookkeeping(
+            self._bad, self._u_mig_max = motion.motion_bookkeeping(
                 b.dx[:n], b.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n], b.u_geo[:n],
                 b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time)
         with tm.phase("halo"):
@@ -206,6 +255,16 @@ class Stepper:
         rotation_matrices(b.q, b.R)
         with tm.phase("forces"):
             self.compute_forces(s.dt)
+
+    def _second_half(self) -> bool:
+        """Contact search and updates, and the step's one reduction; True if blocks must
+        migrate. After :meth:`_first_half` or a compiled run of steps (pdem.cycle), which
+        leaves ``u_mig`` and the state check to be redone here (both are cheap)."""
+        s = self.s
+        b = s.blocks
+        n = s.n_owned
+        r = s.resolved
+        tm = s.timers
         with tm.phase("search"):
             active = b.u_acc > REMAP_FRACTION * s.ctol
             periodic = s.step % s.scene.contact.detect_every == 0
@@ -222,6 +281,7 @@ class Stepper:
             # one small reduction a step: max unbalanced force, trouble, rebuild needed, blocks
             # that left the model domain (looked for at the contact updates), and a stop
             # signal received by any rank (so every rank stops after the same step)
+            bad, u_mig_max = self._bad, self._u_mig_max
             rebuild = bool(n) and u_mig_max > 0.5 * r.margin
             left = periodic and s.scene.domain is not None and domain.outside(s).any()
             signum = self.stop.signum if self.stop is not None else 0

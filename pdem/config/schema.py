@@ -268,6 +268,8 @@ class Damping(Strict):
 
 class Solve(Strict):
     """The end condition (one of ``time``, ``steps``, ``ratio``) and the integration knobs.
+    ``fused``: serial runs march many steps in one compiled call between Python-level events
+    (pdem.cycle; bitwise the same result), off to time each phase of a step separately.
     ``energy_tolerance``: the run stops, naming the cause, when the energy balance error grows
     by more than this fraction of the energy put in between two budget samples (0: never)."""
 
@@ -279,6 +281,7 @@ class Solve(Strict):
     damping: Damping = Damping()
     mass_scaling: bool = False
     inertia: Literal["full", "scalar"] = "full"
+    fused: bool = True
     progress_every: NonNegativeFloat = 2.0
     energy_tolerance: NonNegativeFloat = 0.1
 

@@ -123,6 +123,14 @@ def exact_sum(comm, values: np.ndarray) -> np.ndarray:
     values = np.asarray(values, np.float64)
     if values.ndim == 1:
         values = values[:, None]
+    if comm.size == 1:  # a correctly rounded sum is unique: fsum of the rows is the same bits
+        out = np.empty(values.shape[1])
+        for c, col in enumerate(values.T):
+            try:
+                out[c] = math.fsum(col) if np.isfinite(col).all() else float(np.sum(col))
+            except OverflowError:  # an overflowing partial
+                out[c] = float(np.sum(col))
+        return out
     parts = []
     for col in values.T:
         if not np.isfinite(col).all():

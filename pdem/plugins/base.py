@@ -18,7 +18,16 @@ class Plugin:
         """Before the first step of a march (also after a restart)."""
 
     def after_step(self, run) -> None:
-        """After every step."""
+        """After every step (after the last step of each compiled run of steps, see
+        :meth:`horizon`)."""
+
+    def horizon(self, run) -> tuple[int | None, float | None]:
+        """``(step, time)``: the steps up to the first with ``state.step >= step`` or
+        ``state.time >= time`` may run in one compiled call (pdem.cycle) with ``after_step``
+        called only after the last of them; None for no bound. The default, the next step,
+        calls ``after_step`` after every step, so a plugin that acts on its own schedule
+        declares it here to let small scenes run fused."""
+        return run.state.step + 1, None
 
     def before_migration(self, run) -> None:
         """Before blocks change owner (flush what is buffered by owner)."""
@@ -48,3 +57,8 @@ def interval_steps(state, every_steps, every) -> int:
     sv = state.scene.solve
     total = sv.steps or (int(math.ceil(sv.time / state.dt)) if sv.time else 100_000)
     return max(1, total // 100)
+
+
+def next_multiple(step: int, every: int) -> int:
+    """The first step after ``step`` that is a multiple of ``every`` (an interval's event)."""
+    return (step // every + 1) * every

@@ -8,7 +8,7 @@ import os
 
 from ..errors import writing
 from ..io.checkpoint import prune, write_checkpoint
-from .base import Plugin, interval_steps
+from .base import Plugin, interval_steps, next_multiple
 
 log = logging.getLogger("pdem")
 
@@ -51,6 +51,9 @@ class Checkpoints(Plugin):
     def after_step(self, run):
         if self.state.step % self.every == 0:
             self.write(run)
+
+    def horizon(self, run):
+        return next_multiple(self.state.step, self.every), None
 
     def on_failure(self, run):
         path = self.write(run, final=True)

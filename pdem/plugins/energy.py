@@ -16,7 +16,7 @@ from ..dynamics.diagnosis import explain
 from ..dynamics.energy import kinetic_per_block
 from ..errors import SimulationError, writing
 from ..parallel.mpi import allgather, exact_sum
-from .base import Plugin
+from .base import Plugin, next_multiple
 
 log = logging.getLogger("pdem")
 
@@ -140,6 +140,9 @@ class EnergyBudget(Plugin):
             self.sample()
             if len(self.rows) >= 256:
                 self.flush()
+
+    def horizon(self, run):
+        return next_multiple(self.state.step, self.every), None
 
     def finish(self, run):
         if self.state.step % self.every != 0:

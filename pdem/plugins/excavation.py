@@ -26,6 +26,10 @@ class Excavations(Plugin):
                                if sp.excavate_at is not None and s.glob.out[g] == 0})
         self.after_step(run)  # an excavation due at the start time
 
+    def horizon(self, run):
+        s = self.state
+        return None, (self.pending[0] - 0.5 * s.dt if self.pending else None)
+
     def after_step(self, run):
         s = self.state
         done = False

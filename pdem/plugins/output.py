@@ -14,7 +14,7 @@ from ..io.checkpoint import written_contacts
 from ..io.writer import OutputWriter, quat_to_matrix
 from ..model import csr
 from ..model.fields import OUTPUT
-from .base import Plugin, interval_steps
+from .base import Plugin, interval_steps, next_multiple
 
 
 def body_surfaces(specs):
@@ -116,6 +116,9 @@ class Snapshots(Plugin):
         if self.state.step % self.every == 0:
             self.write()
 
+    def horizon(self, run):
+        return next_multiple(self.state.step, self.every), None
+
     def finish(self, run):
         if self.state.step % self.every != 0:
             self.write()
@@ -188,6 +191,14 @@ class Histories(Plugin):
 
     def after_step(self, run):
         self.sample()
+
+    def horizon(self, run):
+        s = self.state
+        if any(every is None for _, _, _, every in self.items):
+            return s.step + 1, None  # sampled every step
+        eps = 1e-9 * s.dt  # as sample() decides what is due
+        return None, min((self.next_time[name] - eps for name, *_ in self.items),
+                         default=None)
 
     def before_migration(self, run):
         self.flush()

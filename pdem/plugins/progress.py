@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import time as wallclock
 
-from .base import Plugin
+from .base import Plugin, next_multiple
 
 log = logging.getLogger("pdem")
 
@@ -22,6 +22,9 @@ class Progress(Plugin):
     def start(self, run):
         self.t0 = self.last = wallclock.perf_counter()
         self.s0 = self.state.step
+
+    def horizon(self, run):
+        return None, None  # by the wall clock: pdem.run bounds a compiled run's duration
 
     def after_step(self, run):
         now = wallclock.perf_counter()
@@ -55,6 +58,9 @@ class LoadReport(Plugin):
 
     def start(self, run):
         self.log()
+
+    def horizon(self, run):
+        return next_multiple(self.state.step, self.every), None
 
     def after_step(self, run):
         if self.state.step % self.every == 0:

@@ -17,6 +17,9 @@ class StageState(Plugin):
     def __init__(self, state):
         self.state = state
 
+    def horizon(self, run):
+        return None, None  # acts only at checkpoints
+
     def restart_state(self) -> dict:
         attrs = {k: getattr(self.state, k) for k in _KEYS}
         if self.state.stage_times:  # read back by pdem.stages.replay_stages
