@@ -55,8 +55,8 @@ class JointTable:
         # per cut (``cuts:``), the joint row its faces use, -1 where the cut names none
         self.cut_joint = np.zeros(0, np.int32) if cut_joint is None else cut_joint
         self.by_set = bool((self.cut_joint >= 0).any())
-        used = [law for law in JOINT_LAWS.values()
-                if any(p.model == law.name for p in self.params)]
+        used = [law.specialised([p for p in self.params if p.model == law.name])
+                for law in JOINT_LAWS.values() if any(p.model == law.name for p in self.params)]
         self.laws = tuple(used)
         slot = np.zeros(len(self.params), np.int32)
         row = np.zeros(len(self.params), np.int32)
@@ -99,9 +99,10 @@ def law_energy(laws, slot, j, s, hist, un, dil, fx, fy, fz, area, state):
 
 
 def _law_of(table_type) -> JointLaw:
-    for law in JOINT_LAWS.values():
-        if law.table([]).__class__ is table_type.instance_class:
-            return law
+    for registered in JOINT_LAWS.values():
+        for law in (registered, *(v for _, v in registered.variants)):
+            if law.table([]).__class__ is table_type.instance_class:
+                return law
     raise KeyError(f"no registered joint law has the table type {table_type}")
 
 

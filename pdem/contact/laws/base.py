@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,7 +32,11 @@ class JointLaw:
     ``table``: list of params -> namedtuple of per-joint arrays (the kernel's ``p``);
     ``update``: the numba kernel, signature documented in :mod:`pdem.contact.laws`;
     ``energy``: the kernel giving a sub-contact's normal force and stored spring energy in a
-    given state (the energy budget, pdem.dynamics.energy).
+    given state (the energy budget, pdem.dynamics.energy);
+    ``variants``: ``(applies, law)`` pairs: when ``applies(params)`` holds for every joint of
+    the scene using this law, ``law`` (same name, parameters and history, its own table type
+    and kernels doing the same arithmetic without the branches those joints cannot take) is
+    compiled instead, so a scene pays only for the physics it uses (docs/fidelity.md).
     """
 
     name: str
@@ -40,3 +45,10 @@ class JointLaw:
     table: Any
     update: Any
     energy: Any
+    variants: tuple = ()
+
+    def specialised(self, params: list) -> JointLaw:
+        """The variant for these joints (unless ``PDEM_GENERIC_KERNELS`` is set), else self."""
+        if os.environ.get("PDEM_GENERIC_KERNELS", "") not in ("", "0"):
+            return self
+        return next((law for applies, law in self.variants if all(map(applies, params))), self)

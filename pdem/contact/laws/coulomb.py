@@ -125,4 +125,57 @@ def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
                 / (p.ks[j] * a))
 
 
-LAW = JointLaw("coulomb", Params, (), table, update, energy)
+# Frictional joints (no cohesion, tension or dilation: the common case) compile a law without
+# those branches. Bitwise the same as ``update``/``energy`` with zero strengths and dilation:
+# every term they drop is an exact zero there (0 + x, x * 0 with x finite).
+FrictionTable = namedtuple("FrictionTable", "kn ks tan_phi")
+
+
+def friction_table(joints: list[Params]) -> FrictionTable:
+    t = table(joints)
+    return FrictionTable(t.kn, t.ks, t.tan_phi)
+
+
+def is_frictional(p: Params) -> bool:
+    return p.cohesion == 0.0 and p.tension == 0.0 and p.dilation == 0.0
+
+
+@inline_kernel
+def friction_update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state):
+    """:func:`update` for a joint without cohesion, tension or dilation (``dil`` stays 0)."""
+    kss = p.ks[j] * area
+    fx = fx - kss * dx
+    fy = fy - kss * dy
+    fz = fz - kss * dz
+    state = state & FAILED
+    fn = p.kn[j] * area * (un + dil)
+    if fn < -0.0:
+        return 0.0, dil, state | OPEN, 0.0, 0.0, 0.0
+    fs_max = 0.0 + max(fn, 0.0) * p.tan_phi[j]  # as update's c_area + ..., to the zero's sign
+    fs_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if fs_mag > fs_max:
+        scale = fs_max / fs_mag
+        fx *= scale
+        fy *= scale
+        fz *= scale
+        state |= SLIPPING
+    if fn <= 0.0:
+        state |= OPEN
+        fn = min(fn, 0.0)
+    return fn, dil, state, fx, fy, fz
+
+
+@inline_kernel
+def friction_energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
+    """:func:`energy` for a joint without tension (never bonded)."""
+    has_area = area > 0.0
+    a = max(area, 1e-300)
+    kna = p.kn[j] * a
+    fn = max(kna * (un + dil), -0.0) * has_area
+    return fn, (0.5 * fn * fn / kna + 0.5 * (fx * fx + fy * fy + fz * fz) * has_area
+                / (p.ks[j] * a))
+
+
+FRICTION_LAW = JointLaw("coulomb", Params, (), friction_table, friction_update, friction_energy)
+LAW = JointLaw("coulomb", Params, (), table, update, energy,
+               variants=((is_frictional, FRICTION_LAW),))
