@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from .contact.forces import contact_forces
 from .dynamics import motion
+from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices
 from .jit import kernel
 
@@ -44,7 +45,8 @@ def _noop_refresh(c_moved, c_warm, ia, ib, u_geo, refresh_tolerance):
 
 @kernel
 def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u_geo, u_mig,
-                q, R, bodies, pairs, subs, joints, c_moved, c_warm, sc_fn, remap_at,
+                q, R, bodies, pairs, subs, joints, c_moved, c_warm, m_true, calm, still,
+                speed, sleep_steps, force_frac, sc_fn, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
                 step, time, max_steps, stop_step, stop_time, ratio_target, ref_force):
     """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max)``, the
@@ -55,7 +57,8 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
     ``stop_step`` or ``stop_time`` (a plugin's event, the end of the run) or whose unbalanced
     ratio is at most ``ratio_target`` (negative: none), with the step's second half left to the
     stepper, as for ``NEEDS_PYTHON``. ``stop_at_update``: every periodic update goes to Python
-    (the model domain is checked there).
+    (the model domain is checked there). ``m_true``: the record with the true ``fixed`` flags
+    when inactive blocks are held (``m``'s are ``still``; pdem.dynamics.inactive), else None.
     """
     n_steps = 0
     while True:
@@ -70,7 +73,10 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
         rotation_matrices(q, R)
         bodies.force[:] = 0.0
         bodies.moment[:] = 0.0
-        contact_forces(dt, bodies, pairs, subs, joints)
+        contact_forces(dt, bodies, pairs, subs, joints, still)
+        if m_true is not None:
+            update_inactive(m_true, gravity, radius, calm, still, speed, sleep_steps, force_frac,
+                            ref_force)
         if bad >= 0:
             return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
         for i in range(u_acc.shape[0]):

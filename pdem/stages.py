@@ -21,6 +21,7 @@ from .config.resolve import _estimated_stiffness, _timestep
 from .contact.laws import joint_table
 from .domain import DELETED, remove_blocks
 from .dynamics.damping import DAMPING
+from .dynamics.inactive import wake_all
 
 log = logging.getLogger("pdem")
 
@@ -136,6 +137,7 @@ def apply_stage(run, k: int) -> None:
         n = s.n_owned
         s.blocks.x_stage[:n] = s.blocks.x[:n]
     s.redistribute()  # fixed/free changed who is computed where, and the halo plan
+    wake_all(s)
     # a freed block has no contacts yet (none are kept between fixed blocks): find them now,
     # not once it has sunk into its neighbours (the geometry update would then make energy)
     run.stepper.search(np.ones(s.blocks.n, bool))

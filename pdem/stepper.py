@@ -26,6 +26,7 @@ from .contact.joint_sets import set_joints
 from .contact.rigid import Bodies
 from .cycle import fused_steps
 from .dynamics import motion
+from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
 from .model.contacts import ContactStore
@@ -39,10 +40,11 @@ REMAP_FRACTION = 0.5
 NO_STEP = 2**62  # no step bound for a compiled run of steps
 
 
-def motion_record(b, n: int) -> motion.Motion:
-    """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`."""
+def motion_record(b, n: int, still: bool = False) -> motion.Motion:
+    """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`; with ``still`` the
+    held inactive blocks are fixed for it too (pdem.dynamics.inactive)."""
     return motion.Motion(b.x[:n], b.q[:n], b.v[:n], b.w[:n], b.L[:n], b.mass[:n],
-                         b.inertia[:n], b.fixed[:n], b.vfix[:n], b.force[:n],
+                         b.inertia[:n], (b.still if still else b.fixed)[:n], b.vfix[:n], b.force[:n],
                          b.applied_force[:n], b.moment[:n], b.mscale[:n], b.prev_force[:n],
                          b.prev_moment[:n], b.dx[:n], b.dtheta[:n], b.work[:n], b.bforce[:n],
                          b.bmoment[:n])
@@ -57,6 +59,11 @@ class Stepper:
         # a pdem.signals.StopRequest (or None): polled every step, agreed in the flag reduction
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
+
+    @property
+    def holds(self) -> bool:
+        """Whether inactive blocks are held (solve.inactive)."""
+        return self.s.scene.solve.inactive is not None
 
     # ------------------------------------------------------------------ start
     def start(self):
@@ -166,6 +173,7 @@ class Stepper:
         # normal forces of refreshed sub-contacts are recomputed by the next force update
         sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fn": np.zeros(len(area)),
                "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
+        c.frozen[todo.astype(bool)] = 0  # new sub-contacts: held forces are void
         refreshed = ContactStore(c.arrays, sub, start)
         # energy budget: what the update changed in the joints' springs, with no work done
         jump = contact_energies(refreshed.pairs(), refreshed.subs(), joints, todo) * keep \
@@ -182,7 +190,18 @@ class Stepper:
         c = self.s.contacts
         b.force[:] = 0.0
         b.moment[:] = 0.0
-        contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args)
+        contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
+                       b.still)
+
+    def update_inactive(self):
+        """Count, hold and wake inactive blocks after the contact forces (solve.inactive)."""
+        s = self.s
+        if s.scene.solve.inactive is None:
+            return
+        b, n = s.blocks, s.n_owned
+        speed, steps, frac = inactive_args(s.scene)
+        update_inactive(motion_record(b, n), s.gravity, b.radius[:n], b.calm[:n], b.still[:n],
+                        speed, steps, frac, s.resolved.ref_force)
 
     # ------------------------------------------------------------------ the step
     def advance(self):
@@ -208,6 +227,7 @@ class Stepper:
             self.advance()
             return 1
         s = self.s
+        hold_fixed(s)
         b = s.blocks
         c = s.contacts
         n = s.n_owned
@@ -216,11 +236,14 @@ class Stepper:
             nxt = (s.step // 10 + 1) * 10
             stop_step = nxt if stop_step is None else min(stop_step, nxt)
         self.stats[:] = 0.0
+        speed, sleep_steps, frac = inactive_args(s.scene)
         with s.timers.phase("fused"):
             steps, s.step, s.time, _, self._bad, self._u_mig_max = fused_steps(
-                motion_record(b, n), s.gravity, s.dt, s.damping_args(), s.scalar_inertia,
-                self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n], b.q, b.R,
-                self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args, c.moved, c.warm,
+                motion_record(b, n, self.holds), s.gravity, s.dt, s.damping_args(),
+                s.scalar_inertia, self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n], b.q,
+                b.R, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args, c.moved,
+                c.warm, motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
+                speed, sleep_steps, frac,
                 c.sub["sc_fn"], REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
                 r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,
                 s.step, s.time, max_steps, NO_STEP if stop_step is None else stop_step,
@@ -236,12 +259,13 @@ class Stepper:
         n = s.n_owned
         tm = s.timers
         self.stats[:] = 0.0
+        hold_fixed(s)
         with tm.phase("motion"):
             if s.boundary is not None and s.boundary.active:
                 s.boundary.prescribe(s)  # velocity histories at t + dt/2
                 s.boundary.tractions(s)  # boundary stresses at t, on the pose at t
-            motion.integrate(motion_record(b, n), s.gravity, s.dt, s.damping_args(),
-                             s.scalar_inertia, self.stats)
+            motion.integrate(motion_record(b, n, self.holds), s.gravity, s.dt,
+                             s.damping_args(), s.scalar_inertia, self.stats)
             s.step += 1
             s.time += s.dt
             # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
@@ -255,6 +279,7 @@ class Stepper:
         rotation_matrices(b.q, b.R)
         with tm.phase("forces"):
             self.compute_forces(s.dt)
+            self.update_inactive()
 
     def _second_half(self) -> bool:
         """Contact search and updates, and the step's one reduction; True if blocks must

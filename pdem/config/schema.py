@@ -266,6 +266,19 @@ class Damping(Strict):
     ratio: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.5
 
 
+class Inactive(Strict):
+    """Blocks at rest go inactive (docs/fidelity.md): a free block whose speed bound
+    ``|v| + |w| r`` stays below ``speed`` and whose unbalanced force stays below ``force``
+    times its weight for ``steps`` steps stops moving (its kinetic energy is booked as damping),
+    and a contact between two inactive (or fixed) blocks keeps its forces without updating its
+    joint. It wakes when its unbalanced force or moment (over its weight, times its radius)
+    exceeds ``force`` again."""
+
+    speed: PositiveFloat
+    steps: PositiveInt = 100
+    force: PositiveFloat = 0.01
+
+
 class Solve(Strict):
     """The end condition (one of ``time``, ``steps``, ``ratio``) and the integration knobs.
     ``fused``: serial runs march many steps in one compiled call between Python-level events
@@ -282,6 +295,7 @@ class Solve(Strict):
     mass_scaling: bool = False
     inertia: Literal["full", "scalar"] = "full"
     fused: bool = True
+    inactive: Inactive | None = None
     progress_every: NonNegativeFloat = 2.0
     energy_tolerance: NonNegativeFloat = 0.1
 

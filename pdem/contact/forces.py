@@ -52,7 +52,7 @@ def carry_shear(fx, fy, fz, nx, ny, nz):
 
 
 @kernel
-def contact_forces(dt, bodies, pairs, subs, joints):
+def contact_forces(dt, bodies, pairs, subs, joints, still):
     """Advance every sub-contact by one step and add the contact forces to the blocks.
 
     ``bodies`` (:class:`pdem.contact.rigid.Bodies`), ``pairs`` and ``subs``
@@ -67,10 +67,22 @@ def contact_forces(dt, bodies, pairs, subs, joints):
     Sign convention: ``n`` points from A to B; the force on B is ``fn n + fs`` (``fn`` > 0 in
     compression) and the force on A is its opposite. (Eq. 28 writes the action with the
     opposite sign and correspondingly flips eq. 29/31.)
+
+    ``still`` (blocks): 1 for fixed or held inactive blocks (pdem.dynamics.inactive), all 0
+    without ``solve.inactive``. A contact between two still blocks keeps the force it had when
+    they became still (``pairs.held``, valid while ``pairs.frozen``) instead of updating its
+    joint: neither block moves, so the joint would see no motion.
     """
     for c in range(pairs.ia.shape[0]):
         a = pairs.ia[c]
         b = pairs.ib[c]
+        both_still = still[a] != 0 and still[b] != 0
+        if both_still and pairs.frozen[c]:
+            h = pairs.held
+            apply_pair(bodies, a, b, pair_motion(bodies, a, b),
+                       (h[c, 0], h[c, 1], h[c, 2], h[c, 3], h[c, 4], h[c, 5]), 0.0)
+            continue
+        pairs.frozen[c] = 0
         nx, ny, nz = turn_normal(pairs.normal, bodies.dtheta, c, a, b)
         s0 = pairs.sc_start[c]
         s1 = pairs.sc_start[c + 1]
@@ -122,6 +134,10 @@ def contact_forces(dt, bodies, pairs, subs, joints):
             # force on B (eq. 28 with our sign) at the sub-contact
             acc = add_point_force(acc, rax, ray, raz, fx + fn * nx, fy + fn * ny, fz + fn * nz)
         apply_pair(bodies, a, b, rel, acc, dissipated)
+        if both_still:
+            h = pairs.held
+            h[c, 0], h[c, 1], h[c, 2], h[c, 3], h[c, 4], h[c, 5] = acc
+            pairs.frozen[c] = 1
 
 
 @kernel

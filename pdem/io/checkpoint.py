@@ -22,7 +22,7 @@ import numpy as np
 
 from ..model import csr
 from ..model.contacts import ContactStore
-from ..model.fields import BLOCK_BY_NAME, CHECKPOINT, CONTACT, SUB, SUB_HIST, select
+from ..model.fields import BLOCK_BY_NAME, CHECKPOINT, CONTACT, CONTACT_ADDED, SUB, SUB_HIST, select
 from ..parallel.mpi import allgather, barrier, gather
 
 FORMAT = "checkpoint"
@@ -173,7 +173,8 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
         for piece, block in (("pga", "ga"), ("pgb", "gb")):
             if piece not in arrays and block in arrays:  # format <= 2: every block one piece
                 arrays[piece] = arrays[block].copy()
-        missing = [fd.name for fd in CONTACT_CK if fd.name not in arrays]
+        missing = [fd.name for fd in CONTACT_CK if fd.name not in arrays
+                   and fd.name not in CONTACT_ADDED]
         if missing:
             raise ValueError(f"{path}: contacts/{missing[0]} missing: not a complete checkpoint")
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed

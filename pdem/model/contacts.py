@@ -18,7 +18,7 @@ from . import csr
 from .fields import CONTACT, SUB, allocate
 
 # What the force kernel reads and writes of the contacts and sub-contacts.
-Pairs = namedtuple("Pairs", "ia ib joint normal sc_start")
+Pairs = namedtuple("Pairs", "ia ib joint normal sc_start held frozen")
 Subs = namedtuple("Subs", "pa area un fn fs us dil state hist")
 
 
@@ -60,7 +60,8 @@ class ContactStore:
 
     def pairs(self) -> Pairs:
         a = self.arrays
-        return Pairs(a["ia"], a["ib"], a["joint"], a["normal"], self.sc_start)
+        return Pairs(a["ia"], a["ib"], a["joint"], a["normal"], self.sc_start, a["held"],
+                     a["frozen"])
 
     def subs(self) -> Subs:
         s = self.sub

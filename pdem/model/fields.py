@@ -73,6 +73,10 @@ BLOCK: tuple[Field, ...] = (
     Field("u_geo", (), F, "m", "motion since the last periodic geometry update", **_D,
           halo=True),
     Field("u_mig", (), F, "m", "motion since the last ghost rebuild", **_D),
+    Field("calm", (), I32, "1", "consecutive steps at rest; inactive from solve.inactive.steps "
+          "(pdem.dynamics.inactive)", **_D, halo=True),
+    Field("still", (), U8, "1", "1: fixed or held inactive this step (derived from fixed and "
+          "calm; what the integrator and the joints read)", **_D, halo=True),
     Field("out", (), U8, "1", "taken out of the model (left the domain, excavated): 1 frozen, "
           "2 deleted", **_D, output="removed"),
     Field("x_stage", (3,), F, "m", "centroid when the current stage began (stage "
@@ -113,7 +117,13 @@ CONTACT: tuple[Field, ...] = (
     Field("ctype", (), I32, "1", "contact type code (Table 1)", **_D),
     Field("warm", (), U8, "1", "common plane known (warm start)", **_D),
     Field("moved", (), F, "m", "motion of the two blocks since the last geometry update", **_D),
+    Field("held", (6,), F, "N, N m", "force on B and its moment about A's centroid, kept while "
+          "both blocks are inactive (pdem.dynamics.inactive)", **_D),
+    Field("frozen", (), U8, "1", "1: ``held`` is valid, the joint is not updated", **_D),
 )
+
+# contact fields a checkpoint may lack (written before they were added): they start from zero
+CONTACT_ADDED = ("held", "frozen")
 
 SUB: tuple[Field, ...] = (
     Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D),

@@ -1,0 +1,35 @@
+"""Inactive blocks (solve.inactive) give bitwise the 1-rank run on several ranks: a stack
+spanning the rank split settles and is held, then a dropped cube lands on it and wakes its
+neighbours across the split (their hold state and held joint forces travel with the halo).
+
+Run with ``mpiexec -n 2 python -m mpi4py -m pytest --with-mpi tests/mpi/test_inactive_mpi.py``.
+"""
+
+from __future__ import annotations
+
+import pytest
+from mpi4py import MPI
+from support import TWO_RANKS_ONLY, compare_on_rank0, run, shared_dir, with_parallel
+
+pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
+
+SCENE = """
+materials: {rock: {density: 2500.0}}
+joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 30.0}}
+blocks:
+  - {name: floor, box: {min: [-1, -1, -1], max: [5, 3, 0]}, material: rock, fixed: true}
+  - name: cube
+    array: {box: {min: [0, 0, 0], max: [1, 1, 1]}, count: [4, 2, 2], spacing: [1, 1, 1]}
+    material: rock
+  - {name: drop, box: {min: [1.5, 0.0, 2.03], max: [2.5, 1.0, 3.03]}, material: rock}
+solve: {steps: 4000, damping: local, inactive: {speed: 1.0e-4, steps: 100, force: 0.01}}
+"""
+
+
+def test_held_stack_woken_across_the_split_matches_one_rank(tmp_path):
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    path = f"{base}/held.h5"
+    scene = with_parallel(SCENE, [comm.size, 1, 1], path, every_steps=250)
+    run(scene, comm)
+    compare_on_rank0(comm, path, scene, f"{base}/held-ref.h5")
