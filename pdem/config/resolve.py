@@ -174,8 +174,13 @@ def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
     mine = float(critical_steps(glob.mass[g:g + 1], k[g:g + 1], ts.frac, glob.inertia[g:g + 1],
                                 glob.radius[g:g + 1], glob.mscale[g:g + 1])[0])
     median = float(np.sort(own)[len(own) // 2])
-    line = (f"block {_name(names, g)} limits the step: its critical step {mine:.3g} s is "
-            f"{median / mine:.3g} x below the median {median:.3g} s")
+    if ts.dt is None:
+        line = f"block {_name(names, g)} limits the step: its critical step {mine:.3g} s"
+    else:
+        line = (f"solve.timestep.dt = {dt:.3g} s; block {_name(names, g)} has the smallest "
+                f"critical step, {mine:.3g} s")
+    if median >= 2.0 * mine:
+        line += f" is {median / mine:.3g} x below the median {median:.3g} s"
     if ts.dt is None and dt < mine * (1.0 - 1e-9):
         line += f" (eq. 87 pairs its mass with the stiffest block's stiffness: dt = {dt:.3g} s)"
     if median > SUGGEST_RATIO * mine:
