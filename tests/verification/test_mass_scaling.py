@@ -212,3 +212,31 @@ def test_restart_continues_bitwise(tmp_path):
     with h5py.File(f"{tmp_path}/straight.h5") as a, h5py.File(out) as b:
         for k in ("centroid", "orientation", "velocity", "angular_velocity"):
             assert np.array_equal(a[f"blocks/{k}"][-1], b[f"blocks/{k}"][-1]), k
+
+
+def staged_scene(timestep: str) -> str:
+    """The pebble scene run in two stages: unscaled, then partially scaled to ``timestep``."""
+    text = pebble_scene("steps: 1", scaling="false")
+    head = text[:text.index("solve:")]
+    return head + f"""solve: {{damping: none}}
+stages:
+  - name: plain
+    solve: {{steps: 3}}
+  - name: scaled
+    solve: {{steps: 3, mass_scaling: {{timestep: {timestep}}}}}
+"""
+
+
+def test_stage_level_partial_scaling():
+    """A stage's ``mass_scaling: {timestep: DT}`` sets the step and the factors at its start;
+    a bad one is refused naming the stage's key."""
+    s = make_simulation(staged_scene(repr(DT)))
+    r = rows(s)
+    s.run()
+    assert s.dt == DT and s.step == 6
+    assert s.blocks.mscale[r["pebble"]] == pytest.approx(S_PEBBLE, rel=1e-12)
+    assert s.blocks.mscale[r["big"]] == 1.0
+    s = make_simulation(staged_scene("2.0e-4"))
+    with pytest.raises(UserError) as info:
+        s.run()
+    assert str(info.value).startswith("stages[1].solve.mass_scaling.timestep (line "), info.value
