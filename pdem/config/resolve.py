@@ -161,8 +161,8 @@ def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
                 f"free blocks scaled, added inertia {r['added_mass']:.4g} kg "
                 f"({r['added_percent']:.3g} % of the free blocks' {r['model_mass']:.4g} kg), "
                 f"largest factor {r['max_factor']:.4g} on block {_name(names, r['max_block'])}"
-                " (their contact periods are sqrt(factor) longer and gravity accelerates them "
-                "by g / factor)"]
+                " (scaled blocks keep their weight: they accelerate factor times slower and "
+                "ring sqrt(factor) times slower on their contacts)"]
     if ms:
         return []
     own = critical_steps(glob.mass, k, ts.frac, glob.inertia, glob.radius, glob.mscale)[free]
