@@ -36,10 +36,12 @@ def body_surfaces(specs):
 
 
 def _mass_scaling_attrs(state) -> dict:
-    """Root attributes of partial mass scaling (the scene's, at the start of the run): the
-    step it sets and the inertia it added (pdem.config.resolve.mass_scaling_summary)."""
+    """Root attributes of partial mass scaling: the step it sets and the inertia it added
+    (pdem.config.resolve.mass_scaling_summary). Runs without stages only: a stage sets its
+    own scaling at its start (and a restart's factors may be a stage's), which the log
+    reports."""
     ms = state.scene.solve.mass_scaling
-    if not isinstance(ms, MassScaling):
+    if not isinstance(ms, MassScaling) or state.scene.stages:
         return {}
     r = mass_scaling_summary(state.glob)
     g = r["max_block"]
