@@ -118,6 +118,10 @@ def _name(names, g: int) -> str:
 def _check_partial(glob, dt: float, names, key: str) -> None:
     """Refuse partial scaling that would scale most of the model (by mass)."""
     free = glob.fixed == 0
+    if not np.isfinite(glob.mscale).all():
+        raise UserError(f"{key}: the blocks' stiffness estimate overflows, so no mass scale "
+                        "makes them stable: a joint's kn or ks is far outside the usual range "
+                        "(docs/limits.md)")
     total = float(glob.mass[free].sum())
     scaled = free & (glob.mscale > 1.0)
     share = float(glob.mass[scaled].sum()) / total if total > 0.0 else 0.0
@@ -151,8 +155,8 @@ def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
     ts = scene.solve.timestep
     ms = scene.solve.mass_scaling
     free = np.nonzero(glob.fixed == 0)[0]
-    if not len(free):
-        return []
+    if not len(free) or not (math.isfinite(dt) and dt > 0.0):
+        return []  # refused by preflight.check_derived, naming the joint
     if isinstance(ms, MassScaling):
         r = mass_scaling_summary(glob)
         if not r["blocks"]:
@@ -174,6 +178,8 @@ def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
     mine = float(critical_steps(glob.mass[g:g + 1], k[g:g + 1], ts.frac, glob.inertia[g:g + 1],
                                 glob.radius[g:g + 1], glob.mscale[g:g + 1])[0])
     median = float(np.sort(own)[len(own) // 2])
+    if not mine > 0.0:
+        return []
     if ts.dt is None:
         line = f"block {_name(names, g)} limits the step: its critical step {mine:.3g} s"
     else:
