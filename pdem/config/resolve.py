@@ -186,7 +186,8 @@ def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
         line = (f"solve.timestep.dt = {dt:.3g} s; block {_name(names, g)} has the smallest "
                 f"critical step, {mine:.3g} s")
     if median >= 2.0 * mine:
-        line += f" is {median / mine:.3g} x below the median {median:.3g} s"
+        line += (" is" if ts.dt is None else ",") + \
+            f" {median / mine:.3g} x below the median {median:.3g} s"
     if ts.dt is None and dt < mine * (1.0 - 1e-9):
         line += f" (eq. 87 pairs its mass with the stiffest block's stiffness: dt = {dt:.3g} s)"
     if median > SUGGEST_RATIO * mine:

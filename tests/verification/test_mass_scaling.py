@@ -136,6 +136,11 @@ def test_start_up_log_names_the_limiting_block_and_the_added_inertia(caplog):
             "dt = 2e-07 s); consider solve.mass_scaling: {timestep: 9.4e-05}") in caplog.text
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="pdem"):
+        make_simulation(pebble_scene("time: 0.5", dt=DT))
+    assert ("solve.timestep.dt = 9e-05 s; block 'pebble' has the smallest critical step, "
+            "9.43e-06 s, 10 x below the median 9.43e-05 s") in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="pdem"):
         make_simulation(pebble_scene("time: 0.5", scaling=PARTIAL))
     assert ("partial mass scaling to dt = 9e-05 s: 1 of 2 free blocks scaled, added inertia "
             "0.1802 kg (0.00901 % of the free blocks' 2000 kg), largest factor 91.13 on block "
