@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from .config import ConfigError
-from .config.resolve import _estimated_stiffness, _timestep
+from .config.resolve import _estimated_stiffness, _timestep, timestep_report
 from .contact.laws import joint_table
 from .domain import DELETED, remove_blocks
 from .dynamics.damping import DAMPING
@@ -106,7 +106,7 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
         if not len(gids):
             raise ConfigError([f"{s.scene.at('stages', k, 'force', j)}: selects no block"])
         _set(s, gids, applied_force=pf.force)
-    _solve_settings(s, staged)
+    _solve_settings(s, staged, k, report=motion)
     s.stage = k
 
 
@@ -144,11 +144,21 @@ def apply_stage(run, k: int) -> None:
     run.stepper.refresh(all_contacts=False)
 
 
-def _solve_settings(s, staged) -> None:
-    """Timestep, mass scaling and damping of a stage (every rank alike)."""
+def _solve_settings(s, staged, k: int, report: bool = True) -> None:
+    """Timestep, mass scaling and damping of a stage (every rank alike). The mass-scale
+    factors are recomputed from the stage's joints and fixed/free blocks, on every rank
+    alike; a restart replays this (:func:`replay_stages`), so they need no checkpoint."""
     g = s.glob
     g.mscale[:] = 1.0
-    s.dt = _timestep(staged, g, _estimated_stiffness(s.specs, s.joints))
+    stiffness = _estimated_stiffness(s.specs, s.joints)
+    names = [sp.name for sp in s.specs]
+    st = s.scene.stages[k].solve
+    key = s.scene.at("stages", k, "solve", "mass_scaling", "timestep") \
+        if st is not None and st.mass_scaling is not None else "solve.mass_scaling.timestep"
+    s.dt = _timestep(staged, g, stiffness, names, key)
+    if report:
+        for line in timestep_report(staged, g, stiffness, s.dt, names):
+            log.info("stage %d: %s", k + 1, line)
     if s.blocks is not None:
         s.blocks.mscale[:] = g.mscale[s.blocks.gid]
     d = staged.solve.damping

@@ -11,6 +11,7 @@ closed forms the runs are checked against:
 * :mod:`pdem.cases.tumbling` -- torque-free rotation of an asymmetric block;
 * :mod:`pdem.cases.tipping` -- a cube tipping over a floor edge (common-plane motion);
 * :mod:`pdem.cases.stacks` -- the n x n x n cube stack of the benchmarks;
+* :mod:`pdem.cases.pebble` -- a 1 m block and a 1 cm pebble (partial mass scaling);
 * :mod:`pdem.cases.rock_mass` -- rock masses from ``cuts:``/``join:``/``excavate:`` (a wedge cut
   out of a slope by two joint sets, an L-shaped joined block, a tunnel excavated at a time).
 

@@ -8,6 +8,7 @@ the stepper; a restart takes them from the checkpoint rather than re-deriving th
 from __future__ import annotations
 
 import json
+import logging
 import math
 from dataclasses import asdict, dataclass
 
@@ -15,12 +16,22 @@ import numpy as np
 
 from ..dynamics.damping import DAMPING
 from ..dynamics.kinematics import refresh_pose
-from ..dynamics.timestep import auto_timestep, mass_scale_factors
+from ..dynamics.timestep import auto_timestep, critical_steps, limiting_block, mass_scale_factors
 from ..errors import UserError
 from ..parallel.decomposition import choose_dims
+from .schema import MassScaling
+
+log = logging.getLogger("pdem")
 
 # vertices within this fraction of CTOL of the common plane count as touching it
 TOUCH_FRACTION = 0.5
+# partial mass scaling is refused when the blocks it would scale carry more than this share
+# of the free blocks' mass: the dynamics of most of the model would then be the scaled one
+# (use a smaller timestep, or mass_scaling: true for a static solve)
+MAX_SCALED_MASS_FRACTION = 0.5
+# the start-up log suggests partial mass scaling when the block limiting the step is this
+# many times below the median block's critical step
+SUGGEST_RATIO = 10.0
 
 
 @dataclass(frozen=True)
@@ -69,10 +80,22 @@ def _estimated_stiffness(specs, joints) -> np.ndarray:
         return kmax * surf / 3.0
 
 
-def _timestep(scene, glob, k) -> float:
-    """The step (eq. 87 + rotational bound); with mass scaling, sets ``glob.mscale`` (eq. 89)."""
+def _timestep(scene, glob, k, names=None, key: str = "solve.mass_scaling.timestep") -> float:
+    """The step (eq. 87 + rotational bound); with mass scaling, sets ``glob.mscale`` (eq. 89;
+    partial: only the blocks whose own critical step is below ``timestep``).
+
+    The factors come from ``k``, the stiffness estimate of :func:`_estimated_stiffness` (from
+    the blocks' surfaces and the stiffest joint, not from the contacts of the moment): they
+    are the same on every rank and after a restart, which recomputes them from the scene
+    (the scene's, and each stage's at its start, see pdem.stages)."""
     ts = scene.solve.timestep
-    if scene.solve.mass_scaling:
+    ms = scene.solve.mass_scaling
+    if isinstance(ms, MassScaling):
+        # partial (dynamic) scaling: the light blocks are made heavy enough for `timestep`
+        dt = ms.timestep
+        glob.mscale[:] = mass_scale_factors(glob.mass, k, dt, ts.frac, glob.inertia, glob.radius)
+        _check_partial(glob, dt, names, key)
+    elif ms:
         # static solve: every block gets the critical step of the mean block (eq. 89)
         free = glob.fixed == 0
         dt = ts.dt or ts.frac * 2.0 * math.sqrt(
@@ -86,6 +109,96 @@ def _timestep(scene, glob, k) -> float:
     if not math.isfinite(dt):
         raise UserError("solve.timestep: no free block, cannot choose a timestep; give dt")
     return float(dt)
+
+
+def _name(names, g: int) -> str:
+    return repr(names[g]) if names is not None else f"#{g}"
+
+
+def _check_partial(glob, dt: float, names, key: str) -> None:
+    """Refuse partial scaling that would scale most of the model (by mass)."""
+    free = glob.fixed == 0
+    if not np.isfinite(glob.mscale).all():
+        raise UserError(f"{key}: the blocks' stiffness estimate overflows, so no mass scale "
+                        "makes them stable: a joint's kn or ks is far outside the usual range "
+                        "(docs/limits.md)")
+    total = float(glob.mass[free].sum())
+    scaled = free & (glob.mscale > 1.0)
+    share = float(glob.mass[scaled].sum()) / total if total > 0.0 else 0.0
+    if share > MAX_SCALED_MASS_FRACTION:
+        g = int(np.argmax(np.where(free, glob.mscale, 0.0)))
+        raise UserError(
+            f"{key}: {dt:.4g} s would scale {int(scaled.sum())} of {int(free.sum())} free "
+            f"blocks, {100.0 * share:.3g} % of the free mass (more than "
+            f"{100.0 * MAX_SCALED_MASS_FRACTION:g} %; largest factor {glob.mscale[g]:.4g} on "
+            f"block {_name(names, g)}): that is no longer partial scaling; give a smaller "
+            "timestep, or mass_scaling: true for a static solve")
+
+
+def mass_scaling_summary(glob) -> dict:
+    """The inertia partial mass scaling added (free blocks): how many blocks, the added mass
+    (kg and % of the free mass), the largest factor and its block (gid)."""
+    free = glob.fixed == 0
+    scaled = free & (glob.mscale > 1.0)
+    added = float((glob.mass * (glob.mscale - 1.0))[scaled].sum())
+    total = float(glob.mass[free].sum())
+    g = int(np.argmax(np.where(free, glob.mscale, 0.0))) if free.any() else -1
+    return {"blocks": int(scaled.sum()), "free_blocks": int(free.sum()), "added_mass": added,
+            "added_percent": 100.0 * added / total if total > 0.0 else 0.0,
+            "model_mass": total, "max_factor": float(glob.mscale[g]) if g >= 0 else 1.0,
+            "max_block": g}
+
+
+def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
+    """The start-up log lines about the step: which block limits it and by how much (no mass
+    scaling or a fixed dt), or the inertia partial mass scaling added."""
+    ts = scene.solve.timestep
+    ms = scene.solve.mass_scaling
+    free = np.nonzero(glob.fixed == 0)[0]
+    if not len(free) or not (math.isfinite(dt) and dt > 0.0):
+        return []  # refused by preflight.check_derived, naming the joint
+    if isinstance(ms, MassScaling):
+        r = mass_scaling_summary(glob)
+        if not r["blocks"]:
+            return [f"partial mass scaling to dt = {dt:.3g} s: no block needed it"]
+        return [f"partial mass scaling to dt = {dt:.3g} s: {r['blocks']} of {r['free_blocks']} "
+                f"free blocks scaled, added inertia {r['added_mass']:.4g} kg "
+                f"({r['added_percent']:.3g} % of the free blocks' {r['model_mass']:.4g} kg), "
+                f"largest factor {r['max_factor']:.4g} on block {_name(names, r['max_block'])}"
+                " (scaled blocks keep their weight: they accelerate factor times slower and "
+                "ring sqrt(factor) times slower on their contacts)"]
+    if ms:
+        return []
+    own = critical_steps(glob.mass, k, ts.frac, glob.inertia, glob.radius, glob.mscale)[free]
+    own = own[np.isfinite(own)]
+    g = limiting_block(glob.mass, k, ts.frac, glob.inertia, glob.radius, glob.fixed,
+                       glob.mscale)
+    if g < 0 or not len(own):
+        return []
+    mine = float(critical_steps(glob.mass[g:g + 1], k[g:g + 1], ts.frac, glob.inertia[g:g + 1],
+                                glob.radius[g:g + 1], glob.mscale[g:g + 1])[0])
+    median = float(np.sort(own)[len(own) // 2])
+    if not mine > 0.0:
+        return []
+    if ts.dt is None:
+        line = f"block {_name(names, g)} limits the step: its critical step {mine:.3g} s"
+    else:
+        line = (f"solve.timestep.dt = {dt:.3g} s; block {_name(names, g)} has the smallest "
+                f"critical step, {mine:.3g} s")
+    if median >= 2.0 * mine:
+        line += (" is" if ts.dt is None else ",") + \
+            f" {median / mine:.3g} x below the median {median:.3g} s"
+    if ts.dt is None and dt < mine * (1.0 - 1e-9):
+        line += f" (eq. 87 pairs its mass with the stiffest block's stiffness: dt = {dt:.3g} s)"
+    if median > SUGGEST_RATIO * mine:
+        line += f"; consider solve.mass_scaling: {{timestep: {_round_down(median):.2g}}}"
+    return [line]
+
+
+def _round_down(x: float) -> float:
+    """``x`` cut to two significant digits (a suggested step never above the one it quotes)."""
+    unit = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return math.floor(x / unit) * unit
 
 
 def _alpha(scene) -> float:
@@ -110,7 +223,11 @@ def resolve(scene, comm_size: int, specs, glob, joints) -> Resolved:
     free = glob.fixed == 0
     ext = (hi - lo)[free] if free.any() else hi - lo
     cell_size = float(np.mean(ext.max(axis=1))) if cs.cell_size == "auto" else float(cs.cell_size)
-    dt = _timestep(scene, glob, _estimated_stiffness(specs, joints))
+    k = _estimated_stiffness(specs, joints)
+    names = [sp.name for sp in specs]
+    dt = _timestep(scene, glob, k, names)
+    for line in timestep_report(scene, glob, k, dt, names):
+        log.info("%s", line)
     # Runaway threshold: no block can honestly move faster than its start speed plus a fall
     # across the whole model (or what gravity and applied loads add over time); ten times
     # that is a blow-up, typically a timestep too large for the stiffness.

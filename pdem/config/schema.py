@@ -5,11 +5,13 @@ from __future__ import annotations
 from typing import Annotated, Literal, Union
 
 from pydantic import (
+    Discriminator,
     Field,
     NonNegativeFloat,
     PositiveFloat,
     PositiveInt,
     PrivateAttr,
+    Tag,
     field_validator,
     model_validator,
 )
@@ -250,6 +252,30 @@ class Timestep(Strict):
     dt: PositiveFloat | None = None
 
 
+class MassScaling(Strict):
+    """Partial (inertial) mass scaling to the step ``timestep`` (3DEC's ``mass-scale
+    timestep``): the run steps at ``timestep``; only the blocks whose own critical step is
+    below it get their mass and moments scaled up (one factor per block, docs/theory.md).
+    Gravity and applied loads keep the true mass."""
+
+    timestep: PositiveFloat
+
+
+_FLAG, _MAPPING = "(true/false)", "({timestep: DT})"
+
+
+def _mass_scaling_form(v) -> str:
+    return _MAPPING if isinstance(v, dict | MassScaling) else _FLAG
+
+
+# ``true``/``false`` (uniform scaling for static solves) or ``{timestep: DT}`` (partial).
+# The tags carry a "(" so that error messages leave them out of the key path
+# (pdem.config.load._clean_loc): "solve.mass_scaling.timestep: ...".
+MassScalingSetting = Annotated[
+    Union[Annotated[bool, Tag(_FLAG)], Annotated[MassScaling, Tag(_MAPPING)]],  # noqa: UP007
+    Discriminator(_mass_scaling_form)]
+
+
 def _names(registry) -> type:
     return Literal[registry.names()]
 
@@ -292,7 +318,7 @@ class Solve(Strict):
     max_steps: PositiveInt | None = None
     timestep: Timestep = Timestep()
     damping: Damping = Damping()
-    mass_scaling: bool = False
+    mass_scaling: MassScalingSetting = False
     inertia: Literal["full", "scalar"] = "full"
     fused: bool = True
     inactive: Inactive | None = None
@@ -310,6 +336,9 @@ class Solve(Strict):
         ends = [k for k in ("time", "steps", "ratio") if getattr(self, k) is not None]
         if len(ends) > 1:
             raise ValueError(f"give exactly one of time, steps, ratio (got {ends})")
+        if isinstance(self.mass_scaling, MassScaling) and self.timestep.dt is not None:
+            raise ValueError("give timestep.dt or mass_scaling.timestep, not both (partial "
+                             "mass scaling sets the step)")
         return self
 
     @property
@@ -488,7 +517,7 @@ class StageSolve(Strict):
     ratio: PositiveFloat | None = None
     max_steps: PositiveInt | None = None
     damping: Damping | None = None
-    mass_scaling: bool | None = None
+    mass_scaling: MassScalingSetting | None = None
 
     @field_validator("damping", mode="before")
     @classmethod

@@ -7,6 +7,8 @@ import json
 import numpy as np
 
 from .. import __version__
+from ..config.resolve import mass_scaling_summary
+from ..config.schema import MassScaling
 from ..contact.forces import normal_forces
 from ..contact.laws import FAILED
 from ..errors import writing
@@ -31,6 +33,23 @@ def body_surfaces(specs):
         vertices.append(np.concatenate([sh.vertices for sh in bodies]))
         faces.append(fs)
     return vertices, faces
+
+
+def _mass_scaling_attrs(state) -> dict:
+    """Root attributes of partial mass scaling: the step it sets and the inertia it added
+    (pdem.config.resolve.mass_scaling_summary). Runs without stages only: a stage sets its
+    own scaling at its start (and a restart's factors may be a stage's), which the log
+    reports."""
+    ms = state.scene.solve.mass_scaling
+    if not isinstance(ms, MassScaling) or state.scene.stages:
+        return {}
+    r = mass_scaling_summary(state.glob)
+    g = r["max_block"]
+    return {"mass_scaling_timestep": ms.timestep, "mass_scaled_blocks": r["blocks"],
+            "mass_scaling_added_mass": r["added_mass"],
+            "mass_scaling_added_percent": r["added_percent"],
+            "mass_scaling_max_factor": r["max_factor"],
+            "mass_scaling_max_block": state.specs[g].name if g >= 0 else ""}
 
 
 def bonded_joints(joints) -> np.ndarray:
@@ -86,15 +105,17 @@ class Snapshots(Plugin):
         r = state.resolved
         self.contacts = bool(out.contacts)
         self.bonded = bonded_joints(state.joints)
+        attrs = {"pdem_version": __version__, "scene_name": state.scene.name, "dt": state.dt,
+                 "ctol": r.ctol, "run_id": state.run_id, "first_step": state.step,
+                 "resolved": r.to_json()}
+        attrs.update(_mass_scaling_attrs(state))
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
             block_parents=[s.parent for s in state.specs],
             body_vertices=vertices, body_faces=faces,
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
             group_names=state.group_names, fixed=state.glob.fixed,
-            attrs={"pdem_version": __version__, "scene_name": state.scene.name, "dt": state.dt,
-                   "ctol": r.ctol, "run_id": state.run_id, "first_step": state.step,
-                   "resolved": r.to_json()},
+            attrs=attrs,
             contacts=self.contacts, joint_names=state.joints.names)
 
     def write(self):

@@ -91,3 +91,32 @@ def test_joint_pairs_reference_checks():
     msgs = errors_of(text)
     assert msgs[0] == "joint_pairs[0].joint: unknown joint 'weak'"
     assert msgs[1].startswith("joint_pairs[0].groups: no block has group 'nope'")
+
+
+def test_mass_scaling_flag_or_partial_mapping():
+    """``solve.mass_scaling``: true/false as before, or ``{timestep: DT}`` (partial scaling),
+    also per stage; it survives the dump a checkpoint stores; bad values name the key."""
+    from pdem.config.schema import MassScaling
+
+    assert parse_scene(GOOD).solve.mass_scaling is False
+    assert parse_scene(GOOD.replace("steps: 10", "steps: 10, mass_scaling: true")
+                       ).solve.mass_scaling is True
+    scene = parse_scene(GOOD.replace("steps: 10", "steps: 10, mass_scaling: {timestep: 1.0e-4}"))
+    assert scene.solve.mass_scaling == MassScaling(timestep=1.0e-4)
+    assert parse_scene(dump_scene(scene)) == scene
+    staged = GOOD.replace("solve: {steps: 10}", "solve: {}\nstages:\n  - name: a\n    solve: "
+                          "{steps: 10, mass_scaling: {timestep: 2.0e-4}}")
+    assert parse_scene(staged).stages[0].solve.mass_scaling == MassScaling(timestep=2.0e-4)
+    for bad in ("-1.0e-4", "0"):
+        (msg,) = errors_of(GOOD.replace("steps: 10", f"steps: 10, mass_scaling: {{timestep: {bad}}}"))
+        assert msg.startswith("solve.mass_scaling.timestep: Input should be greater than 0"), msg
+        (msg,) = errors_of(staged.replace("2.0e-4", bad))
+        assert msg.startswith("stages[0].solve.mass_scaling.timestep: Input should be greater"), msg
+    msgs = errors_of(GOOD.replace("steps: 10", "steps: 10, mass_scaling: {dt: 1.0e-4}"))
+    assert msgs[0].startswith("solve.mass_scaling.timestep: Field required"), msgs
+    assert msgs[1].startswith("solve.mass_scaling.dt: unknown key"), msgs
+    (msg,) = errors_of(GOOD.replace("steps: 10", "steps: 10, mass_scaling: 3.0"))
+    assert msg.startswith("solve.mass_scaling: Input should be a valid boolean"), msg
+    (msg,) = errors_of(GOOD.replace(
+        "steps: 10", "steps: 10, timestep: {dt: 1.0e-5}, mass_scaling: {timestep: 1.0e-4}"))
+    assert msg.startswith("solve: give timestep.dt or mass_scaling.timestep, not both"), msg
