@@ -727,8 +727,8 @@ def write_doc(results: dict, toggles: dict, quick: bool, runtime: float, date: s
         rel = ", ".join(f"{fmt_value(v)}: {x:.2f}×" for v, x in s["rel"].items()
                         if math.isfinite(x))
         lines.append(
-            f"pdem's default is **{fmt_value(s['default'])}**; at it the worst case uses "
-            f"{s['worst']:.2g} of its tolerance. "
+            f"pdem's default is **{fmt_value(s['default'])}**; at it the worst case's error is "
+            f"{s['worst']:.2g} × its tolerance. "
             + (f"Every case stays within tolerance for {', '.join(fmt_value(v) for v in s['envelope'])}. "
                if s["envelope"] else "No value keeps every case within tolerance. ")
             + (f"CPU time relative to the default (geometric mean over the cases): {rel}. "
