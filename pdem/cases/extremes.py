@@ -22,17 +22,19 @@ def static_overlap(height: float, kn: float, g: float = G, rho: float = RHO) -> 
 
 def box_on_floor(size=(1.0, 1.0, 1.0), *, kn=1.0e9, ks=None, friction=30.0, gravity=(0, 0, -G),
                  origin=(0.0, 0.0, 0.0), gap=None, velocity=(0.0, 0.0, 0.0), damping="none",
-                 end="steps: 100", rho=RHO, extra_blocks="", contact="", name="box") -> str:
+                 end="steps: 100", rho=RHO, extra_blocks="", contact="", name="box",
+                 floor=None) -> str:
     """A box of ``size`` centred over ``origin`` on a fixed floor whose top face is at
     ``origin[2]``. ``gap``: the box's bottom height above the floor (negative: overlap);
-    default: minus the static overlap under ``gravity``, so the box starts in equilibrium."""
+    default: minus the static overlap under ``gravity``, so the box starts in equilibrium.
+    ``floor``: the floor's (x, y) size (default: twice the box's, at least 2 m more)."""
     a, b, c = size
     ks = kn if ks is None else ks
     g = math.sqrt(sum(x * x for x in gravity))
     if gap is None:
         gap = -static_overlap(c, kn, abs(gravity[2]), rho) if g else 0.0
     ox, oy, oz = origin
-    fa, fb = max(2.0 * a, a + 2.0), max(2.0 * b, b + 2.0)  # the floor is wider than the box
+    fa, fb = floor or (max(2.0 * a, a + 2.0), max(2.0 * b, b + 2.0))  # wider than the box
     return f"""
 name: {name}
 gravity: {vec(gravity)}
