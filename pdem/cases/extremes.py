@@ -95,11 +95,11 @@ solve: {{{end}, damping: {damping}}}
 
 
 def thrown_at_plate(speed: float, thickness: float, *, kn=1.0e9, end="time: 0.03",
-                    plate_fixed=True, cube=0.5, start_gap=0.1, extra="") -> str:
-    """No gravity: a cube of side ``cube`` thrown along +x at ``speed`` at a plate of
-    ``thickness`` (its near face at x = 0, 2 m x 2 m), starting ``start_gap`` away."""
-    h = cube / 2
-    x0 = -start_gap - cube
+                    plate_fixed=True, bullet=(0.5, 0.5, 0.5), start_gap=0.1, extra="") -> str:
+    """No gravity: a box ``bullet`` (its x, y, z sides) thrown along +x at ``speed`` at a plate
+    of ``thickness`` (its near face at x = 0, 2 m x 2 m), starting ``start_gap`` away."""
+    lx, ly, lz = bullet
+    x0 = -start_gap - lx
     return f"""
 name: impact
 gravity: [0.0, 0.0, 0.0]
@@ -113,6 +113,6 @@ blocks:
   - name: bullet
     material: rock
     velocity: [{speed!r}, 0.0, 0.0]
-    box: {{min: [{x0!r}, {-h!r}, {-h!r}], max: [{x0 + cube!r}, {h!r}, {h!r}]}}
+    box: {{min: [{x0!r}, {-ly / 2!r}, {-lz / 2!r}], max: [{x0 + lx!r}, {ly / 2!r}, {lz / 2!r}]}}
 {extra}solve: {{{end}, damping: none}}
 """
