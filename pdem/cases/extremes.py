@@ -69,15 +69,16 @@ def sliding_acceleration(psi_deg: float, phi_deg: float, g: float = G) -> float:
 
 
 def column_of_cubes(n: int, *, kn=1.0e9, side=1.0, end="steps: 1000", damping="local",
-                    rho=RHO) -> str:
-    """``n`` cubes of side ``side`` stacked on a fixed floor, each joint pre-loaded at its
+                    rho=RHO, preload=True) -> str:
+    """``n`` cubes of side ``side`` stacked on a fixed floor; ``preload``: each joint at its
     static overlap (the joint under cube k carries the weight of the ``n - k`` cubes above it,
-    itself included)."""
+    itself included), else every cube just touching the one below."""
     w = rho * side**3 * G  # one cube's weight
     blocks = []
     z = 0.0
     for k in range(n):
-        z -= (n - k) * w / (kn * side * side)  # this joint's static overlap
+        if preload:
+            z -= (n - k) * w / (kn * side * side)  # this joint's static overlap
         blocks.append(f"  - {{name: c{k}, material: rock, box: {{min: {vec((-side / 2, -side / 2, z))}, "
                       f"max: {vec((side / 2, side / 2, z + side))}}}}}")
         z += side
