@@ -58,8 +58,8 @@ def tunnelling_text(state, gid: int) -> str:
         return ""
     return (f" It moved {step:.3g} m in one step, more than the {limit:.3g} m (CTOL/2) that "
             f"contact detection can follow: it could pass through a block unseen. Give a "
-            f"smaller solve.timestep.dt (at most {state.dt * limit / step:.3g} s) or stiffer "
-            "joints.")
+            f"smaller solve.timestep.dt (at most {state.dt * limit / step:.3g} s at this speed) "
+            "or stiffer joints, or keep it from falling so far.")
 
 
 def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: int) -> str:
