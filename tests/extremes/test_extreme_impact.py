@@ -111,6 +111,8 @@ def test_refused_scenes_did_tunnel(monkeypatch, end):
     step) and with one inside CTOL/2 (the joint too soft for the impact)."""
     monkeypatch.setattr(pf, "MAX_STEP_MOTION", math.inf)
     monkeypatch.setattr(pf, "_check_impact_overlap", lambda *a: None)
+    orig = motion.motion_bookkeeping  # and no run-time guard either, whatever the stepper passes
+    monkeypatch.setattr(motion, "motion_bookkeeping", lambda *a: orig(*a[:10]))
     sim = make_simulation(thrown_at_plate(V, 0.01, kn=1.0e8, end=end))
     _fly(sim, 0.01)
     assert sim.blocks.x[1, 0] - 0.25 > 0.01 and sim.blocks.v[1, 0] > 50.0  # beyond, going on
@@ -156,7 +158,7 @@ def test_run_time_guard_stops_a_block_before_it_can_tunnel(monkeypatch):
     sim = make_simulation(FALL)
     orig = motion.motion_bookkeeping
     limit = REMAP_FRACTION * sim.state.ctol
-    monkeypatch.setattr(motion, "motion_bookkeeping", lambda *a: orig(*a, limit))
+    monkeypatch.setattr(motion, "motion_bookkeeping", lambda *a: orig(*a[:10], limit))
     with pytest.raises(SimulationError) as e:
         sim.run()
     msg = str(e.value)
