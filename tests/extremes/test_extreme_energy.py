@@ -5,6 +5,9 @@ with the mid-step velocity, so the balance error (pdem.plugins.energy) must stay
 and the bounce must not grow or decay.
 
     PDEM_EXTREME_STEPS=20000 pytest tests/extremes/test_extreme_energy.py   # quick
+
+10^6 steps: 116 s stepping one step at a time (8 600 steps/s, a loaded 2-core machine), 13.5 s
+in the compiled loop (pdem/cycle.py, 74 000 steps/s; the same balance error to the bit).
 """
 
 from __future__ import annotations
