@@ -95,7 +95,7 @@ class ModelState:
         glob, group_names = block_store(scene, specs)
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)
-        check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn)
+        check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn, resolved.ctol)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
         state.estimate = estimate
         apply_scene(state)

@@ -47,6 +47,11 @@ MAX_STATIC_OVERLAP = 0.1
 # time advances by adding dt: past 2**52 steps t + dt == t in double precision, the end time is
 # never reached
 MAX_TIME_STEPS = 2**52
+# a block may move at most this fraction of CTOL in one step: the search runs when a block's
+# accumulated motion passes CTOL/2 (pdem.stepper.REMAP_FRACTION), so a block that jumps further
+# in one step can land inside (or beyond) a thin block before any contact exists (tunnelling;
+# tests/extremes/test_extreme_impact.py)
+MAX_STEP_MOTION = 0.5
 
 # documented physical ranges: outside them a warning is logged, nothing is refused
 # (name, key path pattern, lo, hi, units, what usual values are)
@@ -234,9 +239,12 @@ def _warn_ranges(scene) -> None:
         log.warning("gravity: |g| = %.4g m/s2 is more than %g m/s2 (docs/limits.md)", g, GRAVITY_MAX)
 
 
-def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool = True) -> None:
+def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool = True,
+                  ctol: float | None = None) -> None:
     """Refuse what the built model makes impossible: no usable timestep, an end time that
-    double precision cannot reach, free blocks sinking into their support under gravity."""
+    double precision cannot reach or a step count beyond ``limits.max_steps``, free blocks
+    sinking into their support under gravity, and (given ``ctol``) blocks started so fast that
+    they move more than ``MAX_STEP_MOTION`` x CTOL in one step."""
     if not (math.isfinite(dt) and dt > 0.0):
         name = max(scene.joints, key=lambda j: max(scene.joints[j].kn, scene.joints[j].ks))
         j = scene.joints[name]
@@ -255,7 +263,54 @@ def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool
             log.warning("solve.time: %.4g s at dt=%.4g s is %.4g steps; the run stops at "
                         "solve.max_steps=%d before reaching it", scene.solve.time, dt, steps,
                         scene.solve.max_steps)
+    _check_step_count(scene, joints, dt)
     _check_static_overlap(scene, specs, glob, joints, group_names)
+    if ctol is not None:
+        _check_start_speeds(scene, specs, glob, dt, ctol)
+        _check_impact_overlap(scene, specs, glob, joints, group_names)
+
+
+def _check_step_count(scene, joints, dt: float) -> None:
+    """The steps the run's end implies (``solve.time`` / dt, or ``solve.steps``; at most
+    ``solve.max_steps``) against ``limits.max_steps``: a joint far stiffer than it needs to be
+    (or a tiny block) makes dt so small that the requested model time would take days."""
+    sv = scene.solve
+    if sv.time is not None:
+        steps, key, what = sv.time / dt, "solve.time", f"{sv.time:.4g} s at dt={dt:.4g} s is"
+    elif sv.steps is not None:
+        steps, key, what = float(sv.steps), "solve.steps", "asks for"
+    else:
+        return
+    if sv.max_steps is not None:
+        steps = min(steps, float(sv.max_steps))
+    limit = scene.limits.max_steps
+    if steps > limit:
+        stiff = max(scene.joints, key=lambda j: max(scene.joints[j].kn, scene.joints[j].ks))
+        j = scene.joints[stiff]
+        raise ConfigError([
+            f"{key}: {what} {steps:.4g} steps, more than limits.max_steps = {limit:.4g} "
+            f"(dt={dt:.4g} s is set by the stiffest joint, joints.{stiff}: kn={j.kn:.4g}, "
+            f"ks={j.ks:.4g} Pa/m, and the lightest block; docs/limits.md)"])
+
+
+def _check_start_speeds(scene, specs, glob, dt: float, ctol: float) -> None:
+    """A moving block's start speed (|v| + |w| r) times dt against MAX_STEP_MOTION x CTOL."""
+    moving = np.nonzero(glob.fixed == 0)[0]
+    if len(moving) == 0:
+        return
+    speed = np.linalg.norm(glob.v[moving], axis=1) \
+        + np.linalg.norm(glob.w[moving], axis=1) * glob.radius[moving]
+    k = int(np.argmax(speed))
+    step = float(speed[k]) * dt
+    if step > MAX_STEP_MOTION * ctol:
+        b = int(moving[k])
+        dt_max = MAX_STEP_MOTION * ctol / float(speed[k])
+        raise ConfigError([
+            f"blocks[{specs[b].entry}].velocity: block {specs[b].name!r} starts at "
+            f"{float(speed[k]):.4g} m/s and moves {step:.4g} m in one step (dt={dt:.4g} s), "
+            f"more than {MAX_STEP_MOTION:g} x CTOL = {MAX_STEP_MOTION * ctol:.4g} m: it could "
+            f"pass through a thin block before contact detection sees it; give "
+            f"solve.timestep.dt <= {dt_max:.3g} s (or stiffer joints) (docs/limits.md)"])
 
 
 def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
@@ -286,6 +341,34 @@ def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
             f"(blocks[{specs[worst_b].entry}]): its static overlap m g / (kn A) = {f:.4g} N / "
             f"({kn:.4g} Pa/m x {area:.4g} m2) = {overlap:.4g} m is {worst:.3g} of its size "
             f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g} (docs/limits.md)"])
+
+
+def _check_impact_overlap(scene, specs, glob, joints, group_names) -> None:
+    """A block started at speed v stops against a fixed support after sinking
+    v sqrt(m / (kn A)) into it (the spring takes its kinetic energy, A its largest face, kn the
+    softest joint its group can touch): more than MAX_STATIC_OVERLAP of its size and the
+    contact's common plane can end up beyond the block's middle, which pushes it through."""
+    moving = np.nonzero((glob.fixed == 0) & (np.linalg.norm(glob.v, axis=1) > 0.0))[0]
+    if len(moving) == 0:
+        return
+    soft = _softest_kn_per_group(scene, joints, group_names)
+    worst, vals = 0.0, None
+    for b in moving:
+        kn, jname = soft[int(glob.group[b])]
+        area = float(specs[b].face_areas.max())
+        speed = float(np.linalg.norm(glob.v[b]))
+        depth = speed * math.sqrt(float(glob.mass[b]) / (kn * area))
+        size = specs[b].volume ** (1.0 / 3.0)
+        if depth / size > worst:
+            worst, vals = depth / size, (b, kn, jname, area, speed, depth, size)
+    if worst > MAX_STATIC_OVERLAP:
+        b, kn, jname, area, speed, depth, size = vals
+        raise ConfigError([
+            f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[b].name!r} "
+            f"(blocks[{specs[b].entry}]) started at {speed:.4g} m/s: an impact sinks it "
+            f"v sqrt(m / (kn A)) = {depth:.4g} m into what it hits, {worst:.3g} of its size "
+            f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g}: it could pass through "
+            f"(docs/limits.md)"])
 
 
 def _softest_kn_per_group(scene, joints, group_names) -> list[tuple[float, str]]:

@@ -34,6 +34,34 @@ def deepest_contact(state, gid: int):
     return state.specs[ga].name, state.specs[gb].name, un
 
 
+def step_motion(state, gid: int) -> float:
+    """Block ``gid``'s motion bound in the last step, |dx| + |dtheta| r, from the rank that owns
+    it (collective: every rank gets the owner's answer; 0 if no rank owns it)."""
+    row = state.owned_row(gid)
+    mine = None
+    if row >= 0:
+        b = state.blocks
+        mine = float(np.linalg.norm(b.dx[row]) + np.linalg.norm(b.dtheta[row]) * b.radius[row])
+    found = [m for m in allgather(state.comm, mine) if m is not None]
+    return found[0] if found else 0.0
+
+
+def tunnelling_text(state, gid: int) -> str:
+    """A sentence when block ``gid`` moved further in its last step than the contact search can
+    follow (REMAP_FRACTION x CTOL, see pdem.dynamics.motion.motion_bookkeeping), else ''.
+    Collective."""
+    from ..stepper import REMAP_FRACTION
+
+    step = step_motion(state, gid)
+    limit = REMAP_FRACTION * state.ctol
+    if not (math.isfinite(step) and step > limit):
+        return ""
+    return (f" It moved {step:.3g} m in one step, more than the {limit:.3g} m (CTOL/2) that "
+            f"contact detection can follow: it could pass through a block unseen. Give a "
+            f"smaller solve.timestep.dt (at most {state.dt * limit / step:.3g} s at this speed) "
+            "or stiffer joints, or keep it from falling so far.")
+
+
 def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: int) -> str:
     """The probable cause and the knob that helps, told by where the energy came from.
 
@@ -42,13 +70,14 @@ def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: 
     beyond the work of all forces) and what the contacts made (their work on the blocks plus
     the change of the energy stored in the joints plus what the joints dissipated)."""
     contact = deepest_contact(state, gid)
+    fast = tunnelling_text(state, gid)
     where = ""
     if contact is not None:
         a, b, un = contact
         where = (f" Its deepest contact, {a!r}-{b!r}, overlaps {un:.3g} m "
                  f"({un / state.ctol:.2g} x CTOL).")
     if totals is None or start is None or not all(map(math.isfinite, totals.values())):
-        return (f"{where} Probable cause: timestep {state.dt:.3g} s too large for the joint "
+        return (f"{fast}{where} Probable cause: timestep {state.dt:.3g} s too large for the joint "
                 "stiffness (lower solve.timestep.frac or give a smaller dt) or blocks created "
                 "deeply overlapping.")
     ke0, strain0 = start
@@ -76,4 +105,4 @@ def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: 
     else:
         cause = (" The energy balances, so the speed was put in by the loads (gravity, "
                  "applied forces, prescribed velocities): check them.")
-    return where + budget + cause
+    return fast + where + budget + cause

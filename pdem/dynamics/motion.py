@@ -447,14 +447,23 @@ def stagger_start(m, gravity, dt, scalar_inertia):
 
 
 @kernel
-def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, speed_limit):
+def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, speed_limit,
+                       max_step=math.inf):
     """After :func:`integrate`: accumulate each block's motion bound (eq. 1: centroid motion
     plus rotation times the block radius) into ``u_acc``, ``u_geo``, ``u_mig``, and check the
     state.
 
     Returns ``(bad, u_mig_max)``: the row of the first block with a non-finite position or
-    speed, or a speed above ``speed_limit`` (-1 if none), and the largest ``u_mig`` of the free
-    (not ``fixed``) blocks (0 if none).
+    speed, a speed above ``speed_limit``, or a free block whose motion bound in this one step
+    exceeds ``max_step`` (-1 if none), and the largest ``u_mig`` of the free (not ``fixed``)
+    blocks (0 if none).
+
+    ``max_step``: the motion per step the contact search can follow. The search runs after
+    the step in which a block's ``u_acc`` passes CTOL/2 (pdem.stepper.REMAP_FRACTION), so a
+    pair not yet in contact can overlap by at most the step's motion before its contact exists;
+    a block moving more in one step can land inside or beyond a thin block unseen (tunnelling,
+    tests/extremes/test_extreme_impact.py). Pass ``REMAP_FRACTION * ctol``; the default
+    (infinite) checks nothing.
     """
     bad = -1
     u_max = 0.0
@@ -471,7 +480,8 @@ def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, spe
         if bad < 0:
             speed = math.sqrt(v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])
             if not (math.isfinite(speed) and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1])
-                    and math.isfinite(x[i, 2])) or speed > speed_limit:
+                    and math.isfinite(x[i, 2])) or speed > speed_limit \
+                    or (fixed[i] == 0 and moved > max_step):
                 bad = i
     return bad, u_max
 

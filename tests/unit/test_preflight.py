@@ -105,3 +105,21 @@ def test_valid_scene_still_valid(tmp_path, capsys):
 def test_config_error_is_user_error():
     with pytest.raises(ConfigError, match="limits.max_blocks"):
         preflight(parse_scene(_scene(extra="limits: {max_blocks: 1}\n")), 1)
+
+
+def test_step_count_beyond_limit_refused(tmp_path, capsys):
+    """The implied step count against limits.max_steps, in one `pdem check` line."""
+    rc, _, err = _check(tmp_path, _scene(t="100.0", extra="limits: {max_steps: 1000}\n"), capsys)
+    assert rc == 1 and "solve.time: 100 s at dt=" in err
+    assert "steps, more than limits.max_steps = 1000" in err and "joints.default: kn=1e+09" in err
+    rc, _, _ = _check(tmp_path, _scene(t="100.0", extra="limits: {max_steps: 1000}\n").replace(
+        "solve: {time: 100.0}", "solve: {time: 100.0, max_steps: 500}"), capsys)
+    assert rc == 0
+
+
+def test_fast_start_refused(tmp_path, capsys):
+    """A block started so fast that one step moves it more than CTOL/2."""
+    text = _scene().replace("max: [1, 1, 1.001]}}", "max: [1, 1, 1.001]}, velocity: [0, 0, -500]}")
+    rc, _, err = _check(tmp_path, text, capsys)
+    assert rc == 1 and "blocks[1].velocity: block 'cube' starts at 500 m/s" in err
+    assert "CTOL" in err and err.count("\n  - ") == 1
