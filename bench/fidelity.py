@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -353,6 +354,30 @@ def _pile_measure(sim, quick: bool) -> dict:
     return {"error": abs(err) / put_in, "slipped": t["joint_dissipation"] / put_in}
 
 
+# a 4 x 4 x 4 cube stack settling under local damping: each cube's height against the
+# column's elastic rest (the joint under layer k closed by (n - k) m g / (kn A)), relative to
+# the column's whole compression; the case where holding blocks at rest pays
+SETTLED_N = 4
+
+
+def _settled_scene(quick: bool) -> str:
+    from pdem.cases.stacks import cube_stack_scene
+
+    return cube_stack_scene(SETTLED_N, "fast")
+
+
+def _settled_measure(sim, quick: bool) -> dict:
+    n = SETTLED_N
+    sim.run(steps=3000 if quick else 6000)
+    b = sim.blocks
+    free = b.fixed == 0
+    w = 2500.0 * 9.81 / 1.0e9  # the stack's m g / (kn A)
+    rest = np.arange(n) + 0.5 - np.cumsum([(n - k) * w for k in range(n)])
+    layer = np.round(b.x[free, 2] - 0.5).astype(int)
+    err = float(np.abs(b.x[free, 2] - rest[layer]).max()) / (n * (n + 1) / 2 * w)
+    return {"error": err, "held": int((b.still[free] == 1).sum())}
+
+
 CASES = {c.name: c for c in [
     Case("incline", "sliding acceleration g(sin ψ − cos ψ tan φ), ψ = 20°, φ = 10°",
          "|a/a_exact − 1|, a fitted over t ≥ 0.1 s", _incline_scene, _incline_measure, 5e-3,
@@ -379,6 +404,10 @@ CASES = {c.name: c for c in [
     Case("pile", "20 random polyhedra dropped into a box, undamped: energy balance closes",
          "|balance error| / energy put in, after 1 s (12 blocks, 0.8 s in --quick)",
          _pile_scene, _pile_measure, 1e-2, "test_energy.py::test_undamped_collapses_balance"),
+    Case("settled", f"heights of a {SETTLED_N}³ cube stack at elastic rest after 6000 steps of "
+         "local damping (3000 in --quick)", "max |z − z_rest| / the column's compression",
+         _settled_scene, _settled_measure, 1e-2,
+         "test_inactive.py::test_a_settled_stack_is_held_at_its_elastic_rest"),
 ]}
 
 
@@ -448,8 +477,43 @@ class FeatureToggle:
     reset: Callable[[], None] = field(default=lambda: None)
 
 
-# Filled in by the lead engineer; the page skips the section while this is empty.
-FEATURE_TOGGLES: list[FeatureToggle] = []
+def _generic_kernels(text: str, on: bool) -> str:
+    """Specialised kernels on (the default) or off (``PDEM_GENERIC_KERNELS=1``); the comment
+    keeps the two runs apart in the result cache."""
+    os.environ["PDEM_GENERIC_KERNELS"] = "0" if on else "1"
+    return text + ("" if on else "\n# PDEM_GENERIC_KERNELS=1\n")
+
+
+def _clear_generic() -> None:
+    os.environ.pop("PDEM_GENERIC_KERNELS", None)
+
+
+INACTIVE = {"speed": 1.0e-4, "steps": 100, "force": 0.01}
+
+FEATURE_TOGGLES: list[FeatureToggle] = [
+    FeatureToggle(
+        "fused inner loop",
+        "`solve.fused` (default on): a serial run marches the steps between Python-level events "
+        "in one compiled call (pdem/cycle.py). The result is bitwise the same; the CPU time "
+        "is what changes. bench/fused_loop.py measures the small scenes of the issue "
+        "(1 and 10 blocks).",
+        lambda text, on: set_key(text, "solve.fused", on), ("static", "static-unequal", "pile")),
+    FeatureToggle(
+        "kernel specialisation",
+        "Frictional Coulomb joints (no cohesion, tension or dilation) compile a law without "
+        "those branches (default); `PDEM_GENERIC_KERNELS=1` compiles the general one. "
+        "Bitwise the same result (tests/unit/test_specialised.py). Damping modes and joint "
+        "laws were already compiled per scene (only the used ones).",
+        _generic_kernels, ("static", "pile", "settled"), reset=_clear_generic),
+    FeatureToggle(
+        "inactive blocks",
+        f"`solve.inactive: {INACTIVE}` (default off): blocks at rest are held and joints "
+        "between held or fixed blocks keep their forces (pdem/dynamics/inactive.py). Not "
+        "bitwise: a held block ignores an unbalanced force below 1% of its weight; the error "
+        "column says what that costs.",
+        lambda text, on: set_key(text, "solve.inactive", INACTIVE if on else None),
+        ("static", "settled", "pile")),
+]
 
 
 # ------------------------------------------------------------------------------ running
