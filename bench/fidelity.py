@@ -507,7 +507,8 @@ FEATURE_TOGGLES: list[FeatureToggle] = [
         _generic_kernels, ("static", "pile", "settled"), reset=_clear_generic),
     FeatureToggle(
         "inactive blocks",
-        f"`solve.inactive: {INACTIVE}` (default off): blocks at rest are held and joints "
+        "`solve.inactive: {speed: 1.0e-4, steps: 100, force: 0.01}` (default off): blocks "
+        "at rest are held and joints "
         "between held or fixed blocks keep their forces (pdem/dynamics/inactive.py). Not "
         "bitwise: a held block ignores an unbalanced force below 1% of its weight; the error "
         "column says what that costs.",
@@ -829,7 +830,25 @@ def write_doc(results: dict, toggles: dict, quick: bool, runtime: float, date: s
         for t in FEATURE_TOGGLES:
             lines += [f"### {t.name}", "", t.about, "", knob_table(toggles[t.name], t.name, quick),
                       ""]
+    lines += ["## Measured elsewhere", "", ELSEWHERE, ""]
     return "\n".join(lines) + "\n"
+
+
+# knobs and features whose measurement needs its own scene or a long run (no numbers here:
+# they are in the pages named, each from its own script)
+ELSEWHERE = """\
+* **Partial mass scaling** (`solve.mass_scaling: {timestep: DT}`): a 1 cm pebble beside 1 m \
+blocks no longer sets the step of the whole scene; `bench/mass_scaling.py` counts the steps with \
+and without it, and docs/validation.md section 11 gives the error it makes (the scaled blocks \
+keep their weight but accelerate factor times slower: use it for blocks whose own motion does \
+not matter). The start-up log names the block that limits the step and suggests a DT.
+* **The compiled loop on small scenes**: `bench/fused_loop.py` (1 and 10 blocks, steps/s off \
+and on, and that the states are bitwise equal); the cube stack `bench/cube_stack.py`. Figures \
+in docs/validation.md, Benchmarks.
+* **The extremes**: what pdem runs and what it refuses (stiffness 1e4-1e14 Pa/m, size ratio \
+1:100, mass ratio 1e6, aspect 1:100, 100 m/s impacts, friction 0-89 deg, 100-block columns, \
+1e6 undamped steps, gravity 1e-6-1e5 m/s2, coordinates at 1e6 m): docs/limits.md, "The \
+envelope", from tests/extremes."""
 
 
 # Prose per knob: qualitative, no numbers (those come from the tables). Written against the

@@ -69,7 +69,8 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
         time += dt
         n_steps += 1
         bad, u_mig_max = motion.motion_bookkeeping(m.dx, m.dtheta, radius, m.fixed, u_acc, u_geo,
-                                           u_mig, m.v, m.x, speed_limit + speed_growth * time)
+                                           u_mig, m.v, m.x, speed_limit + speed_growth * time,
+                                           remap_at)
         rotation_matrices(q, R)
         bodies.force[:] = 0.0
         bodies.moment[:] = 0.0

@@ -273,7 +273,8 @@ class Stepper:
             r = s.resolved
             self._bad, self._u_mig_max = motion.motion_bookkeeping(
                 b.dx[:n], b.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n], b.u_geo[:n],
-                b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time)
+                b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time,
+                REMAP_FRACTION * s.ctol)  # a block moving more in a step could tunnel
         with tm.phase("halo"):
             s.halo.forward(b)
         rotation_matrices(b.q, b.R)

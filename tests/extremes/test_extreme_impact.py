@@ -32,7 +32,6 @@ from pdem.config import preflight as pf
 from pdem.dynamics import motion
 from pdem.dynamics.motion import motion_bookkeeping
 from pdem.errors import SimulationError
-from pdem.stepper import REMAP_FRACTION
 
 V = 100.0
 
@@ -151,26 +150,14 @@ solve: {time: 0.15, damping: none}
 """
 
 
-def test_run_time_guard_stops_a_block_before_it_can_tunnel(monkeypatch):
-    """With motion_bookkeeping given max_step = REMAP_FRACTION x CTOL (the change pdem.stepper
-    needs, emulated here), the falling cube is stopped at 16 m/s, 4.9 m above the plate, by a
-    SimulationError naming it and what to change, instead of passing through the plate."""
-    sim = make_simulation(FALL)
-    orig = motion.motion_bookkeeping
-    limit = REMAP_FRACTION * sim.state.ctol
-    monkeypatch.setattr(motion, "motion_bookkeeping", lambda *a: orig(*a[:10], limit))
+@pytest.mark.parametrize("fused", [True, False])
+def test_run_time_guard_stops_a_block_before_it_can_tunnel(fused):
+    """The stepper passes max_step = REMAP_FRACTION x CTOL to motion_bookkeeping: the falling
+    cube is stopped at 16 m/s, 4.9 m above the plate, by a SimulationError naming it and what
+    to change, instead of passing through the plate (compiled loop and step by step alike)."""
+    sim = make_simulation(FALL.replace("damping: none}", f"damping: none, fused: {str(fused).lower()}}}"))
     with pytest.raises(SimulationError) as e:
-        while sim.time < 0.15:  # step by step: a compiled (fused) loop would not see the patch
-            sim.advance()
+        sim.run()
     msg = str(e.value)
     assert "block 'cube'" in msg and "(CTOL/2) that contact detection can follow" in msg
     assert sim.blocks.x[1, 2] > 4.0
-
-
-@pytest.mark.xfail(strict=False, reason="pdem.stepper does not pass max_step to "
-                   "motion_bookkeeping yet: the cube passes through the plate (docs/limits.md)")
-def test_stepper_guards_against_run_time_tunnelling():
-    """What the stepper should do by itself: refuse to let the falling cube through."""
-    sim = make_simulation(FALL)
-    with pytest.raises(SimulationError, match="contact detection can follow"):
-        sim.run()
