@@ -48,7 +48,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
                 q, R, bodies, pairs, subs, joints, c_moved, c_warm, m_true, calm, still,
                 speed, sleep_steps, force_frac, sc_fn, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
-                step, time, max_steps, stop_step, stop_time, ratio_target, ref_force):
+                step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step):
     """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max)``, the
     last two from the last step's :func:`pdem.dynamics.motion.motion_bookkeeping`.
 
@@ -70,7 +70,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
         n_steps += 1
         bad, u_mig_max = motion.motion_bookkeeping(m.dx, m.dtheta, radius, m.fixed, u_acc, u_geo,
                                            u_mig, m.v, m.x, speed_limit + speed_growth * time,
-                                           remap_at)
+                                           max_step)
         rotation_matrices(q, R)
         bodies.force[:] = 0.0
         bodies.moment[:] = 0.0

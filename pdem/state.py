@@ -23,7 +23,7 @@ from .contact.cellspace import CellSpace
 from .contact.detect import Planes, refresh_contacts
 from .contact.laws import joint_table
 from .dynamics.damping import DAMPING
-from .dynamics.kinematics import refresh_pose
+from .dynamics.kinematics import refresh_pose, thinnest_width
 from .errors import UserError
 from .io.checkpoint import new_run_id
 from .model.build import block_store, expand_blocks
@@ -34,6 +34,21 @@ from .parallel.migrate import rebuild
 from .parallel.mpi import allgather, broadcast
 from .timers import Timers
 
+# a block may move up to this fraction of the thinnest piece's width in one step (see
+# max_step_motion)
+STEP_WIDTH_FRACTION = 0.2
+
+
+def max_step_motion(ctol: float, thinnest: float) -> float:
+    """The step motion the run-time tunnelling guard allows: CTOL/2 (pdem.stepper's remap
+    trigger: up to it every pair closing in is found before it touches) or, if larger, a fifth
+    of the thinnest piece's width. A step larger than CTOL/2 only delays a contact: the pair is
+    first seen already overlapping by up to the two blocks' motion in that step; a block passes
+    through another only when that overlap reaches about half the thinner one's width (the
+    common plane then lies past its middle and pushes it out on the far side)."""
+    from .stepper import REMAP_FRACTION
+
+    return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
 
 class ModelState:
     """The model on one rank; construct with :meth:`create` (collective)."""
@@ -77,6 +92,11 @@ class ModelState:
         self.halo = None
         self.cells = None
         self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
+        # the largest motion of a block in one step that cannot take it through another block
+        # unseen (pdem.dynamics.motion.motion_bookkeeping)
+        self.max_step = max_step_motion(resolved.ctol, thinnest_width(
+            glob.vert_start, glob.verts_local, glob.face_start, glob.normals_local,
+            glob.offsets_local))
 
     @staticmethod
     def create(scene: Scene, comm, *, check_overlaps: bool = True) -> ModelState:

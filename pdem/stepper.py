@@ -248,7 +248,7 @@ class Stepper:
                 r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,
                 s.step, s.time, max_steps, NO_STEP if stop_step is None else stop_step,
                 math.inf if stop_time is None else stop_time,
-                -1.0 if ratio_target is None else ratio_target, r.ref_force)
+                -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step)
         self._second_half()
         return steps
 
@@ -274,7 +274,7 @@ class Stepper:
             self._bad, self._u_mig_max = motion.motion_bookkeeping(
                 b.dx[:n], b.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n], b.u_geo[:n],
                 b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time,
-                REMAP_FRACTION * s.ctol)  # a block moving more in a step could tunnel
+                s.max_step)  # a block moving more in a step could tunnel
         with tm.phase("halo"):
             s.halo.forward(b)
         rotation_matrices(b.q, b.R)

@@ -48,16 +48,14 @@ def step_motion(state, gid: int) -> float:
 
 def tunnelling_text(state, gid: int) -> str:
     """A sentence when block ``gid`` moved further in its last step than the contact search can
-    follow (REMAP_FRACTION x CTOL, see pdem.dynamics.motion.motion_bookkeeping), else ''.
-    Collective."""
-    from ..stepper import REMAP_FRACTION
-
+    follow (``state.max_step``, see pdem.state.max_step_motion and
+    pdem.dynamics.motion.motion_bookkeeping), else ''. Collective."""
     step = step_motion(state, gid)
-    limit = REMAP_FRACTION * state.ctol
+    limit = state.max_step
     if not (math.isfinite(step) and step > limit):
         return ""
-    return (f" It moved {step:.3g} m in one step, more than the {limit:.3g} m (CTOL/2) that "
-            f"contact detection can follow: it could pass through a block unseen. Give a "
+    return (f" It moved {step:.3g} m in one step, more than the {limit:.3g} m that contact "
+            f"detection can follow: it could pass through a block unseen. Give a "
             f"smaller solve.timestep.dt (at most {state.dt * limit / step:.3g} s at this speed) "
             "or stiffer joints, or keep it from falling so far.")
 

@@ -13,7 +13,7 @@ moved or a load changed, and the block wakes.
 
 This trades accuracy for speed: a held block ignores unbalanced forces below the threshold
 (docs/fidelity.md measures what that costs on a settled pile). The decisions use only the
-block's own state and its ghosts' (``calm`` and ``still`` travel with the halo), so results stay
+block's own state and its ghosts' (``still`` travels with the halo), so results stay
 bitwise the same on any rank count and across restarts (both fields are checkpointed).
 """
 

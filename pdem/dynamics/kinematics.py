@@ -19,6 +19,22 @@ def rotation_matrices(q, out):
 
 
 @kernel
+def thinnest_width(vert_start, verts_local, face_start, normals_local, offsets_local) -> float:
+    """The smallest width of any convex piece: over its faces, the distance from the face's
+    plane to the piece's farthest vertex behind it (inf without pieces)."""
+    out = np.inf
+    for p in range(vert_start.shape[0] - 1):
+        for f in range(face_start[p], face_start[p + 1]):
+            lo = np.inf
+            for v in range(vert_start[p], vert_start[p + 1]):
+                d = normals_local[f, 0] * verts_local[v, 0] + normals_local[f, 1] * \
+                    verts_local[v, 1] + normals_local[f, 2] * verts_local[v, 2]
+                lo = min(lo, d)
+            out = min(out, offsets_local[f] - lo)
+    return out
+
+
+@kernel
 def world_vertices(x, R, piece_block, piece_center, piece_x, vert_start, verts_local,
                    verts_world):
     """World piece centres and vertices from the pose (no drift: always from the body-frame

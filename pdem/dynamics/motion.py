@@ -462,8 +462,8 @@ def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, spe
     the step in which a block's ``u_acc`` passes CTOL/2 (pdem.stepper.REMAP_FRACTION), so a
     pair not yet in contact can overlap by at most the step's motion before its contact exists;
     a block moving more in one step can land inside or beyond a thin block unseen (tunnelling,
-    tests/extremes/test_extreme_impact.py). Pass ``REMAP_FRACTION * ctol``; the default
-    (infinite) checks nothing.
+    tests/extremes/test_extreme_impact.py). The stepper passes ``state.max_step``
+    (pdem.state.max_step_motion); the default (infinite) checks nothing.
     """
     bad = -1
     u_max = 0.0

@@ -74,7 +74,7 @@ BLOCK: tuple[Field, ...] = (
           halo=True),
     Field("u_mig", (), F, "m", "motion since the last ghost rebuild", **_D),
     Field("calm", (), I32, "1", "consecutive steps at rest; inactive from solve.inactive.steps "
-          "(pdem.dynamics.inactive)", **_D, halo=True),
+          "(pdem.dynamics.inactive)", **_D),
     Field("still", (), U8, "1", "1: fixed or held inactive this step (derived from fixed and "
           "calm; what the integrator and the joints read)", **_D, halo=True),
     Field("out", (), U8, "1", "taken out of the model (left the domain, excavated): 1 frozen, "

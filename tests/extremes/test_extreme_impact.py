@@ -159,5 +159,5 @@ def test_run_time_guard_stops_a_block_before_it_can_tunnel(fused):
     with pytest.raises(SimulationError) as e:
         sim.run()
     msg = str(e.value)
-    assert "block 'cube'" in msg and "(CTOL/2) that contact detection can follow" in msg
+    assert "block 'cube'" in msg and "m that contact detection can follow" in msg
     assert sim.blocks.x[1, 2] > 4.0

@@ -22,7 +22,7 @@ def test_declared_travel_sets_are_consistent():
     # everything a checkpoint restores must also move with a block (or be rebuilt: static)
     assert set(F.CHECKPOINT) <= set(F.MIGRATE) | set(F.STATIC)
     # the halo row is exactly the declared halo fields, and ghosts get the pose they render
-    assert ROW == sum(f.width for f in F.HALO) == 18
+    assert ROW == sum(f.width for f in F.HALO) == 19
     assert {"x", "q", "v", "w", "dtheta"} <= {f.name for f in F.HALO}
     assert {f.output for f in F.OUTPUT} == {"centroid", "orientation", "velocity",
                                             "angular_velocity", "removed", "stage_origin"}
