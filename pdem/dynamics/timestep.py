@@ -142,13 +142,20 @@ def critical_steps(masses, stiffnesses, frac: float = 0.1, inertias=None, radii=
     out = np.full(len(m), np.inf)
     sel = k > 0.0
     out[sel] = np.sqrt(m[sel] * ms[sel] / k[sel])
-    if inertias is not None and radii is not None:
-        i_min = np.asarray(inertias, dtype=np.float64).min(axis=1) * ms
-        r = np.asarray(radii, dtype=np.float64)
-        kr = k * r * r
-        rot = kr > 0.0
-        out[rot] = np.minimum(out[rot], np.sqrt(i_min[rot] / kr[rot]))
-    return frac * 2.0 * out
+    return frac * 2.0 * _rotational(out, k, ms, inertias, radii)
+
+
+def _rotational(step, k, ms, inertias, radii) -> np.ndarray:
+    """``step`` (per block, in place) lowered to each block's rotational bound
+    ``sqrt(I_min / (K r^2))`` where it has one (module docstring)."""
+    if inertias is None or radii is None:
+        return step
+    i_min = np.asarray(inertias, dtype=np.float64).min(axis=1) * ms
+    r = np.asarray(radii, dtype=np.float64)
+    kr = k * r * r
+    rot = kr > 0.0
+    step[rot] = np.minimum(step[rot], np.sqrt(i_min[rot] / kr[rot]))
+    return step
 
 
 def limiting_block(masses, stiffnesses, frac: float = 0.1, inertias=None, radii=None,
@@ -163,11 +170,5 @@ def limiting_block(masses, stiffnesses, frac: float = 0.1, inertias=None, radii=
     free = np.nonzero(_free(n, fixed))[0]
     if not len(free) or k[free].max() <= 0.0:
         return -1
-    step = np.sqrt(m * ms / k[free].max())
-    if inertias is not None and radii is not None:
-        i_min = np.asarray(inertias, dtype=np.float64).min(axis=1) * ms
-        r = np.asarray(radii, dtype=np.float64)
-        kr = k * r * r
-        rot = kr > 0.0
-        step[rot] = np.minimum(step[rot], np.sqrt(i_min[rot] / kr[rot]))
+    step = _rotational(np.sqrt(m * ms / k[free].max()), k, ms, inertias, radii)
     return int(free[np.argmin(step[free])])

@@ -113,16 +113,23 @@ def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     """Normal force and stored spring energy of a sub-contact in the given state: the normal
     spring ``kn A (un + dil)`` in compression, or in tension while the bond holds, and the
     shear spring ``|fs|^2 / (2 ks A)``."""
-    # A sub-contact without positive area (a corner share can round to -1e-18 m2) stores
-    # nothing; written without branches (this kernel is inlined): the weights are 0 or 1.
-    has_area = area > 0.0
-    a = max(area, 1e-300)
-    kna = p.kn[j] * a
     # tension only while bonded
     bonded = ((state & FAILED) == 0) & (p.tension[j] > 0.0)
-    fn = max(kna * (un + dil), -1e308 * bonded) * has_area
+    return _springs(p.kn[j], p.ks[j], un, dil, fx, fy, fz, area, -1e308 * bonded)
+
+
+@inline_kernel
+def _springs(kn, ks, un, dil, fx, fy, fz, area, fn_min):
+    """(normal force, stored energy) of the joint's two springs, the normal force at least
+    ``fn_min`` (a bond's tension, or -0 without one). A sub-contact without positive area (a
+    corner share can round to -1e-18 m2) stores nothing; written without branches (this kernel
+    is inlined): the weights are 0 or 1."""
+    has_area = area > 0.0
+    a = max(area, 1e-300)
+    kna = kn * a
+    fn = max(kna * (un + dil), fn_min) * has_area
     return fn, (0.5 * fn * fn / kna + 0.5 * (fx * fx + fy * fy + fz * fz) * has_area
-                / (p.ks[j] * a))
+                / (ks * a))
 
 
 # Frictional joints (no cohesion, tension or dilation: the common case) compile a law without
@@ -168,12 +175,7 @@ def friction_update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy
 @inline_kernel
 def friction_energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     """:func:`energy` for a joint without tension (never bonded)."""
-    has_area = area > 0.0
-    a = max(area, 1e-300)
-    kna = p.kn[j] * a
-    fn = max(kna * (un + dil), -0.0) * has_area
-    return fn, (0.5 * fn * fn / kna + 0.5 * (fx * fx + fy * fy + fz * fz) * has_area
-                / (p.ks[j] * a))
+    return _springs(p.kn[j], p.ks[j], un, dil, fx, fy, fz, area, -0.0)
 
 
 FRICTION_LAW = JointLaw("coulomb", Params, (), friction_table, friction_update, friction_energy)
