@@ -70,11 +70,15 @@ def glue_registered(monkeypatch):
     from numba.core.caching import NullCache
     from numba.core.dispatcher import Dispatcher
 
+    from pdem import cycle
     from pdem.contact import forces
 
-    for kernel_ in vars(forces).values():
-        if isinstance(kernel_, Dispatcher):
-            monkeypatch.setattr(kernel_, "_cache", NullCache())
+    # every kernel whose argument types include the joint table: the force kernels and the
+    # compiled loop that calls them (pdem.cycle)
+    for module in (forces, cycle):
+        for kernel_ in vars(module).values():
+            if isinstance(kernel_, Dispatcher):
+                monkeypatch.setattr(kernel_, "_cache", NullCache())
     monkeypatch.setitem(JOINT_LAWS._entries, "glue", GLUE)
     import pdem.config.schema as schema
 
