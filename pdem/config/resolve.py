@@ -18,6 +18,7 @@ from ..dynamics.damping import DAMPING
 from ..dynamics.kinematics import refresh_pose
 from ..dynamics.timestep import auto_timestep, critical_steps, limiting_block, mass_scale_factors
 from ..errors import UserError
+from ..geometry import face_areas
 from ..parallel.decomposition import choose_dims
 from .schema import MassScaling
 
@@ -73,6 +74,7 @@ def _estimated_stiffness(specs, joints) -> np.ndarray:
     cube): the timestep must be stable before the first contact forms, and must not depend
     on which contacts a rank holds."""
     kmax = float(np.maximum(joints.kn, joints.ks).max())
+    face_areas([p for s in specs for p in s.pieces])  # every piece's areas in one batch
     surf = np.array([s.face_areas.sum() for s in specs])
     # an absurd stiffness overflows to inf (dt = 0), refused by preflight.check_derived with
     # the joint named; numpy's warning would only add noise before that message

@@ -15,6 +15,7 @@ from ..geometry import (
     GeometryError,
     box,
     check_convex,
+    face_areas,
     from_planes,
     from_vertices,
     prism,
@@ -70,7 +71,7 @@ class BlockSpec:
 
     @property
     def face_areas(self) -> np.ndarray:
-        return np.concatenate([[p.face_area(f) for f in range(p.n_faces)] for p in self.pieces])
+        return np.concatenate([p.face_areas() for p in self.pieces])
 
     def principal_frame(self):
         """(body-frame pieces, centroid, R, principal moments per unit density) of the rigid
@@ -87,6 +88,13 @@ class BlockSpec:
         if np.linalg.det(R) < 0.0:
             R[:, 2] = -R[:, 2]
         return [p.transformed(R.T, -c @ R) for p in self.pieces], c, R, moments
+
+
+def spec_face_areas(specs: list[BlockSpec]) -> list[np.ndarray]:
+    """Face areas of every block (its pieces' faces in order), computed in one batch for all
+    the blocks' pieces (pdem.geometry.polyhedron.face_areas), then kept on the pieces."""
+    face_areas([p for s in specs for p in s.pieces])
+    return [s.face_areas for s in specs]
 
 
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
