@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -188,14 +189,39 @@ def _planes(p):
 
 
 def _array(a):
+    """The members of ``base.transformed(np.eye(3), offset)`` (x fastest), computed for all
+    members at once: the rotated base once, then per member the same additions and
+    matrix-vector products (stacked), so bitwise the same shapes as one call per member."""
     base = box(a.box.min, a.box.max)
+    eye = np.eye(3)
+    base.transformed(eye, np.zeros(3))  # the same checks as a call per member
+    nx, ny, nz = a.count
+    iz, iy, ix = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    idx = np.stack([ix.ravel(), iy.ravel(), iz.ravel()], axis=1).astype(float)
+    offs = idx * np.array(a.spacing, float)
+    verts_r = base.vertices @ eye.T
+    normals = _frozen(base.normals @ eye.T)
+    centroid_r = eye @ base.centroid
+    inertia = _frozen(eye @ base.inertia @ eye.T)
     k = 0
-    for iz in range(a.count[2]):
-        for iy in range(a.count[1]):
-            for ix in range(a.count[0]):
-                off = np.array([ix, iy, iz], float) * np.array(a.spacing)
-                yield k, base.transformed(np.eye(3), off)
-                k += 1
+    for c0 in range(0, len(offs), _ARRAY_CHUNK):
+        t = offs[c0:c0 + _ARRAY_CHUNK]
+        verts = _frozen(verts_r + t[:, None, :])
+        stacked = np.ascontiguousarray(np.broadcast_to(normals, (len(t),) + normals.shape))
+        offsets = _frozen(base.offsets + (stacked @ t[:, :, None])[:, :, 0])
+        cents = _frozen(centroid_r + t)
+        for j in range(len(t)):
+            yield k, dataclasses.replace(base, vertices=verts[j], normals=normals,
+                                         offsets=offsets[j], centroid=cents[j], inertia=inertia)
+            k += 1
+
+
+_ARRAY_CHUNK = 1 << 16
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
 
 
 def _random(r):
