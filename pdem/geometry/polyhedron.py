@@ -355,7 +355,11 @@ def face_areas(polys) -> list[np.ndarray]:
         verts = np.concatenate([p.vertices for p in todo])
         voff = np.cumsum(nv) - nv
         fverts = np.concatenate([p.face_verts for p in todo]) + np.repeat(voff, nfv)
-        counts = np.concatenate([np.diff(p.face_start) for p in todo])  # vertices per face
+        # vertices per face: the differences of the concatenated face_start, less the one
+        # across each polyhedron's end
+        fs = np.concatenate([p.face_start for p in todo])
+        ends = np.cumsum(nf + 1) - 1
+        counts = np.delete(np.diff(fs), ends[:-1])
         fstart = np.cumsum(counts) - counts
         areas = np.empty(len(counts))
         for k in np.unique(counts):

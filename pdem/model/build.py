@@ -16,7 +16,6 @@ from ..geometry import (
     GeometryError,
     box,
     check_convex,
-    face_areas,
     from_planes,
     from_vertices,
     prism,
@@ -89,13 +88,6 @@ class BlockSpec:
         if np.linalg.det(R) < 0.0:
             R[:, 2] = -R[:, 2]
         return [p.transformed(R.T, -c @ R) for p in self.pieces], c, R, moments
-
-
-def spec_face_areas(specs: list[BlockSpec]) -> list[np.ndarray]:
-    """Face areas of every block (its pieces' faces in order), computed in one batch for all
-    the blocks' pieces (pdem.geometry.polyhedron.face_areas), then kept on the pieces."""
-    face_areas([p for s in specs for p in s.pieces])
-    return [s.face_areas for s in specs]
 
 
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
