@@ -212,6 +212,17 @@ class ConvexPolyhedron:
             raise GeometryError(f"face_tag must be {self.n_faces} integers, got {tag.dtype} {tag.shape}")
         return dataclasses.replace(self, face_tag=_readonly(tag, np.int64))
 
+    def moved(self, **fields) -> ConvexPolyhedron:
+        """Copy with the given fields replaced, as ``dataclasses.replace`` (no check), for a
+        builder that computed them from this polyhedron by a rigid motion (read-only arrays it
+        owns): a fraction of ``replace``'s time, for the members of a large array."""
+        new = object.__new__(ConvexPolyhedron)
+        d = new.__dict__
+        d.update(self.__dict__)
+        d.pop("_face_areas", None)  # the cache is the moved shape's own
+        d.update(fields)
+        return new
+
     # ------------------------------------------------------------------ sizes
     @property
     def n_vertices(self) -> int:

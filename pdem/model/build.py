@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -203,8 +202,8 @@ def _array(a):
         offsets = _frozen(base.offsets + (stacked @ t[:, :, None])[:, :, 0])
         cents = _frozen(centroid_r + t)
         for j in range(len(t)):
-            yield k, dataclasses.replace(base, vertices=verts[j], normals=normals,
-                                         offsets=offsets[j], centroid=cents[j], inertia=inertia)
+            yield k, base.moved(vertices=verts[j], normals=normals, offsets=offsets[j],
+                                centroid=cents[j], inertia=inertia)
             k += 1
 
 
@@ -302,7 +301,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
     n_pieces = len(pieces)
     piece_start = np.zeros(n + 1, np.int64)
     np.cumsum([len(s.pieces) for s in specs], out=piece_start[1:])
-    counts = np.array([(p.n_vertices, p.n_faces, len(p.face_verts), len(p.edges))
+    counts = np.array([(len(p.vertices), len(p.face_start) - 1, len(p.face_verts), len(p.edges))
                        for p in pieces], np.int64).reshape(-1, 4)
     starts = np.zeros((n_pieces + 1, 4), np.int64)
     np.cumsum(counts, axis=0, out=starts[1:])
@@ -335,15 +334,13 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
     arr["owned"][:] = 1
     arr["x0"][:] = arr["x"]
     arr["x_stage"][:] = arr["x"]
-    # the same R gives the same quaternion: blocks of one shape share a few distinct frames
-    quats: dict[bytes, np.ndarray] = {}
+    # one quaternion per distinct R (bitwise): blocks of one shape share a few frames
     for rows, _, R, _, _, _, _ in frames:
-        for r, Rb in zip(np.atleast_1d(rows), R.reshape(-1, 3, 3), strict=True):
-            key = Rb.tobytes()
-            q = quats.get(key)
-            if q is None:
-                q = quats[key] = quat_from_matrix(Rb)
-            arr["q"][r] = q
+        R = R.reshape(-1, 3, 3)
+        _, first, inverse = np.unique(R.reshape(len(R), 9).view(np.uint64), axis=0,
+                                      return_index=True, return_inverse=True)
+        q = np.array([quat_from_matrix(R[i]) for i in first])
+        arr["q"][rows] = q[inverse.ravel()].reshape(-1, 4) if np.ndim(rows) else q[0]
     rho = np.array([scene.materials[s.material].density for s in specs], float)
     arr["mass"][:] = rho * np.array([s.volume for s in specs], float)
     arr["inertia"][:] *= rho[:, None]
@@ -366,13 +363,18 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
     v0 = vert_start[:-1]
     face_verts = np.concatenate([p.face_verts for p in pieces]) + np.repeat(v0, counts[:, 2]) \
         if pieces else np.zeros(0, np.int64)
-    fsizes = np.concatenate([np.diff(p.face_start) for p in pieces]) if pieces \
-        else np.zeros(0, np.int64)
+    # a face's vertex count: the difference of the concatenated face_start, less the one
+    # across each piece's end; their running sum is fvert_start
+    fs = np.concatenate([p.face_start for p in pieces]) if pieces else np.zeros(1, np.int64)
+    fsizes = np.delete(np.diff(fs), np.cumsum(counts[:, 1] + 1)[:-1] - 1)
     fvert_start = np.zeros(len(fsizes) + 1, np.int64)
     np.cumsum(fsizes, out=fvert_start[1:])
     edges = np.concatenate([p.edges for p in pieces]).reshape(-1, 2) \
         + np.repeat(v0, counts[:, 3])[:, None] if pieces else np.zeros((0, 2), np.int64)
-    tags = [p.face_tag if p.face_tag is not None else np.full(p.n_faces, -1) for p in pieces]
+    face_tag = np.full(starts[-1, 1], -1, np.int32)  # -1: a face no cut made
+    for k, p in enumerate(pieces):
+        if p.face_tag is not None:
+            face_tag[face_start[k]:face_start[k + 1]] = p.face_tag
     edirs, edir_start = _edge_directions(verts_local, edges.astype(np.int64), edge_start)
     return BlockStore(arr, dict(
         piece_start=piece_start,
@@ -386,7 +388,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
         verts_local=verts_local,
         verts_world=np.zeros_like(verts_local),
         face_start=face_start.copy(),
-        face_tag=np.concatenate(tags).astype(np.int32) if tags else np.zeros(0, np.int32),
+        face_tag=face_tag,
         fvert_start=fvert_start,
         face_verts=face_verts.astype(np.int64),
         normals_local=normals_local,
@@ -438,14 +440,19 @@ def _edge_directions(verts: np.ndarray, edges: np.ndarray, edge_start: np.ndarra
     for m in np.unique(n_edges):
         sel = np.nonzero(n_edges == m)[0]
         D = d[edge_start[sel, None] + np.arange(m)]  # (pieces, m, 3)
-        kept = np.zeros((len(sel), m), bool)
+        # pieces of one shape often have bitwise the same directions: decide each distinct
+        # set once (the same operands give the same decisions)
+        _, first, inverse = np.unique(D.reshape(len(sel), -1).view(np.uint64), axis=0,
+                                      return_index=True, return_inverse=True)
+        D = D[first]
+        kept = np.zeros((len(first), m), bool)
         for i in range(m):
-            merged = np.zeros(len(sel), bool)
+            merged = np.zeros(len(D), bool)
             for j in range(i):  # an earlier kept direction parallel to this one
                 dot = np.matmul(D[:, i, None, :], D[:, j, :, None])[:, 0, 0]
                 merged |= kept[:, j] & (np.abs(np.abs(dot) - 1.0) < _PARALLEL_TOL)
             kept[:, i] = ~merged
-        keep[edge_start[sel, None] + np.arange(m)] = kept
+        keep[edge_start[sel, None] + np.arange(m)] = kept[inverse.ravel()]
     edir_start = np.zeros(len(edge_start), np.int64)
     piece_of = np.repeat(np.arange(len(n_edges)), n_edges)
     np.cumsum(np.bincount(piece_of[keep], minlength=len(n_edges)), out=edir_start[1:])
