@@ -276,7 +276,9 @@ def _force(spec, arr, r):
 
 
 # Conditions on blocks by scene key: each sets the block's static fields (pdem.model.fields)
-# from its ``blocks[i]`` entry; the motion kernel reads those fields.
+# from its ``blocks[i]`` entry; the motion kernel reads those fields. ``apply(spec, arr, r)``
+# is called once per entry with ``r`` the index array of all its blocks' rows (an array's
+# members at once), so it must assign with numpy indexing, not take ``r`` as one int.
 BLOCK_CONDITIONS: Registry = Registry("block condition")
 for _name, _apply in (("fixed", _fixed), ("velocity", _velocity), ("force", _force)):
     BLOCK_CONDITIONS.register(_name, _apply)
