@@ -28,6 +28,7 @@ from .errors import UserError
 from .io.checkpoint import new_run_id
 from .model.build import block_store, expand_blocks
 from .model.contacts import ContactStore
+from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE
 from .parallel.decomposition import Decomposition
 from .parallel.migrate import rebuild
@@ -194,15 +195,28 @@ class ModelState:
 
     # ------------------------------------------------------------------ start checks
     def check_initial_overlaps(self):
-        """Blocks interpenetrating at start are an input error, named by block."""
+        """Blocks interpenetrating at start are an input error, named by block (collective:
+        each rank checks a share of the candidate pairs, every rank raises alike)."""
         g = self.glob
         tol = self.resolved.overlap_tolerance
         cells = CellSpace(g.lo, g.hi, self.resolved.cell_size)
         qi, qj = cells.candidates(g.piece_lo, g.piece_hi, np.ones(g.n_pieces, np.uint8))
         other = g.piece_block[qi] != g.piece_block[qj]  # a joined block's pieces touch
         qi, qj = qi[other], qj[other]
-        if len(qi) == 0:
-            return
+        # in contact-key order (the probe's), then this rank's share: the messages gathered in
+        # rank order are those of one rank checking every pair
+        order = np.argsort(g.piece_gid[qi] * KEY_SHIFT + g.piece_gid[qj], kind="stable")
+        size, rank = self.comm.size, self.comm.rank
+        share = order[len(order) * rank // size:len(order) * (rank + 1) // size]
+        msgs = self._overlaps(qi[share], qj[share], tol) if len(share) else []
+        msgs = [m for part in allgather(self.comm, msgs) for m in part][:10]
+        if msgs:
+            raise ConfigError(msgs)
+
+    def _overlaps(self, qi, qj, tol) -> list[str]:
+        """Messages for the first 10 of the candidate piece pairs ``qi, qj`` that overlap by
+        more than ``tol`` at start."""
+        g = self.glob
         pi, pj = g.piece_block[qi], g.piece_block[qj]
         probe = ContactStore.empty(self.joints.hist_width).with_new_pairs(
             ia=pi, ib=pj, ka=qi, kb=qj, ga=g.gid[pi], gb=g.gid[pj], pga=g.piece_gid[qi],
@@ -215,13 +229,12 @@ class ModelState:
                                 probe.subs(), np.ones(probe.n, np.uint8), 1e300, TOUCH_FRACTION,
                                 self.algorithm)[0]
         bad = keep.astype(bool) & (a["gap"] < -tol)
-        if bad.any():
-            msgs = []
-            for c in np.nonzero(bad)[0][:10]:
-                na, nb = self.specs[a["ga"][c]].name, self.specs[a["gb"][c]].name
-                msgs.append(f"blocks {na!r} and {nb!r} overlap by {-a['gap'][c]:.4g} m at start "
-                            f"(tolerance {tol:.3g} m: contact.overlap_tolerance)")
-            raise ConfigError(msgs)
+        msgs = []
+        for c in np.nonzero(bad)[0][:10]:
+            na, nb = self.specs[a["ga"][c]].name, self.specs[a["gb"][c]].name
+            msgs.append(f"blocks {na!r} and {nb!r} overlap by {-a['gap'][c]:.4g} m at start "
+                        f"(tolerance {tol:.3g} m: contact.overlap_tolerance)")
+        return msgs
 
     # ------------------------------------------------------------------ reports
     def load_report(self) -> dict:

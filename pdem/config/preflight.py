@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import face_areas
 from .load import ConfigError
 
 log = logging.getLogger("pdem")
@@ -325,17 +326,19 @@ def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
         return
     # softest joint per group: any pair this group is part of (joint_table's rows by group)
     soft = _softest_kn_per_group(scene, joints, group_names)
-    worst, worst_b, worst_vals = 0.0, -1, None
-    for n, b in enumerate(free):
-        area = float(specs[b].face_areas.max())
-        size = specs[b].volume ** (1.0 / 3.0)
-        kn, jname = soft[int(glob.group[b])]
-        overlap = load[n] / (kn * area)
-        frac = overlap / size
-        if frac > worst:
-            worst, worst_b, worst_vals = frac, b, (load[n], kn, jname, area, overlap, size)
+    # per block, vectorised (a Python loop over the blocks was seconds for 1e5 of them)
+    face_areas([p for b in free for p in specs[b].pieces])  # one batch, kept on the pieces
+    area = np.array([specs[b].face_areas.max() for b in free])
+    size = np.array([specs[b].volume ** (1.0 / 3.0) for b in free])
+    kn_all = np.array([kn for kn, _ in soft], float)[glob.group[free]]
+    overlap = load / (kn_all * area)
+    frac = overlap / size
+    n = int(np.argmax(np.where(np.isnan(frac), -np.inf, frac)))  # the first largest
+    worst = float(frac[n]) if frac[n] > 0.0 else 0.0
     if worst > MAX_STATIC_OVERLAP:
-        f, kn, jname, area, overlap, size = worst_vals
+        worst_b = free[n]
+        f, kn, area, overlap, size = load[n], kn_all[n], area[n], overlap[n], size[n]
+        jname = soft[int(glob.group[worst_b])][1]
         raise ConfigError([
             f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[worst_b].name!r} "
             f"(blocks[{specs[worst_b].entry}]): its static overlap m g / (kn A) = {f:.4g} N / "

@@ -10,7 +10,7 @@ from pdem.geometry.hull import (
     is_convex_point_set,
 )
 from pdem.geometry.mass import mass_properties
-from pdem.geometry.polyhedron import ConvexPolyhedron
+from pdem.geometry.polyhedron import ConvexPolyhedron, face_areas
 
 __all__ = [
     "ConvexPolyhedron",
@@ -19,6 +19,7 @@ __all__ = [
     "check_convex",
     "convex_hull",
     "default_tolerance",
+    "face_areas",
     "from_planes",
     "from_vertices",
     "hull_vertex_indices",

@@ -106,3 +106,81 @@ def test_contact_types_from_touching_vertices():
     s = build("  - {name: tip, polyhedron: {vertices: [[0, 0, 0.0005], [1, 0, 1], [-1, 0.5, 1], "
               "[0, -1, 1]]}, material: rock}\n")
     assert s.contacts.ctype.tolist() == [VERTEX_FACE]
+
+
+# set-up is vectorised over the blocks (issue 11); these pin it to the per-block definitions,
+# bit for bit: the areas, principal frames and edge directions feed the timestep, the masses
+# and every contact
+BITWISE_SCENE = """
+name: bitwise
+materials: {rock: {density: 2650.0}}
+joints: {default: {kn: 3.0e8, ks: 1.0e8, friction: 30.0}}
+solve: {steps: 1}
+blocks:
+  - name: b
+    array: {box: {min: [1000.3, 2000.7, 0.1], max: [1001.03, 2001.41, 0.77]},
+            count: [5, 4, 3], spacing: [1.1, 0.9, 0.67]}
+    material: rock
+    angular_velocity: [0.0, 0.3, 0.1]
+  - name: r
+    random: {count: 12, region: {min: [0, 0, 5], max: [4, 4, 8]}, size: [0.45, 0.6],
+             vertices: 10, seed: 3}
+    material: rock
+  - name: pr
+    prism: {base: [[20.5, 0.1, 0], [21.3, 0.2, 0], [21.6, 0.8, 0], [21.0, 1.5, 0],
+                   [20.4, 1.0, 0], [20.3, 0.5, 0]], extrude: [0.1, 0.05, 0.7]}
+    material: rock
+  - name: ell
+    polyhedron:
+      vertices: [[30,0,0],[32,0,0],[32,1,0],[31,1,0],[31,2,0],[30,2,0],
+                 [30,0,1],[32,0,1],[32,1,1],[31,1,1],[31,2,1],[30,2,1]]
+      faces: [[0,5,4,3,2,1],[6,7,8,9,10,11],[0,1,7,6],[1,2,8,7],[2,3,9,8],[3,4,10,9],
+              [4,5,11,10],[5,0,6,11]]
+    material: rock
+"""
+
+
+def _bits(a):
+    return np.ascontiguousarray(a, np.float64).view(np.uint64)
+
+
+def test_vectorised_setup_is_bitwise_the_per_block_definition():
+    from pdem.config.resolve import surface_areas
+    from pdem.geometry import box
+    from pdem.model.build import _array, unique_directions
+
+    scene = parse_scene(BITWISE_SCENE)
+    specs = expand_blocks(scene)
+    assert any(len(s.pieces) > 1 for s in specs)  # a joined block is among them
+    # array members: one transformed() call each
+    a = scene.blocks[0].array
+    base = box(a.box.min, a.box.max)
+    for k, member in _array(a):
+        idx = np.array([k % 5, k // 5 % 4, k // 20], float)
+        ref = base.transformed(np.eye(3), idx * np.array(a.spacing))
+        for f in ("vertices", "normals", "offsets", "centroid", "inertia"):
+            assert np.array_equal(_bits(getattr(member, f)), _bits(getattr(ref, f))), (k, f)
+    # face areas (batched Newell) and surfaces (row sums)
+    surf = surface_areas(specs)
+    for r, s in enumerate(specs):
+        per_face = [p.face_area(f) for p in s.pieces for f in range(p.n_faces)]
+        assert np.array_equal(_bits(s.face_areas), _bits(per_face))
+        assert _bits(surf[r]) == _bits(np.array(per_face).sum())
+    # the store: principal frames and edge directions as one block at a time
+    glob, _ = block_store(scene, specs)
+    for r, s in enumerate(specs):
+        bodies, c, R, moments = s.principal_frame()
+        rho = scene.materials[s.material].density
+        assert np.array_equal(_bits(glob.x[r]), _bits(c))
+        assert np.array_equal(_bits(glob.q[r]), _bits(quat_from_matrix(R)))
+        assert np.array_equal(_bits(glob.inertia[r]), _bits(rho * moments))
+        for j, body in enumerate(bodies):
+            k = glob.piece_start[r] + j
+            v = glob.verts_local[glob.vert_start[k]:glob.vert_start[k + 1]]
+            assert np.array_equal(_bits(v), _bits(body.vertices))
+            nrm = glob.normals_local[glob.face_start[k]:glob.face_start[k + 1]]
+            assert np.array_equal(_bits(nrm), _bits(body.normals))
+            d = glob.edirs_local[glob.edir_start[k]:glob.edir_start[k + 1]]
+            ref = unique_directions(body.vertices[body.edges[:, 1]]
+                                    - body.vertices[body.edges[:, 0]])
+            assert np.array_equal(_bits(d), _bits(ref))

@@ -1,0 +1,120 @@
+"""Set-up benchmark: time and peak memory to build a model of N cubes and take its first step.
+
+The model is the cube stack of bench/cube_stack.py (pdem.cases.stacks): n x n x n unit cubes
+(one ``array:`` entry) on a fixed floor, N = n^3. Each size runs in a fresh process (its own
+peak memory); the numba kernels are loaded once on a small model first, so the figures are
+the set-up itself, not the kernels' load from the cache (about 0.5 s more on a cold process).
+
+    .venv/bin/python bench/setup.py                 # N = 8,000 and 64,000 on 1 rank
+    .venv/bin/python bench/setup.py --ranks 2       # the same under mpiexec -n 2
+    .venv/bin/python bench/setup.py --n 20 40 100   # N = 8e3, 6.4e4 and 1e6 (memory: ~GB)
+
+Prints per phase the seconds (slowest rank) and the peak resident memory per rank (MB). Run it
+against another tree with PYTHONPATH=that/tree to compare before and after a change. Issue
+11's target: 64,000 blocks to the first step within 10 s on 2 ranks, <= 400 MB per rank.
+Not a test: timings on shared machines are noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PHASES = ("parse", "preflight", "expand_blocks", "block_store", "resolve", "check_derived",
+          "overlaps", "start", "first_step")
+
+
+def _timed(times, key, fn):
+    def wrapper(*args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            times[key] = times.get(key, 0.0) + time.perf_counter() - t0
+    return wrapper
+
+
+def child(n: int) -> None:
+    """Build the n^3 model on MPI.COMM_WORLD, step once; print one JSON line (rank 0)."""
+    from mpi4py import MPI
+
+    import pdem.state as st
+    from pdem.cases.stacks import cube_stack_scene
+    from pdem.config import parse_scene
+    from pdem.simulation import Simulation
+    from pdem.stepper import Stepper
+
+    comm = MPI.COMM_WORLD
+    # load the kernels (numba cache) on a small model: not the set-up's cost
+    Simulation(parse_scene(cube_stack_scene(2, "fast")), comm, output=False).run(steps=1)
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    times: dict[str, float] = {}
+    # the phases of ModelState.create and Simulation, timed where pdem.state calls them
+    for name in ("preflight", "expand_blocks", "block_store", "resolve", "check_derived"):
+        setattr(st, name, _timed(times, name, getattr(st, name)))
+    orig_overlaps, orig_start = st.ModelState.check_initial_overlaps, Stepper.start
+    st.ModelState.check_initial_overlaps = _timed(times, "overlaps", orig_overlaps)
+    Stepper.start = _timed(times, "start", orig_start)
+    comm.Barrier()
+    t0 = time.perf_counter()
+    scene = parse_scene(cube_stack_scene(n, "fast"))
+    times["parse"] = time.perf_counter() - t0
+    sim = Simulation(scene, comm, output=False)
+    t1 = time.perf_counter()
+    sim.run(steps=1)
+    times["first_step"] = time.perf_counter() - t1
+    times["total"] = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1), root=0)
+    if comm.rank == 0:
+        out = {k: max(r[0].get(k, 0.0) for r in rows) for k in (*PHASES, "total")}
+        out.update(n=n, cubes=rows[0][3], ranks=comm.size, peak_mb=max(r[1] for r in rows),
+                   base_mb=max(r[2] for r in rows))
+        print("RESULT " + json.dumps(out), flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[20, 40],
+                    help="cubes per side (N = n^3); default 20 40")
+    ap.add_argument("--ranks", type=int, default=1, help="MPI ranks (mpiexec), default 1")
+    ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child is not None:
+        child(args.child)
+        return
+    py = sys.executable
+    mpiexec = Path(py).with_name("mpiexec")
+    results = []
+    for n in args.n:
+        cmd = [py, __file__, "--child", str(n)]
+        if args.ranks > 1:
+            cmd = [str(mpiexec), "-n", str(args.ranks), *cmd]
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ)
+        line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+        if proc.returncode or not line:
+            print(f"n={n}: failed (exit {proc.returncode})\n{proc.stderr[-2000:]}")
+            continue
+        results.append(json.loads(line[0][7:]))
+    if not results:
+        return
+    print(f"set-up to the first step, cube stack, {args.ranks} rank(s); seconds (slowest rank), "
+          "peak resident MB per rank (after loading the kernels: base)")
+    head = f"{'phase':>14}" + "".join(f"{r['cubes']:>12,}" for r in results)
+    print(head)
+    for k in (*PHASES, "total"):
+        print(f"{k:>14}" + "".join(f"{r[k]:>12.2f}" for r in results))
+    print(f"{'peak MB':>14}" + "".join(f"{r['peak_mb']:>12.0f}" for r in results))
+    print(f"{'base MB':>14}" + "".join(f"{r['base_mb']:>12.0f}" for r in results))
+    print(f"{'KB per block':>14}" + "".join(
+        f"{1024.0 * (r['peak_mb'] - r['base_mb']) / r['cubes']:>12.1f}" for r in results))
+
+
+if __name__ == "__main__":
+    main()
