@@ -36,11 +36,13 @@ import time
 import numpy as np
 
 from pdem.cases.stacks import cube_stack_scene
-from pdem.parallel.halo import ROW as HALO_ROW
+from pdem.model.fields import halo_fields, row_width
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-ROW_BYTES = HALO_ROW * 8  # float64 per ghosted free block per step (declared halo fields)
+# float64 per ghosted free block per step (the declared halo fields of a scene without
+# solve.inactive)
+ROW_BYTES = row_width(halo_fields(False)) * 8
 CUBE_RADIUS = math.sqrt(3.0) / 2.0  # unit cube: centroid to vertex
 CTOL = 0.02  # ctol "auto" = 2 % of the smallest block's equivalent size (1 m)
 GRAVITY = np.array([0.0, 0.0, -9.81])

@@ -29,7 +29,7 @@ from .io.checkpoint import new_run_id
 from .model.build import block_store, expand_blocks
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
-from .model.fields import MIGRATE
+from .model.fields import MIGRATE, halo_fields
 from .parallel.decomposition import Decomposition
 from .parallel.migrate import rebuild
 from .parallel.mpi import allgather, broadcast
@@ -139,7 +139,7 @@ class ModelState:
             r = self.resolved
             self.blocks, self.n_owned, self.contacts, self.halo = rebuild(
                 self.comm, self.decomp, self.glob, owned_gids, state, contacts, 0.5 * r.ctol,
-                r.margin)
+                r.margin, halo_fields(self.scene.solve.inactive is not None))
             b = self.blocks
             refresh_pose(b, 0.5 * r.ctol)
             # a rank whose brick holds no block has no cell space until blocks arrive; blocks

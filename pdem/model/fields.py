@@ -76,7 +76,8 @@ BLOCK: tuple[Field, ...] = (
     Field("calm", (), I32, "1", "consecutive steps at rest; inactive from solve.inactive.steps "
           "(pdem.dynamics.inactive)", **_D),
     Field("still", (), U8, "1", "1: fixed or held inactive this step (derived from fixed and "
-          "calm; what the integrator and the joints read)", **_D, halo=True),
+          "calm; what the integrator and the joints read); in the halo with solve.inactive",
+          **_D, halo=True),
     Field("out", (), U8, "1", "taken out of the model (left the domain, excavated): 1 frozen, "
           "2 deleted", **_D, output="removed"),
     Field("x_stage", (3,), F, "m", "centroid when the current stage began (stage "
@@ -182,4 +183,11 @@ STATIC = names(BLOCK, static=True)
 MIGRATE = names(BLOCK, migrate=True)
 CHECKPOINT = names(BLOCK, checkpoint=True)
 HALO = select(BLOCK, halo=True)
+# halo fields only a feature reads: a scene without it does not send them (pdem.parallel.halo)
+HALO_INACTIVE = ("still",)  # solve.inactive (pdem.dynamics.inactive)
+
+
+def halo_fields(inactive: bool) -> tuple[Field, ...]:
+    """The halo row of a scene: every halo field, less those of features it does not use."""
+    return HALO if inactive else tuple(f for f in HALO if f.name not in HALO_INACTIVE)
 OUTPUT = tuple(f for f in BLOCK if f.output)

@@ -12,20 +12,25 @@ import numpy as np
 
 from ..model.fields import HALO, pack, row_width, unpack
 
-# columns of a halo row: the block fields declared with halo=True (pdem.model.fields)
+# columns of a full halo row: the block fields declared with halo=True (pdem.model.fields); a
+# scene sends those of the features it uses (pdem.model.fields.halo_fields)
 ROW = row_width(HALO)
 
 
 class Halo:
     """Send/receive plan: ``send[r]`` local owned rows ghosted on rank r, ``recv[r]`` local ghost
-    rows owned by rank r, both in gid order so the two sides agree row by row."""
+    rows owned by rank r, both in gid order so the two sides agree row by row; ``fields``: the
+    halo fields sent (pdem.model.fields.halo_fields)."""
 
-    def __init__(self, comm, send: dict[int, np.ndarray], recv: dict[int, np.ndarray]):
+    def __init__(self, comm, send: dict[int, np.ndarray], recv: dict[int, np.ndarray],
+                 fields=HALO):
         self.comm = comm
+        self.fields = fields
+        width = row_width(fields)
         self.send = {r: rows for r, rows in send.items() if len(rows)}
         self.recv = {r: rows for r, rows in recv.items() if len(rows)}
-        self.sbuf = {r: np.empty((len(rows), ROW)) for r, rows in self.send.items()}
-        self.rbuf = {r: np.empty((len(rows), ROW)) for r, rows in self.recv.items()}
+        self.sbuf = {r: np.empty((len(rows), width)) for r, rows in self.send.items()}
+        self.rbuf = {r: np.empty((len(rows), width)) for r, rows in self.recv.items()}
 
     @property
     def bytes_per_step(self) -> int:
@@ -45,8 +50,8 @@ class Halo:
         arrays = blocks.fields()
         reqs = [self.comm.Irecv(buf, source=r, tag=11) for r, buf in self.rbuf.items()]
         for r, rows in self.send.items():
-            pack(arrays, HALO, rows, self.sbuf[r])
+            pack(arrays, self.fields, rows, self.sbuf[r])
             reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=11))
         MPI.Request.Waitall(reqs)
         for r, rows in self.recv.items():
-            unpack(arrays, HALO, rows, self.rbuf[r])
+            unpack(arrays, self.fields, rows, self.rbuf[r])

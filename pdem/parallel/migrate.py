@@ -20,7 +20,7 @@ import numpy as np
 
 from ..model.blocks import BlockStore, take_rows
 from ..model.contacts import ContactStore
-from ..model.fields import MIGRATE
+from ..model.fields import HALO, MIGRATE
 from .halo import Halo
 from .mpi import allgather, alltoall
 
@@ -43,11 +43,12 @@ def _merge_contacts(parts: list[ContactStore]) -> ContactStore:
 
 
 def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
-            contacts: ContactStore, pad: float, margin: float):
+            contacts: ContactStore, pad: float, margin: float, halo_fields=HALO):
     """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo).
 
     ``owned_gids``/``state``: the blocks this rank owns now and their MIGRATE arrays;
-    ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here).
+    ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here);
+    ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields).
     """
     size, rank = comm.size, comm.rank
     owned_gids = np.asarray(owned_gids, np.int64)
@@ -133,4 +134,4 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
         rows = np.nonzero((g_from == r) & ~fixed[g_gids])[0] + n_owned
         recv[int(r)] = rows
     blocks.u_mig[:] = 0.0
-    return blocks, n_owned, mine, Halo(comm, send, recv)
+    return blocks, n_owned, mine, Halo(comm, send, recv, halo_fields)

@@ -23,6 +23,9 @@ def test_declared_travel_sets_are_consistent():
     assert set(F.CHECKPOINT) <= set(F.MIGRATE) | set(F.STATIC)
     # the halo row is exactly the declared halo fields, and ghosts get the pose they render
     assert ROW == sum(f.width for f in F.HALO) == 19
+    # a scene pays only for the halo of the features it uses: without solve.inactive the
+    # hold flag is not sent
+    assert F.row_width(F.halo_fields(False)) == 18 and F.halo_fields(True) == F.HALO
     assert {"x", "q", "v", "w", "dtheta"} <= {f.name for f in F.HALO}
     assert {f.output for f in F.OUTPUT} == {"centroid", "orientation", "velocity",
                                             "angular_velocity", "removed", "stage_origin"}
