@@ -168,7 +168,7 @@ def _check(args, comm, log) -> int:
     from .simulation import Simulation
 
     scene = load_scene(args.scene)
-    sim = Simulation(scene, comm, output=False)
+    sim = Simulation(scene, comm, output=False, release=False)  # the report reads it all
     log.info("%s: valid; %d blocks, %d initial contacts, dt=%.4g s, ctol=%.4g m",
              args.scene, sim.blocks.n, sim.contacts.n, sim.dt, sim.state.ctol)
     log.info("pre-flight estimate: %s", sim.state.estimate)

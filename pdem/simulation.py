@@ -18,10 +18,12 @@ from .stepper import Stepper
 
 class Simulation:
     """Build (collective) and march a model; ``checkpoint``: a read checkpoint to continue;
-    ``stop``: a :class:`pdem.signals.StopRequest` that ends the march early (with a checkpoint)."""
+    ``stop``: a :class:`pdem.signals.StopRequest` that ends the march early (with a checkpoint);
+    ``release``: once set up, keep only the geometry of the blocks each rank holds (False: keep
+    the whole scene's, for reports such as ``pdem check``'s)."""
 
     def __init__(self, scene, comm, *, output: bool = True, checkpoint: dict | None = None,
-                 plugins=None, stop=None):
+                 plugins=None, stop=None, release: bool = True):
         paths = {"output.file": scene.output.file} if output else {}
         if scene.checkpoint is not None:
             paths["checkpoint.file"] = scene.checkpoint.file
@@ -43,6 +45,8 @@ class Simulation:
         if checkpoint is not None:
             for p in self.runner.plugins:
                 p.restore(checkpoint["attrs"])
+        if release:
+            self.state.release_scene_geometry()
 
     # the model, as scripts and tests read it
     @property

@@ -133,13 +133,15 @@ class ModelState:
         return self.damping.kernel_args(self.alpha)
 
     # ------------------------------------------------------------------ ownership
-    def distribute(self, owned_gids, state: dict, contacts: ContactStore):
-        """(Re)build this rank's blocks, contacts and halo (collective), see parallel.migrate."""
+    def distribute(self, owned_gids, state: dict, contacts: ContactStore, source=None):
+        """(Re)build this rank's blocks, contacts and halo (collective), see parallel.migrate.
+        ``source``: a store holding the blocks ``owned_gids`` (default: this rank's)."""
         with self.timers.phase("migrate"):
             r = self.resolved
             self.blocks, self.n_owned, self.contacts, self.halo = rebuild(
-                self.comm, self.decomp, self.glob, owned_gids, state, contacts, 0.5 * r.ctol,
-                r.margin, halo_fields(self.scene.solve.inactive is not None))
+                self.comm, self.decomp, self.glob, self.blocks if source is None else source,
+                owned_gids, state, contacts, 0.5 * r.ctol, r.margin,
+                halo_fields(self.scene.solve.inactive is not None))
             b = self.blocks
             refresh_pose(b, 0.5 * r.ctol)
             # a rank whose brick holds no block has no cell space until blocks arrive; blocks
@@ -149,12 +151,34 @@ class ModelState:
                 if present.any() else None
             self.n_rebuilds += 1
 
+    def _scene_store(self):
+        """The scene's store with its geometry (set-up and restore only)."""
+        if not self.glob.has_geometry:
+            raise RuntimeError("the scene's block geometry was released after set-up")
+        return self.glob
+
+    def needs_scene_geometry(self) -> bool:
+        """Whether the run reads the geometry of blocks it does not hold after set-up: a
+        stage's boundary stress finds the exposed faces on the scene's store (pdem.boundary)."""
+        return any(st.stress for st in self.scene.stages)
+
+    def release_scene_geometry(self):
+        """After set-up (blocks distributed, output opened): drop the geometry of the blocks
+        this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
+        block: fixed, radius, ...), the blocks' specs their names and scalars; each rank's
+        store holds its blocks' and ghosts' geometry, which migrates with them."""
+        if self.needs_scene_geometry():
+            return
+        self.glob.drop_geometry()
+        for sp in self.specs:
+            sp.release()
+
     def distribute_initial(self):
         """Every rank takes the blocks whose centroid lies in its brick (collective)."""
         g = self.glob
         owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
         self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE},
-                        ContactStore.empty(self.joints.hist_width))
+                        ContactStore.empty(self.joints.hist_width), source=self._scene_store())
 
     def redistribute(self):
         """Migrate blocks whose centroid left the brick and rebuild ghosts (collective)."""
@@ -191,7 +215,8 @@ class ModelState:
         self.glob.fixed[gone] = 1
         self.glob.out[gone] = blocks["out"][gone]
         owned = np.nonzero(self.decomp.owner_of(blocks["x"]) == self.comm.rank)[0]
-        self.distribute(owned, {k: blocks[k][owned] for k in MIGRATE}, ck["contacts"])
+        self.distribute(owned, {k: blocks[k][owned] for k in MIGRATE}, ck["contacts"],
+                        source=self._scene_store())
 
     # ------------------------------------------------------------------ start checks
     def check_initial_overlaps(self):

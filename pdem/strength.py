@@ -29,6 +29,7 @@ import numpy as np
 
 from .contact.laws import joint_table
 from .errors import UserError
+from .model.blocks import take_rows
 from .model.fields import MIGRATE
 from .parallel import mpi
 from .stages import stage_scene
@@ -63,13 +64,16 @@ class _Snapshot:
         self.contacts = s.contacts.take(np.arange(s.contacts.n))
         self.clock = (s.step, s.time, s.ratio, s.alpha)
         self.glob = {k: getattr(s.glob, k).copy() for k in ("fixed", "out")}
+        # the owned blocks' geometry: a trial's migration may take them to other ranks, and
+        # no rank keeps the geometry of blocks it does not hold
+        self.store = take_rows(b, np.arange(n), np.ones(n, np.uint8))
 
     def restore(self, s):
         for k, v in self.glob.items():
             getattr(s.glob, k)[:] = v
         s.step, s.time, s.ratio, s.alpha = self.clock
         s.distribute(self.gids, {k: v.copy() for k, v in self.rows.items()},
-                     self.contacts.take(np.arange(self.contacts.n)))
+                     self.contacts.take(np.arange(self.contacts.n)), source=self.store)
 
 
 def _displacements(s, snap: _Snapshot) -> np.ndarray:

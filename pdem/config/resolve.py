@@ -73,11 +73,13 @@ def surface_areas(specs) -> np.ndarray:
     """Each block's surface (its pieces' face areas summed, ``spec.face_areas.sum()``),
     vectorised: the areas in one batch, one-piece blocks summed row-wise in stacks of equal
     face counts (numpy sums each row as it sums the block's 1-D array: bitwise the same)."""
-    face_areas([p for s in specs for p in s.pieces])  # every piece's areas in one batch
+    face_areas([p for s in specs if s.pieces is not None for p in s.pieces])  # one batch
     surf = np.empty(len(specs))
     stacks: dict[int, list[int]] = {}
     for r, s in enumerate(specs):
-        if len(s.pieces) == 1:
+        if s.pieces is None:  # released after set-up: its sum kept (the same bits)
+            surf[r] = s.surface
+        elif len(s.pieces) == 1:
             stacks.setdefault(s.pieces[0].n_faces, []).append(r)
         else:
             surf[r] = s.face_areas.sum()

@@ -74,47 +74,113 @@ class BlockStore:
     def geometry(self) -> dict[str, np.ndarray]:
         return {k: getattr(self, k) for k in GEOMETRY}
 
+    @property
+    def has_geometry(self) -> bool:
+        return "verts_local" in self.__dict__
+
+    def drop_geometry(self) -> None:
+        """Keep the per-block fields only: the scene's store after set-up, when each rank
+        holds the geometry of its own blocks and ghosts (pdem.parallel.migrate)."""
+        for k in GEOMETRY:
+            self.__dict__.pop(k, None)
+
     def shapes(self) -> Shapes:
         return Shapes(self.piece_block, self.piece_x, self.vert_start, self.verts_world,
                       self.face_start, self.normals_local, self.edir_start, self.edirs_local,
                       self.point_area)
 
 
-def take_rows(glob: BlockStore, gids: np.ndarray, owned: np.ndarray) -> BlockStore:
-    """A local store holding blocks ``gids`` of the global (static) store; scratch zeroed.
+# geometry recomputed from the pose (pdem.dynamics.kinematics.refresh_pose): not sent with a
+# block, allocated where it arrives
+SCRATCH_GEOMETRY = ("piece_x", "piece_lo", "piece_hi", "verts_world")
+# CSR starts and the arrays they index: (start, indexed arrays, what the entries count)
+_CSR = (("piece_start", (), "piece"), ("vert_start", ("verts_local",), "vert"),
+        ("face_start", ("face_tag", "normals_local", "offsets_local"), "face"),
+        ("fvert_start", ("face_verts",), "fvert"), ("edge_start", ("edges",), "edge"),
+        ("edir_start", ("edirs_local",), "edir"))
 
-    Non-static fields come from ``glob`` too; callers overwrite them with migrated state."""
-    gids = np.asarray(gids, np.int64)
-    per_block = {f.name: getattr(glob, f.name)[gids].copy() for f in BLOCK}
+
+def take_rows(src: BlockStore, rows: np.ndarray, owned: np.ndarray) -> BlockStore:
+    """A store holding rows ``rows`` of ``src`` (any store: the scene's, where row == gid, or
+    a rank's), in that order; per-block fields copied, scratch geometry zeroed (callers
+    refresh it from the pose, pdem.dynamics.kinematics.refresh_pose)."""
+    rows = np.asarray(rows, np.int64)
+    per_block = {f.name: getattr(src, f.name)[rows].copy() for f in BLOCK}
     per_block["owned"] = np.asarray(owned, np.uint8)
-    pidx, piece_start = csr.take(glob.piece_start, gids)
-    vidx, vert_start = csr.take(glob.vert_start, pidx)
-    fidx, face_start = csr.take(glob.face_start, pidx)
-    fvidx, fvert_start = csr.take(glob.fvert_start, fidx)
-    eidx, edge_start = csr.take(glob.edge_start, pidx)
-    didx, edir_start = csr.take(glob.edir_start, pidx)
-    # vertex ids inside faces and edges are global vertex rows: renumber to local rows
-    vmap = np.full(len(glob.verts_local), -1, np.int64)
+    pidx, piece_start = csr.take(src.piece_start, rows)
+    vidx, vert_start = csr.take(src.vert_start, pidx)
+    fidx, face_start = csr.take(src.face_start, pidx)
+    fvidx, fvert_start = csr.take(src.fvert_start, fidx)
+    eidx, edge_start = csr.take(src.edge_start, pidx)
+    didx, edir_start = csr.take(src.edir_start, pidx)
+    # vertex ids inside faces and edges are rows of src's vertices: renumber to the new rows
+    vmap = np.full(len(src.verts_local), -1, np.int64)
     vmap[vidx] = np.arange(len(vidx))
+    n_pieces, n_verts = len(pidx), len(vidx)
     return BlockStore(per_block, dict(
         piece_start=piece_start,
-        piece_block=np.repeat(np.arange(len(gids)), np.diff(piece_start)),
-        piece_gid=pidx,
-        piece_center=glob.piece_center[pidx],
-        piece_x=glob.piece_x[pidx].copy(),
-        piece_lo=glob.piece_lo[pidx].copy(),
-        piece_hi=glob.piece_hi[pidx].copy(),
+        piece_block=np.repeat(np.arange(len(rows)), np.diff(piece_start)),
+        piece_gid=src.piece_gid[pidx],
+        piece_center=src.piece_center[pidx],
+        piece_x=np.zeros((n_pieces, 3)),
+        piece_lo=np.zeros((n_pieces, 3)),
+        piece_hi=np.zeros((n_pieces, 3)),
         vert_start=vert_start,
-        verts_local=glob.verts_local[vidx],
-        verts_world=glob.verts_world[vidx].copy(),
+        verts_local=src.verts_local[vidx],
+        verts_world=np.zeros((n_verts, 3)),
         face_start=face_start,
         fvert_start=fvert_start,
-        face_tag=glob.face_tag[fidx],
-        face_verts=vmap[glob.face_verts[fvidx]],
-        normals_local=glob.normals_local[fidx],
-        offsets_local=glob.offsets_local[fidx],
+        face_tag=src.face_tag[fidx],
+        face_verts=vmap[src.face_verts[fvidx]],
+        normals_local=src.normals_local[fidx],
+        offsets_local=src.offsets_local[fidx],
         edge_start=edge_start,
-        edges=vmap[glob.edges[eidx]],
+        edges=vmap[src.edges[eidx]],
         edir_start=edir_start,
-        edirs_local=glob.edirs_local[didx],
+        edirs_local=src.edirs_local[didx],
     ))
+
+
+def pack(src: BlockStore, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """Rows ``rows`` of ``src`` as a message: the static per-block fields and the body-frame
+    geometry, what a rank needs to hold a block it did not have (pdem.parallel.migrate).
+    The dynamic fields travel separately (MIGRATE), scratch is rebuilt where it arrives."""
+    part = take_rows(src, rows, np.zeros(len(rows), np.uint8))
+    msg = {f.name: getattr(part, f.name) for f in BLOCK if f.static}
+    msg.update({k: v for k, v in part.geometry().items() if k not in SCRATCH_GEOMETRY})
+    return msg
+
+
+def unpack(parts: list[dict[str, np.ndarray]], owned: np.ndarray) -> BlockStore:
+    """One store of the blocks of several :func:`pack` messages, in message order; CSR
+    starts and vertex ids are offset to the concatenated rows."""
+    if not parts:
+        raise ValueError("unpack: no messages (pack zero rows for an empty store)")
+    per_block = {f.name: np.concatenate([p[f.name] for p in parts]) for f in BLOCK if f.static}
+    per_block["owned"] = np.asarray(owned, np.uint8)
+    geometry: dict[str, np.ndarray] = {}
+    base = {"block": 0, "piece": 0, "vert": 0, "face": 0, "fvert": 0, "edge": 0, "edir": 0}
+    chunks: dict[str, list[np.ndarray]] = {}
+    for p in parts:
+        for start, _, unit in _CSR:
+            chunks.setdefault(start, []).append(p[start][:-1] + base[unit])
+        chunks.setdefault("piece_block", []).append(
+            np.repeat(np.arange(len(p["gid"])), np.diff(p["piece_start"])) + base["block"])
+        chunks.setdefault("face_verts", []).append(p["face_verts"] + base["vert"])
+        chunks.setdefault("edges", []).append(p["edges"] + base["vert"])
+        for k in ("piece_gid", "piece_center", "verts_local", "face_tag", "normals_local",
+                  "offsets_local", "edirs_local"):
+            chunks.setdefault(k, []).append(p[k])
+        base["block"] += len(p["gid"])
+        for start, _, unit in _CSR:
+            base[unit] += int(p[start][-1])
+    for start, _, unit in _CSR:
+        geometry[start] = np.concatenate(chunks[start] + [np.array([base[unit]], np.int64)])
+    for k in ("piece_block", "face_verts", "edges", "piece_gid", "piece_center", "verts_local",
+              "face_tag", "normals_local", "offsets_local", "edirs_local"):
+        geometry[k] = np.concatenate(chunks[k])
+    n_pieces, n_verts = base["piece"], base["vert"]
+    for k, n in (("piece_x", n_pieces), ("piece_lo", n_pieces), ("piece_hi", n_pieces),
+                 ("verts_world", n_verts)):
+        geometry[k] = np.zeros((n, 3))
+    return BlockStore(per_block, geometry)

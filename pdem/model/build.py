@@ -45,6 +45,25 @@ class BlockSpec:
     group_name: str | None = None
     material_name: str | None = None
 
+    def release(self) -> None:
+        """Drop the pieces (after set-up their geometry lives with the blocks' owners, see
+        pdem.state.ModelState.release_scene_geometry), keeping the scalars later stages
+        read: volume, surface area, piece count."""
+        if self.pieces is None:
+            return
+        self._volume = self.volume
+        self._surface = float(self.face_areas.sum())
+        self._n_pieces = len(self.pieces)
+        self.pieces = None
+
+    @property
+    def n_pieces(self) -> int:
+        return self._n_pieces if self.pieces is None else len(self.pieces)
+
+    @property
+    def surface(self) -> float:
+        return self._surface if self.pieces is None else float(self.face_areas.sum())
+
     @property
     def group(self) -> str:
         return self.group_name if self.group_name is not None else self.spec.group
@@ -62,6 +81,8 @@ class BlockSpec:
 
     @property
     def volume(self) -> float:
+        if self.pieces is None:
+            return self._volume
         return sum(p.volume for p in self.pieces)
 
     @property

@@ -1,11 +1,13 @@
 """Ownership migration and ghost rebuild (collective, at start, restart and when blocks moved).
 
-1. Every owned block goes to the rank whose brick holds its centroid, with its dynamic state;
-   the contacts of a migrating free block (with their full history: common plane, sub-contacts,
+1. Every owned block goes to the rank whose brick holds its centroid, with its dynamic state
+   and, to a rank that did not own it, its static data and body-frame geometry (a rank keeps
+   the geometry of the blocks it holds only: memory O(N/P + ghosts), docs/parallel.md); the
+   contacts of a migrating free block (with their full history: common plane, sub-contacts,
    shear forces, slip state) go with it.
 2. Each rank's interest box is the box around its owned free blocks, padded by CTOL/2 and
    enlarged by ``margin``; a block whose padded bounding box reaches into another rank's interest
-   box becomes a ghost there. Between two rebuilds no block moves more than margin/2 (the
+   box becomes a ghost there (with its geometry). Between two rebuilds no block moves more than margin/2 (the
    solver triggers a rebuild before that), so every pair that can come within CTOL of an owned
    free block has both blocks on the rank.
 3. A rank keeps the contacts in which it owns a free block: those it computes every step.
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.blocks import BlockStore, take_rows
+from ..model.blocks import BlockStore, pack, take_rows, unpack
 from ..model.contacts import ContactStore
 from ..model.fields import HALO, MIGRATE
 from .halo import Halo
@@ -42,16 +44,31 @@ def _merge_contacts(parts: list[ContactStore]) -> ContactStore:
     return merged.take(first)
 
 
-def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
-            contacts: ContactStore, pad: float, margin: float, halo_fields=HALO):
+def rows_of(gids_held: np.ndarray, gids: np.ndarray) -> np.ndarray:
+    """Rows of ``gids`` in a store whose rows hold ``gids_held`` (each gid must be there)."""
+    order = np.argsort(gids_held, kind="stable")
+    pos = np.searchsorted(gids_held, gids, sorter=order)
+    pos = np.minimum(pos, max(len(gids_held) - 1, 0))
+    rows = order[pos] if len(gids_held) else np.zeros(0, np.int64)
+    if len(rows) != len(gids) or np.any(gids_held[rows] != gids):
+        raise RuntimeError("rebuild: a block to distribute is not in the source store")
+    return rows
+
+
+def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.ndarray,
+            state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO):
     """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo).
 
+    ``glob``: the per-block static fields of every block, by gid (fixed, radius);
+    ``source``: a store holding the blocks ``owned_gids`` (the scene's store at start, this
+    rank's store later): their static data and geometry go with them;
     ``owned_gids``/``state``: the blocks this rank owns now and their MIGRATE arrays;
     ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here);
     ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields).
     """
     size, rank = comm.size, comm.rank
     owned_gids = np.asarray(owned_gids, np.int64)
+    src_rows = rows_of(source.gid, owned_gids)
     fixed = glob.fixed.astype(bool)
     # 1. migration of owned blocks and the contacts of the free ones that leave
     dest = decomp.owner_of(state["x"]) if len(owned_gids) else np.zeros(0, np.int64)
@@ -59,15 +76,22 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
     for r in range(size):
         go = dest == r
         msg = {"gid": owned_gids[go], **{k: state[k][go] for k in MIGRATE}}
-        if r != rank and contacts.n:
-            leaving_free = owned_gids[go & ~fixed[owned_gids]]
-            msg["contacts"] = contacts.select(contacts_needed(contacts, leaving_free))
+        if r != rank:
+            msg["store"] = pack(source, src_rows[go])
+            if contacts.n:
+                leaving_free = owned_gids[go & ~fixed[owned_gids]]
+                msg["contacts"] = contacts.select(contacts_needed(contacts, leaving_free))
         out.append(msg)
     got = alltoall(comm, out)
+    stays = pack(source, src_rows[dest == rank])
     gids = np.concatenate([m["gid"] for m in got])
     order = np.argsort(gids, kind="stable")
     gids = gids[order]
     new_state = {k: np.concatenate([m[k] for m in got])[order] for k in MIGRATE}
+    arrived = unpack([stays if r == rank else m["store"] for r, m in enumerate(got)],
+                     np.zeros(len(gids), np.uint8))
+    mine_store = take_rows(arrived, order, np.ones(len(gids), np.uint8))
+    del arrived
     parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
     merged = _merge_contacts(parts)
 
@@ -75,19 +99,20 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
     free_now = gids[~fixed[gids]]
     if len(free_now):
         sel = ~fixed[gids]
-        lo, hi = _boxes(new_state["x"][sel], glob.radius[free_now], pad)
+        lo, hi = _boxes(new_state["x"][sel], mine_store.radius[sel], pad)
         box = np.concatenate([lo.min(0) - margin, hi.max(0) + margin])
     else:
         box = np.array([np.inf] * 3 + [-np.inf] * 3)
     boxes = np.array(allgather(comm, box))
-    blo, bhi = _boxes(new_state["x"], glob.radius[gids], pad)
+    blo, bhi = _boxes(new_state["x"], mine_store.radius, pad)
     out = []
     for r in range(size):
         if r == rank:
             out.append(None)
             continue
         hit = np.all(blo <= boxes[r, 3:], axis=1) & np.all(bhi >= boxes[r, :3], axis=1)
-        out.append({"gid": gids[hit], **{k: new_state[k][hit] for k in MIGRATE}})
+        out.append({"gid": gids[hit], **{k: new_state[k][hit] for k in MIGRATE},
+                    "store": pack(mine_store, np.nonzero(hit)[0])})
     got = alltoall(comm, out)
     ghost_parts = [(r, m) for r, m in enumerate(got) if m is not None and len(m["gid"])]
     g_gids = np.concatenate([m["gid"] for _, m in ghost_parts]) if ghost_parts else np.zeros(0, np.int64)
@@ -101,7 +126,12 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
     # 3. the local store: owned rows first, then ghosts, each in gid order
     all_gids = np.concatenate([gids, g_gids])
     owned = np.concatenate([np.ones(len(gids), np.uint8), np.zeros(len(g_gids), np.uint8)])
-    blocks = take_rows(glob, all_gids, owned)
+    n_owned = len(gids)
+    both = unpack([pack(mine_store, np.arange(n_owned))] + [m["store"] for _, m in ghost_parts],
+                  owned)
+    del mine_store
+    blocks = take_rows(both, np.concatenate([np.arange(n_owned), n_owned + g_order]), owned)
+    del both
     for k in MIGRATE:
         getattr(blocks, k)[:] = np.concatenate([new_state[k], g_state[k]])
 
@@ -117,8 +147,9 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
             raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
         mine.arrays[side] = row_of[pos]
     # the pieces in contact: the same piece ordinal within the block's local pieces
-    for side, piece, g, pg in (("ia", "ka", "ga", "pga"), ("ib", "kb", "gb", "pgb")):
-        ordinal = mine.arrays[pg] - glob.piece_start[mine.arrays[g]]
+    for side, piece, pg in (("ia", "ka", "pga"), ("ib", "kb", "pgb")):
+        first = blocks.piece_gid[blocks.piece_start[mine.arrays[side]]]  # the block's 1st piece
+        ordinal = mine.arrays[pg] - first
         mine.arrays[piece] = blocks.piece_start[mine.arrays[side]] + ordinal
 
     # 5. the per-step halo plan (free blocks only; fixed ghosts were sent once, above)
@@ -129,7 +160,6 @@ def rebuild(comm, decomp, glob: BlockStore, owned_gids: np.ndarray, state: dict,
         gi = m["gid"][~fixed[m["gid"]]]
         send[r] = np.searchsorted(gids, gi)  # owned rows are [0, n_owned) in gid order
     recv = {}
-    n_owned = len(gids)
     for r in np.unique(g_from):
         rows = np.nonzero((g_from == r) & ~fixed[g_gids])[0] + n_owned
         recv[int(r)] = rows

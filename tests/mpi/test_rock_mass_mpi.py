@@ -30,7 +30,7 @@ def test_l_block_on_cut_stack_matches_one_rank(tmp_path):
     specs = solver.specs
     gone = [g for g, sp in enumerate(specs) if sp.excavate_at is not None]
     out = solver.state.glob.out
-    leader = next(g for g, sp in enumerate(specs) if len(sp.pieces) == 2)
+    leader = next(g for g, sp in enumerate(specs) if sp.n_pieces == 2)
     keys = np.unique(np.concatenate(comm.allgather(solver.contacts.keys())))
     if comm.rank == 0:
         print(f"\nL on cut stack, {comm.size} ranks: {len(specs)} blocks ({len(gone)} excavated), "

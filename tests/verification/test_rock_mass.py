@@ -152,7 +152,7 @@ def test_l_block_mass_properties_and_free_tumbling():
     b = s.blocks
     m, c, inertia = l_block_mass_properties()
     moments = np.linalg.eigvalsh(inertia)
-    assert b.n == 1 and s.specs[0].name == "a" and len(s.specs[0].pieces) == 2
+    assert b.n == 1 and s.specs[0].name == "a" and s.specs[0].n_pieces == 2
     err_m = abs(b.mass[0] / m - 1.0)
     err_c = float(np.linalg.norm(b.x0[0] - c))
     err_i = float(np.abs(np.sort(b.inertia[0]) / moments - 1.0).max())
