@@ -26,6 +26,7 @@ from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose, thinnest_width
 from .errors import UserError
 from .io.checkpoint import new_run_id
+from .memory import return_freed_memory
 from .model.build import block_store, expand_blocks
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
@@ -150,6 +151,7 @@ class ModelState:
             self.cells = CellSpace(b.lo[present], b.hi[present], r.cell_size) \
                 if present.any() else None
             self.n_rebuilds += 1
+            return_freed_memory()  # the messages and the old store
 
     def _scene_store(self):
         """The scene's store with its geometry (set-up and restore only)."""
@@ -167,11 +169,11 @@ class ModelState:
         this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
         block: fixed, radius, ...), the blocks' specs their names and scalars; each rank's
         store holds its blocks' and ghosts' geometry, which migrates with them."""
-        if self.needs_scene_geometry():
-            return
-        self.glob.drop_geometry()
-        for sp in self.specs:
-            sp.release()
+        if not self.needs_scene_geometry():
+            self.glob.drop_geometry()
+            for sp in self.specs:
+                sp.release()
+        return_freed_memory()
 
     def distribute_initial(self):
         """Every rank takes the blocks whose centroid lies in its brick (collective)."""
