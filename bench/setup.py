@@ -26,6 +26,9 @@ import sys
 import time
 from pathlib import Path
 
+from pdem.memory import resident_mb
+
+STEPS = 20  # steps timed after set-up (block-steps/s of the whole run)
 PHASES = ("parse", "preflight", "expand_blocks", "block_store", "resolve", "check_derived",
           "overlaps", "start", "first_step")
 
@@ -63,7 +66,10 @@ def child(n: int) -> None:
     Stepper.start = _timed(times, "start", orig_start)
     comm.Barrier()
     t0 = time.perf_counter()
-    scene = parse_scene(cube_stack_scene(n, "fast"))
+    text = cube_stack_scene(n, "fast")
+    if os.environ.get("PDEM_BENCH_MEMORY"):  # --memory: the pre-flight's limit per rank
+        text += f"limits: {{max_memory_per_rank: {os.environ['PDEM_BENCH_MEMORY']}}}\n"
+    scene = parse_scene(text)
     times["parse"] = time.perf_counter() - t0
     sim = Simulation(scene, comm, output=False)
     t1 = time.perf_counter()
@@ -71,11 +77,17 @@ def child(n: int) -> None:
     times["first_step"] = time.perf_counter() - t1
     times["total"] = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1), root=0)
+    now = resident_mb()  # what the run keeps once set up
+    sim.run(steps=1)  # the second step leaves the start's one-off work behind
+    t2 = time.perf_counter()
+    sim.run(steps=STEPS)
+    rate = (sim.state.glob.n - 1) * STEPS / (time.perf_counter() - t2)
+    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1, now, rate), root=0)
     if comm.rank == 0:
         out = {k: max(r[0].get(k, 0.0) for r in rows) for k in (*PHASES, "total")}
         out.update(n=n, cubes=rows[0][3], ranks=comm.size, peak_mb=max(r[1] for r in rows),
-                   base_mb=max(r[2] for r in rows))
+                   base_mb=max(r[2] for r in rows), steady_mb=max(r[4] for r in rows),
+                   rate=min(r[5] for r in rows))
         print("RESULT " + json.dumps(out), flush=True)
 
 
@@ -84,11 +96,15 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[20, 40],
                     help="cubes per side (N = n^3); default 20 40")
     ap.add_argument("--ranks", type=int, default=1, help="MPI ranks (mpiexec), default 1")
+    ap.add_argument("--memory", help="limits.max_memory_per_rank for the pre-flight (e.g. 10GiB; "
+                    "its estimate is conservative: it assumes a denser packing than the stack's)")
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
         child(args.child)
         return
+    if args.memory:
+        os.environ["PDEM_BENCH_MEMORY"] = args.memory
     py = sys.executable
     mpiexec = Path(py).with_name("mpiexec")
     results = []
@@ -114,6 +130,9 @@ def main() -> None:
     print(f"{'base MB':>14}" + "".join(f"{r['base_mb']:>12.0f}" for r in results))
     print(f"{'KB per block':>14}" + "".join(
         f"{1024.0 * (r['peak_mb'] - r['base_mb']) / r['cubes']:>12.1f}" for r in results))
+    print(f"{'after set-up MB':>14}" + "".join(f"{r['steady_mb']:>12.0f}" for r in results))
+    print(f"{'block-steps/s':>14}" + "".join(f"{r['rate']:>12.3g}" for r in results)
+          + f"   (per rank: / {args.ranks}; {STEPS} steps after the first two)")
 
 
 if __name__ == "__main__":

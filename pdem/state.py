@@ -52,6 +52,13 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
 
     return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
 
+# the per-block fields of every block each rank keeps after set-up (the scene's store, by gid):
+# what later stages select and set on every rank alike (pdem.stages, pdem.boundary,
+# pdem.domain), the rebuild's ownership and boxes (fixed, radius), a stage's timestep
+CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixed", "vfix",
+             "out", "material", "group", "applied_force", "radius", "point_area")
+
+
 class ModelState:
     """The model on one rank; construct with :meth:`create` (collective)."""
 
@@ -171,6 +178,7 @@ class ModelState:
         store holds its blocks' and ghosts' geometry, which migrates with them."""
         if not self.needs_scene_geometry():
             self.glob.drop_geometry()
+            self.glob.keep_fields(CATALOGUE)
             for sp in self.specs:
                 sp.release()
         return_freed_memory()

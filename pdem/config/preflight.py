@@ -155,7 +155,11 @@ def estimate(scene, comm_size: int, memory: float | None = None
     contact_row = _row_bytes(CONTACT) + SUBS_PER_CONTACT * _row_bytes(SUB)
     per_entry = []
     n_total = 0
-    static_bytes = 0.0  # the whole static model lives on every rank (built by gid)
+    # the whole scene is built on every rank at set-up (blocks by gid), then each rank keeps
+    # its own blocks' and ghosts' geometry (pdem.parallel.migrate): the set-up peak is the
+    # scene's store and its Python objects on every rank, plus the rank's share
+    static_bytes = 0.0
+    held_bytes = 0.0  # a block's row and geometry in a rank's store
     for i, b in enumerate(scene.blocks):
         n, v, f, e = _shape_size(b)
         per_entry.append((i, n))
@@ -164,19 +168,21 @@ def estimate(scene, comm_size: int, memory: float | None = None
         # edge directions; plus the block row and its Python objects
         geom = 8 * (6 * v + 6 * f + 2 * e + 2 * e + 3 * e + 4)
         static_bytes += float(n) * (geom + block_row + PY_BYTES_PER_BLOCK)
+        held_bytes += float(n) * (geom + block_row)
     share = n_total / max(comm_size, 1)
     contacts = math.ceil(share * CONTACTS_PER_BLOCK / 2)
     avg_block = static_bytes / max(n_total, 1)
+    avg_held = held_bytes / max(n_total, 1)
     # the rank's own store: its blocks, plus ghosts when there are other ranks
     local = 1.0 + (GHOST_FACTOR - 1.0 if comm_size > 1 else 0.0)
-    per_rank = static_bytes + share * local * avg_block + contacts * contact_row
+    per_rank = static_bytes + share * local * avg_held + contacts * contact_row
     lim = scene.limits
     memory = machine_memory() if memory is None else memory
     max_bytes = (MEMORY_FRACTION * memory / max(comm_size, 1)
                  if lim.max_memory_per_rank == "auto" else parse_bytes(lim.max_memory_per_rank))
     if lim.max_blocks == "auto":
         # the count whose estimate fits the memory limit (every rank holds the static model)
-        per_block = avg_block * (1.0 + local / max(comm_size, 1)) \
+        per_block = avg_block + avg_held * local / max(comm_size, 1) \
             + CONTACTS_PER_BLOCK / 2 * contact_row / max(comm_size, 1)
         max_blocks = int(min(max_bytes / per_block, 2**62)) if math.isfinite(max_bytes) else 2**62
     else:

@@ -78,6 +78,12 @@ class BlockStore:
     def has_geometry(self) -> bool:
         return "verts_local" in self.__dict__
 
+    def keep_fields(self, names) -> None:
+        """Drop the per-block fields not in ``names`` (the scene's store after set-up)."""
+        for f in BLOCK:
+            if f.name not in names:
+                self.__dict__.pop(f.name, None)
+
     def drop_geometry(self) -> None:
         """Keep the per-block fields only: the scene's store after set-up, when each rank
         holds the geometry of its own blocks and ghosts (pdem.parallel.migrate)."""
