@@ -17,10 +17,9 @@ from .boundary import apply_scene
 from .config import ConfigError, Scene
 from .config.load import dump_scene
 from .config.preflight import check_derived, machine_memory, preflight, rescaled
-from .config.resolve import TOUCH_FRACTION, Resolved, resolve
+from .config.resolve import Resolved, resolve
 from .contact.algorithms import ALGORITHMS
 from .contact.cellspace import CellSpace
-from .contact.detect import Planes, refresh_contacts
 from .contact.laws import joint_table
 from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose, thinnest_width
@@ -101,6 +100,7 @@ class ModelState:
         self.halo = None
         self.cells = None
         self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
+        self.check_overlaps = False  # refuse blocks overlapping at start (Stepper.start)
         # the largest motion of a block in one step that cannot take it through another block
         # unseen (pdem.dynamics.motion.motion_bookkeeping)
         self.max_step = max_step_motion(resolved.ctol, thinnest_width(
@@ -128,8 +128,8 @@ class ModelState:
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
         state.estimate = estimate
         apply_scene(state)
-        if check_overlaps:
-            state.check_initial_overlaps()
+        # checked by the stepper's start on the first contact update (one search, not two)
+        state.check_overlaps = check_overlaps
         return state
 
     @property
@@ -230,46 +230,26 @@ class ModelState:
 
     # ------------------------------------------------------------------ start checks
     def check_initial_overlaps(self):
-        """Blocks interpenetrating at start are an input error, named by block (collective:
-        each rank checks a share of the candidate pairs, every rank raises alike)."""
-        g = self.glob
-        tol = self.resolved.overlap_tolerance
-        cells = CellSpace(g.lo, g.hi, self.resolved.cell_size)
-        qi, qj = cells.candidates(g.piece_lo, g.piece_hi, np.ones(g.n_pieces, np.uint8))
-        other = g.piece_block[qi] != g.piece_block[qj]  # a joined block's pieces touch
-        qi, qj = qi[other], qj[other]
-        # in contact-key order (the probe's), then this rank's share: the messages gathered in
-        # rank order are those of one rank checking every pair
-        order = np.argsort(g.piece_gid[qi] * KEY_SHIFT + g.piece_gid[qj], kind="stable")
-        size, rank = self.comm.size, self.comm.rank
-        share = order[len(order) * rank // size:len(order) * (rank + 1) // size]
-        msgs = self._overlaps(qi[share], qj[share], tol) if len(share) else []
-        msgs = [m for part in allgather(self.comm, msgs) for m in part][:10]
-        if msgs:
-            raise ConfigError(msgs)
+        """Blocks interpenetrating at start are an input error, named by block (collective;
+        called by the stepper's start once the first contact update has measured every pair
+        that can touch: a rank checks the contacts it writes, each pair once over the ranks,
+        and every rank raises alike). The first ten in contact-key order, as one rank
+        checking every pair would find them; pairs of two fixed blocks (never in contact)
+        are not checked."""
+        from .io.checkpoint import written_contacts
 
-    def _overlaps(self, qi, qj, tol) -> list[str]:
-        """Messages for the first 10 of the candidate piece pairs ``qi, qj`` that overlap by
-        more than ``tol`` at start."""
-        g = self.glob
-        pi, pj = g.piece_block[qi], g.piece_block[qj]
-        probe = ContactStore.empty(self.joints.hist_width).with_new_pairs(
-            ia=pi, ib=pj, ka=qi, kb=qj, ga=g.gid[pi], gb=g.gid[pj], pga=g.piece_gid[qi],
-            pgb=g.piece_gid[qj], joint=np.zeros(len(pi), np.int32))
-        a = probe.arrays
-        planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
-                        a["ctype"], a["warm"])
-        shapes = g.shapes()._replace(point_area=np.ones(g.n))
-        keep = refresh_contacts(g.x, g.R, shapes, planes, np.zeros(probe.n + 1, np.int64),
-                                probe.subs(), np.ones(probe.n, np.uint8), 1e300, TOUCH_FRACTION,
-                                self.algorithm)[0]
-        bad = keep.astype(bool) & (a["gap"] < -tol)
-        msgs = []
-        for c in np.nonzero(bad)[0][:10]:
-            na, nb = self.specs[a["ga"][c]].name, self.specs[a["gb"][c]].name
-            msgs.append(f"blocks {na!r} and {nb!r} overlap by {-a['gap'][c]:.4g} m at start "
-                        f"(tolerance {tol:.3g} m: contact.overlap_tolerance)")
-        return msgs
+        c = self.contacts
+        tol = self.resolved.overlap_tolerance
+        bad = np.nonzero(written_contacts(self) & (c.gap < -tol))[0] if c.n else []
+        found = [(int(c.pga[i]) * KEY_SHIFT + int(c.pgb[i]), int(c.ga[i]), int(c.gb[i]),
+                  float(-c.gap[i])) for i in bad]
+        found = sorted(found)[:10]
+        found = sorted(f for part in allgather(self.comm, found) for f in part)[:10]
+        if found:
+            raise ConfigError([
+                f"blocks {self.specs[ga].name!r} and {self.specs[gb].name!r} overlap by "
+                f"{depth:.4g} m at start (tolerance {tol:.3g} m: contact.overlap_tolerance)"
+                for _, ga, gb, depth in found])
 
     # ------------------------------------------------------------------ reports
     def load_report(self) -> dict:

@@ -72,6 +72,8 @@ class Stepper:
         s.distribute_initial()
         self.search(np.ones(s.blocks.n, bool))
         self.refresh(all_contacts=True)
+        if s.check_overlaps:
+            s.check_initial_overlaps()
         if s.scene.insitu is not None:  # joints start loaded by the in-situ stress
             from .insitu import initialise
 
