@@ -130,10 +130,10 @@ def _run(args, comm, log) -> int:
 def _restart(args, comm, log) -> int:
     from .config import parse_scene
     from .errors import UserError
-    from .io.checkpoint import read_checkpoint
+    from .io.checkpoint import open_checkpoint
 
-    try:
-        ck = read_checkpoint(args.checkpoint)
+    try:  # the attributes here; each rank reads its rows at the restore (collective)
+        ck = open_checkpoint(args.checkpoint)
     except (OSError, ValueError, KeyError) as exc:
         raise UserError(f"cannot restart from {args.checkpoint}: {exc}") from None
     scene = parse_scene(ck["attrs"]["scene"], f"{args.checkpoint}:scene")

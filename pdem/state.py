@@ -220,13 +220,53 @@ class ModelState:
         self.ratio = float(a["ratio"]) if a["ratio"] >= 0 else math.inf
         self.run_id = str(a["run_id"])
         self.resolved = dataclasses.replace(self.resolved, dt=self.dt)
-        blocks = ck["blocks"]
-        gone = blocks["out"] > 0  # blocks that left the model domain act as fixed ones
+        if "blocks" in ck:  # read whole by one process (read_checkpoint)
+            self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
+                                lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
+                                lambda mine: ck["contacts"])
+            return
+        path = ck["path"]
+        with self._reader(path) as reader:
+            # every rank reads the centroids (who owns what) and the contacts' blocks, then the
+            # rows it will hold: its blocks and the contacts of its free blocks (the rebuild
+            # keeps no others)
+            out, x = self._checked(lambda: (reader.block_column("out"),
+                                            reader.block_column("x")), path)
+            self._restore_share(
+                out, x, lambda owned: self._checked(lambda: reader.block_rows(owned, MIGRATE),
+                                                    path),
+                lambda mine: reader.contacts(self._checked(lambda: np.nonzero(
+                    mine[reader.contact_column("ga")] | mine[reader.contact_column("gb")])[0],
+                    path)))
+
+    def _restore_share(self, out, x, block_rows, contacts):
+        """The blocks this rank owns at the checkpoint's poses, from ``block_rows(gids)``, and
+        the contacts of its free ones, ``contacts(mask of free owned blocks by gid)``."""
+        gone = out > 0  # blocks that left the model domain act as fixed ones
         self.glob.fixed[gone] = 1
-        self.glob.out[gone] = blocks["out"][gone]
-        owned = np.nonzero(self.decomp.owner_of(blocks["x"]) == self.comm.rank)[0]
-        self.distribute(owned, {k: blocks[k][owned] for k in MIGRATE}, ck["contacts"],
-                        source=self._scene_store())
+        self.glob.out[gone] = out[gone]
+        owned = np.nonzero(self.decomp.owner_of(x) == self.comm.rank)[0]
+        mine = np.zeros(self.glob.n, bool)
+        mine[owned] = self.glob.fixed[owned] == 0
+        self.distribute(owned, block_rows(owned), contacts(mine), source=self._scene_store())
+
+    def _reader(self, path):
+        """The checkpoint opened on every rank (collective), or one line of why not."""
+        from .io.checkpoint import CheckpointReader
+
+        return self._checked(lambda: CheckpointReader(path, self.comm), path)
+
+    def _checked(self, read, path):
+        """``read()`` on every rank; a damaged file found by any rank is refused by all
+        (the same line), never one rank raising while the others wait."""
+        try:
+            value, why = read(), None
+        except (OSError, ValueError, KeyError) as exc:
+            value, why = None, str(exc)
+        whys = [w for w in allgather(self.comm, why) if w is not None]
+        if whys:
+            raise UserError(f"cannot restart from {path}: {whys[0]}")
+        return value
 
     # ------------------------------------------------------------------ start checks
     def check_initial_overlaps(self):

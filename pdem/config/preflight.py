@@ -39,9 +39,10 @@ PY_BYTES_PER_BLOCK = 4096
 # a rank holds its owned blocks plus ghosts; a slab of ghosts about as thick as a block on each
 # side of a brick, at most as many again as it owns
 GHOST_FACTOR = 2.0
-# the fraction of physical memory one rank may plan for by default: the rest is the OS, MPI's
-# buffers, HDF5's chunk cache and numba's compiled code
-MEMORY_FRACTION = 0.5
+# the fraction of physical memory the ranks may plan for by default: the rest is the OS, MPI's
+# buffers, HDF5's chunk cache and numba's compiled code. The estimate is of the set-up peak
+# (10^6 cubes on 2 ranks: 9.26 GiB estimated, 9.13 GiB measured, bench/setup.py)
+MEMORY_FRACTION = 0.85
 # static overlap m g / (kn A) beyond this fraction of the block size: the joint is too soft for
 # the load (the contact detection and the common plane assume small overlaps)
 MAX_STATIC_OVERLAP = 0.1

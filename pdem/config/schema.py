@@ -659,7 +659,7 @@ class Limits(Strict):
     """What a scene may ask of the machine, checked before anything is built (pdem.config.
     preflight, docs/limits.md). ``max_blocks``: blocks after expanding ``array``/``random``;
     ``auto`` = what fits in ``max_memory_per_rank``. ``max_memory_per_rank``: bytes (a number
-    or text like ``8 GiB``); ``auto`` = half of this machine's memory shared by the ranks.
+    or text like ``8 GiB``); ``auto`` = 0.85 of this machine's memory shared by the ranks.
     ``max_steps``: the steps a run's end may imply (``solve.time`` / dt, ``solve.steps``)."""
 
     max_blocks: PositiveInt | Literal["auto"] = "auto"

@@ -149,42 +149,161 @@ def _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s) -> None:
         d[off_c:off_c + counts[0]] = nsub
 
 
-def read_checkpoint(path: str | os.PathLike) -> dict:
-    """Everything in a checkpoint (read by each rank; restart keeps what it needs):
-    ``attrs``, ``blocks`` {field: (n_blocks, ...)} and ``contacts`` (a ContactStore)."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no checkpoint at {path}")
-    with h5py.File(path, "r") as f:
+# rows between two wanted ones that a read takes along rather than starting a new read
+READ_GAP = 256
+
+
+def _read_rows(dset, rows: np.ndarray) -> np.ndarray:
+    """Rows ``rows`` (sorted, unique) of a dataset: one slice read per run of rows, runs closer
+    than READ_GAP joined (a hyperslab read each, not a point selection per row)."""
+    if len(rows) == 0:
+        return np.zeros((0, *dset.shape[1:]), dset.dtype)
+    if len(rows) == dset.shape[0]:
+        return dset[()]
+    breaks = np.nonzero(np.diff(rows) > READ_GAP)[0] + 1
+    parts = []
+    for chunk in np.split(rows, breaks):
+        lo, hi = int(chunk[0]), int(chunk[-1]) + 1
+        parts.append(dset[lo:hi][chunk - lo])
+    return np.concatenate(parts)
+
+
+class CheckpointReader:
+    """An open checkpoint: attributes checked at opening, rows read by selection, so that a
+    rank reads the rows of the blocks and contacts it will hold (``ModelState.restore``).
+    Opened collectively with the mpio driver when h5py has it and ``comm`` has several ranks
+    (each rank then reads its own rows), else by each rank on its own."""
+
+    def __init__(self, path: str | os.PathLike, comm=None):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise FileNotFoundError(f"no checkpoint at {self.path}")
+        parallel = comm is not None and comm.size > 1 and h5py.get_config().mpi
+        try:
+            self.f = h5py.File(self.path, "r", driver="mpio", comm=comm) if parallel \
+                else h5py.File(self.path, "r")
+        except OSError as exc:
+            raise ValueError(f"{self.path} is not a readable HDF5 file ({exc})") from None
+        try:
+            self._check()
+        except BaseException:
+            self.f.close()
+            raise
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.f.close()
+
+    def _check(self) -> None:
+        f = self.f
         if f.attrs.get("pdem_format") != FORMAT:
-            raise ValueError(f"{path} is not a pdem checkpoint")
+            raise ValueError(f"{self.path} is not a pdem checkpoint")
         if int(f.attrs["format_version"]) > FORMAT_VERSION:
-            raise ValueError(f"{path}: checkpoint format {int(f.attrs['format_version'])} is newer "
-                             f"than this pdem reads ({FORMAT_VERSION})")
-        out = {"attrs": {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}}
-        n_blocks = int(f.attrs["n_blocks"])
-        # a field added after the file was written starts from zero (its declared start value)
-        out["blocks"] = {k: f[f"blocks/{k}"][()] if f"blocks/{k}" in f else
-                         np.zeros((n_blocks, *BLOCK_BY_NAME[k].shape), BLOCK_BY_NAME[k].dtype)
-                         for k in CHECKPOINT}
-        nsub = f["contacts/nsub"][()]
-        arrays = {fd.name: f[f"contacts/{fd.name}"][()] for fd in CONTACT_CK
-                  if f"contacts/{fd.name}" in f}
+            raise ValueError(f"{self.path}: checkpoint format {int(f.attrs['format_version'])} "
+                             f"is newer than this pdem reads ({FORMAT_VERSION})")
+        self.attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+        _validate_attrs(self.path, self.attrs)
+        self.n_blocks = int(self.attrs["n_blocks"])
+        for k in CHECKPOINT:
+            want = (self.n_blocks, *BLOCK_BY_NAME[k].shape)
+            if f"blocks/{k}" in f and f[f"blocks/{k}"].shape != want:
+                raise ValueError(f"{self.path}: blocks/{k} has shape {f[f'blocks/{k}'].shape}, "
+                                 f"expected {want}")
+        for k in _CORE:
+            if f"blocks/{k}" not in f:
+                raise ValueError(f"{self.path}: blocks/{k} is missing or not finite: cannot "
+                                 "continue")
+        if "contacts/nsub" not in f:
+            raise ValueError(f"{self.path}: contacts/nsub missing: not a complete checkpoint")
+        self.nsub = f["contacts/nsub"][()]
+        if (self.nsub < 0).any():
+            raise ValueError(f"{self.path}: contacts/nsub has negative counts")
+        names = {fd.name for fd in CONTACT_CK if f"contacts/{fd.name}" in f}
         for piece, block in (("pga", "ga"), ("pgb", "gb")):
-            if piece not in arrays and block in arrays:  # format <= 2: every block one piece
-                arrays[piece] = arrays[block].copy()
-        missing = [fd.name for fd in CONTACT_CK if fd.name not in arrays
+            if piece not in names and block in names:  # format <= 2: every block one piece
+                names.add(piece)
+        missing = [fd.name for fd in CONTACT_CK if fd.name not in names
                    and fd.name not in CONTACT_ADDED]
         if missing:
-            raise ValueError(f"{path}: contacts/{missing[0]} missing: not a complete checkpoint")
+            raise ValueError(f"{self.path}: contacts/{missing[0]} missing: not a complete "
+                             "checkpoint")
+        nc, ns = len(self.nsub), int(self.nsub.sum())
+        for fd in CONTACT_CK:
+            if f"contacts/{fd.name}" in f and len(f[f"contacts/{fd.name}"]) != nc:
+                raise ValueError(f"{self.path}: contacts/{fd.name} has "
+                                 f"{len(f[f'contacts/{fd.name}'])} rows, contacts/nsub {nc}")
+        for fd in SUB_CK:
+            if f"subcontacts/{fd.name}" not in f:
+                if fd.name == "sc_hist":  # format 1: no law history
+                    continue
+                raise ValueError(f"{self.path}: subcontacts/{fd.name} missing: not a complete "
+                                 "checkpoint")
+            if len(f[f"subcontacts/{fd.name}"]) != ns:
+                raise ValueError(f"{self.path}: subcontacts/{fd.name} has "
+                                 f"{len(f[f'subcontacts/{fd.name}'])} rows, expected {ns}")
+
+    def block_column(self, k: str) -> np.ndarray:
+        """Field ``k`` of every block (a field added after the file was written: zeros)."""
+        return self.block_rows(np.arange(self.n_blocks), (k,))[k]
+
+    def block_rows(self, gids: np.ndarray, fields=CHECKPOINT) -> dict[str, np.ndarray]:
+        """Fields of blocks ``gids`` (sorted); a field added after the file was written
+        starts from zero (its declared start value). Non-finite poses are refused."""
+        f = self.f
+        out = {k: _read_rows(f[f"blocks/{k}"], gids) if f"blocks/{k}" in f else
+               np.zeros((len(gids), *BLOCK_BY_NAME[k].shape), BLOCK_BY_NAME[k].dtype)
+               for k in fields}
+        for k in _CORE:
+            if k in out and (not np.isfinite(out[k]).all() or (
+                    k == "q" and len(gids) and not (np.abs(out[k]).sum(axis=1) > 0).all())):
+                raise ValueError(f"{self.path}: blocks/{k} is missing or not finite: cannot "
+                                 "continue")
+        return out
+
+    def contact_column(self, k: str) -> np.ndarray:
+        """``ga`` or ``gb`` of every contact, checked to name blocks of the model."""
+        a = self.f[f"contacts/{k}"][()]
+        if len(a) and not ((a >= 0) & (a < self.n_blocks)).all():
+            raise ValueError(f"{self.path}: contacts/{k} names blocks outside "
+                             f"0..{self.n_blocks - 1}")
+        return a
+
+    def contacts(self, rows: np.ndarray) -> ContactStore:
+        """Contacts ``rows`` (sorted) with their sub-contacts."""
+        f = self.f
+        arrays = {fd.name: _read_rows(f[f"contacts/{fd.name}"], rows) for fd in CONTACT_CK
+                  if f"contacts/{fd.name}" in f}
+        for piece, block in (("pga", "ga"), ("pgb", "gb")):
+            if piece not in arrays:  # format <= 2: every block one piece
+                arrays[piece] = arrays[block].copy()
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed
-            arrays.setdefault(fd.name, np.zeros((len(nsub), *fd.shape), fd.dtype))
-        sub = {fd.name: f[f"subcontacts/{fd.name}"][()] for fd in SUB_CK
+            arrays.setdefault(fd.name, np.zeros((len(rows), *fd.shape), fd.dtype))
+        sub_rows, start = csr.take(csr.starts(self.nsub), rows)
+        sub = {fd.name: _read_rows(f[f"subcontacts/{fd.name}"], sub_rows) for fd in SUB_CK
                if f"subcontacts/{fd.name}" in f}
-        sub.setdefault("sc_hist", np.zeros((int(nsub.sum()), 0)))  # format 1: no law history
-    _validate(path, out["attrs"], out["blocks"], arrays, sub, nsub)
-    out["contacts"] = ContactStore(arrays, sub, csr.starts(nsub))
+        sub.setdefault("sc_hist", np.zeros((len(sub_rows), 0)))  # format 1: no law history
+        return ContactStore(arrays, sub, start)
+
+
+def read_checkpoint(path: str | os.PathLike) -> dict:
+    """Everything in a checkpoint, read by one process (tools, tests; a restart reads each
+    rank's share, :class:`CheckpointReader`): ``attrs``, ``blocks`` {field: (n_blocks, ...)}
+    and ``contacts`` (a ContactStore)."""
+    with CheckpointReader(path) as r:
+        out = {"attrs": r.attrs, "blocks": r.block_rows(np.arange(r.n_blocks))}
+        for k in ("ga", "gb"):
+            r.contact_column(k)
+        out["contacts"] = r.contacts(np.arange(len(r.nsub)))
     return out
+
+
+def open_checkpoint(path: str | os.PathLike) -> dict:
+    """A checkpoint's attributes, checked (its rows are read by ``ModelState.restore``,
+    each rank its own): ``attrs`` and ``path``."""
+    with CheckpointReader(path) as r:
+        return {"attrs": r.attrs, "path": str(path)}
 
 
 # what a restart reads from the attributes, and the values it can continue from
@@ -195,7 +314,7 @@ _ATTRS = {"step": lambda v: v >= 0, "time": math.isfinite, "dt": lambda v: math.
 _CORE = ("x", "q", "v", "w")
 
 
-def _validate(path, attrs, blocks, arrays, sub, nsub) -> None:
+def _validate_attrs(path, attrs) -> None:
     """A damaged or foreign checkpoint is refused with what is wrong (found by the fuzz:
     missing attributes gave KeyError tracebacks, a zero dt a ZeroDivisionError, short datasets
     IndexErrors deep in the restart)."""
@@ -211,30 +330,6 @@ def _validate(path, attrs, blocks, arrays, sub, nsub) -> None:
     for key in ("scene", "run_id"):
         if not isinstance(attrs.get(key), str):
             raise ValueError(f"{path}: attribute {key!r} missing: not a complete checkpoint")
-    n = int(attrs["n_blocks"])
-    for k, a in blocks.items():
-        want = (n, *BLOCK_BY_NAME[k].shape)
-        if a.shape != want:
-            raise ValueError(f"{path}: blocks/{k} has shape {a.shape}, expected {want}")
-    for k in _CORE:
-        if not np.isfinite(blocks[k]).all() or (k == "q" and n and
-                                                 not (np.abs(blocks[k]).sum(axis=1) > 0).all()):
-            raise ValueError(f"{path}: blocks/{k} is missing or not finite: cannot continue")
-    nc, ns = len(nsub), int(np.sum(nsub))
-    if (nsub < 0).any():
-        raise ValueError(f"{path}: contacts/nsub has negative counts")
-    for k, a in arrays.items():
-        if len(a) != nc:
-            raise ValueError(f"{path}: contacts/{k} has {len(a)} rows, contacts/nsub {nc}")
-    for fd in SUB_CK:
-        if fd.name not in sub:  # sc_hist alone may be absent (format 1), set by the reader
-            raise ValueError(f"{path}: subcontacts/{fd.name} missing: not a complete checkpoint")
-    for k, a in sub.items():
-        if len(a) != ns:
-            raise ValueError(f"{path}: subcontacts/{k} has {len(a)} rows, expected {ns}")
-    for k in ("ga", "gb"):
-        if nc and not ((arrays[k] >= 0) & (arrays[k] < n)).all():
-            raise ValueError(f"{path}: contacts/{k} names blocks outside 0..{n - 1}")
 
 
 def prune(prefix: str, keep: int, comm) -> None:

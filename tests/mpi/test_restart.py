@@ -1,5 +1,6 @@
 """Checkpoint/restart continuity: 2N steps straight == N steps + checkpoint + restart + N,
-bitwise, when the checkpoint written on 2 ranks is restarted on 1 rank and on all ranks."""
+bitwise, when the checkpoint written on 2 ranks is restarted on 1 rank and on all ranks; on
+all ranks each reads the rows of its own blocks and contacts only (as ``pdem restart``)."""
 
 import os
 
@@ -8,8 +9,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+import pdem.io.checkpoint as checkpoint_io
 from pdem.config import parse_scene
-from pdem.io.checkpoint import read_checkpoint
+from pdem.io.checkpoint import open_checkpoint, read_checkpoint
 from pdem.simulation import Simulation
 
 SCENE = """
@@ -58,22 +60,44 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     ref, ref_step = final_state(f"{d}/straight.h5")
     assert ref_step == 2 * N
 
-    def restart(c, out):
+    def restart(c, out, state):
         sc = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
                                       "checkpoint": None})
-        r = Simulation(sc, c, checkpoint=ck)
+        r = Simulation(sc, c, checkpoint=state)
         assert r.step == N
+        owned = r.n_owned
         r.run()
         r.close()
-        return final_state(out)
+        return final_state(out), owned
 
-    if comm.rank == 0:  # on 1 rank
-        got, step = restart(MPI.COMM_SELF, f"{d}/r1.h5")
+    if comm.rank == 0:  # on 1 rank, the whole file read at once
+        (got, step), _ = restart(MPI.COMM_SELF, f"{d}/r1.h5", ck)
         assert step == 2 * N
         for k in FIELDS:
             assert np.array_equal(got[k], ref[k]), k
     comm.Barrier()
-    got, step = restart(comm, f"{d}/r{comm.size}.h5")  # on every rank of the job
+    # on every rank of the job, each reading its share (rows counted per dataset)
+    read = {}
+    whole = checkpoint_io._read_rows
+
+    def counted(dset, rows):
+        read[dset.name] = read.get(dset.name, 0) + len(rows)
+        return whole(dset, rows)
+
+    checkpoint_io._read_rows = counted
+    try:
+        (got, step), owned = restart(comm, f"{d}/r{comm.size}.h5", open_checkpoint(ck_path))
+    finally:
+        checkpoint_io._read_rows = whole
     assert step == 2 * N
     for k in FIELDS:
         assert np.array_equal(got[k], ref[k]), k
+    n_blocks, n_contacts = len(ck["blocks"]["x"]), ck["contacts"].n
+    # the centroids by every rank (who owns what), then the owned rows (centroid included)
+    assert read["/blocks/x"] == n_blocks + owned and read["/blocks/q"] == owned
+    assert comm.allreduce(owned) == n_blocks
+    if comm.size > 1:
+        assert owned < n_blocks
+    counts = comm.allgather(read.get("/contacts/normal", 0))
+    # each contact by a rank owning one of its free blocks: once, or twice across a boundary
+    assert n_contacts <= sum(counts) < 2 * n_contacts and max(counts) < n_contacts, counts
