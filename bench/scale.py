@@ -1,0 +1,142 @@
+"""Scale-out benchmark: the cube stack at 10^4, 10^5 and 10^6 blocks on 1 and 2 ranks, and a
+model of memory and halo traffic per rank at 64-4096 ranks fitted to those runs.
+
+    .venv/bin/python bench/scale.py                        # n = 22 46 100 on 1 and 2 ranks
+    .venv/bin/python bench/scale.py --n 22 46 --ranks 1 2  # skip 10^6 (it takes minutes)
+    .venv/bin/python bench/scale.py --model-only FILE.json # the model from a saved run
+
+Measured (each size and rank count in a fresh job, bench/setup.py's child): seconds to the
+first step, peak resident MB per rank (the set-up) and after set-up (what the run keeps),
+block-steps/s over 20 steps. Saved as JSON (``--save``, default bench/scale-last.json).
+
+Model: a rank's memory after set-up is ``base + a N + h (owned + ghosts)``: ``a`` the bytes
+every rank keeps per scene block (the scene's per-block fields and block names), ``h`` the bytes
+per block it holds (its row and geometry, and its share of the contacts: the stack has ~12 per
+cube). The set-up peak is ``base + s N + h' (owned + ghosts)`` (every rank builds the whole
+scene at set-up). ``a, h, s, h'`` are least-squares fits to the measured runs; owned blocks,
+ghosts and halo bytes per rank come from bench/scaling.py's decomposition model (exact for
+the stack's lattice). Strong scaling: N fixed (10^6, 10^7); weak: 10^4 blocks per rank.
+
+Not a test: timings on shared machines are noisy; memory is not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def _module(name: str):
+    spec = importlib.util.spec_from_file_location(name, HERE / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def measure(ns, ranks, memory) -> list[dict]:
+    py = sys.executable
+    mpiexec = str(Path(py).with_name("mpiexec"))
+    env = dict(os.environ)
+    if memory:
+        env["PDEM_BENCH_MEMORY"] = memory
+    out = []
+    for n in ns:
+        for p in ranks:
+            cmd = [mpiexec, "-n", str(p), py, str(HERE / "setup.py"), "--child", str(n)]
+            proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+            line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+            if proc.returncode or not line:
+                print(f"n={n} ranks={p}: failed (exit {proc.returncode})\n{proc.stderr[-1500:]}")
+                continue
+            r = json.loads(line[0][7:])
+            out.append(r)
+            print(f"{r['cubes']:>10,} blocks {p} rank(s): first step {r['total']:7.1f} s, "
+                  f"peak {r['peak_mb']:7.0f} MB, after set-up {r['steady_mb']:7.0f} MB per rank, "
+                  f"{r['rate']:.3g} block-steps/s", flush=True)
+    return out
+
+
+def held_per_rank(n: int, size: int):
+    """(owned + ghosts) mean and max over the ranks, halo KB/step received mean and max."""
+    m = _module("scaling").model(n, size)
+    held = m["owned"] + m["ghosts"]
+    return held.mean(), held.max(), m["recv"].mean() / 1e3, m["recv"].max() / 1e3, m["dims"]
+
+
+def fit(runs, key):
+    """Least squares ``mb - base = x0 N + x1 held`` over the runs (MB per block)."""
+    rows, rhs = [], []
+    for r in runs:
+        _, held, _, _, _ = held_per_rank(r["n"], r["ranks"])
+        rows.append([r["cubes"], held])
+        rhs.append(r[key] - r["base_mb"])
+    x, *_ = np.linalg.lstsq(np.array(rows, float), np.array(rhs, float), rcond=None)
+    return x
+
+
+def report_model(runs):
+    base = float(np.mean([r["base_mb"] for r in runs]))
+    a, h = fit(runs, "steady_mb")
+    s, hp = fit(runs, "peak_mb")
+    kb = 1024.0
+    print(f"\nfit over {len(runs)} runs: base {base:.0f} MB; after set-up {a * kb:.2f} KB per "
+          f"scene block on every rank + {h * kb:.2f} KB per block held; set-up peak "
+          f"{s * kb:.2f} KB per scene block + {hp * kb:.2f} KB per block held")
+    print("\nthe fit against the runs (MB per rank, max over ranks):")
+    print(f"{'blocks':>10} {'ranks':>5} {'after set-up meas/model':>25} {'peak meas/model':>18}")
+    for r in runs:
+        _, held, _, _, _ = held_per_rank(r["n"], r["ranks"])
+        print(f"{r['cubes']:>10,} {r['ranks']:>5} {r['steady_mb']:>12.0f}/"
+              f"{base + a * r['cubes'] + h * held:<12.0f} {r['peak_mb']:>8.0f}/"
+              f"{base + s * r['cubes'] + hp * held:<8.0f}")
+    print("\nmodel, per rank (max over ranks): memory after set-up and set-up peak (GB), "
+          "blocks held, halo KB received per step")
+    print(f"{'scaling':>8} {'blocks':>10} {'ranks':>6} {'grid':>9} {'held':>8} "
+          f"{'after set-up GB':>15} {'peak GB':>8} {'halo KB/step':>13}")
+    cases = [("strong", 100, p) for p in (64, 512, 4096)] + \
+        [("strong", 215, p) for p in (64, 512, 4096)] + \
+        [("weak", round((1e4 * p) ** (1 / 3)), p) for p in (64, 512, 4096)]
+    for kind, n, p in cases:
+        _, held, _, halo, dims = held_per_rank(n, p)
+        N = n ** 3
+        steady = (base + a * N + h * held) / 1024.0
+        peak = (base + s * N + hp * held) / 1024.0
+        print(f"{kind:>8} {N:>10.3g} {p:>6} {'x'.join(map(str, dims)):>9} {held:>8.0f} "
+              f"{steady:>15.2f} {peak:>8.2f} {halo:>13.1f}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[22, 46, 100],
+                    help="cubes per edge (22: 10,648; 46: 97,336; 100: 10^6)")
+    ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--memory", default="20GiB",
+                    help="limits.max_memory_per_rank for the runs (the pre-flight's limit)")
+    ap.add_argument("--save", default=str(HERE / "scale-last.json"))
+    ap.add_argument("--model-only", metavar="FILE", help="fit the model to a saved run")
+    args = ap.parse_args()
+    if args.model_only:
+        runs = json.loads(Path(args.model_only).read_text())
+    else:
+        runs = measure(args.n, args.ranks, args.memory)
+        Path(args.save).write_text(json.dumps(runs, indent=1))
+        rate = {(r["n"], r["ranks"]): r["rate"] for r in runs}
+        for n in args.n:
+            if (n, 1) in rate and (n, 2) in rate:
+                print(f"n={n}: strong-scaling efficiency on 2 ranks "
+                      f"{rate[(n, 2)] / (2 * rate[(n, 1)]):.2f}")
+    if len(runs) >= 2:
+        report_model(runs)
+
+
+if __name__ == "__main__":
+    main()
