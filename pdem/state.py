@@ -1,8 +1,9 @@
 """ModelState: one rank's share of the model (blocks, contacts, halo, cell space, clock).
 
 Built from a scene (or a checkpoint) on every rank alike. The static model (shapes, masses,
-initial state) is built on every rank from the scene, keyed by gid; a rank holds rows of it
-(owned + ghosts) in ``blocks``. Everything the cycle reads and writes lives here; the stepper
+initial state) is built on every rank from the scene, keyed by gid (``glob``); a rank holds rows
+of it (owned + ghosts) in ``blocks``, and after set-up keeps only those rows' geometry (it
+travels with the blocks, pdem.parallel.migrate) and a few per-block fields of every block. Everything the cycle reads and writes lives here; the stepper
 (:mod:`pdem.stepper`) changes it, plugins (:mod:`pdem.plugins`) observe it.
 """
 

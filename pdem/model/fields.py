@@ -2,7 +2,8 @@
 
 Each field says its trailing shape, dtype, units and where it travels:
 
-* ``static``     rebuilt from the scene by gid on every rank that holds the block;
+* ``static``     built from the scene at set-up; sent with the block to a rank that did not
+                 hold it (pdem.parallel.migrate);
 * ``migrate``    moves with a block (or contact) to its new owner at a rebuild;
 * ``checkpoint`` stored in checkpoints (always a subset of what migrates or is static);
 * ``halo``       sent from a block's owner to its ghost copies every step;
