@@ -209,7 +209,7 @@ def test_pile_settling_matches_one_rank(tmp_path, split):
     # distinct contacts (one between blocks of two ranks is computed by both)
     keys = np.unique(np.concatenate(comm.allgather(solver.contacts.keys())))
     if comm.rank == 0:
-        print(f"\npile {split} on {comm.size} ranks, dims {solver.state.decomp.dims.tolist()}: owned "
+        print(f"\npile {split} on {comm.size} ranks, {solver.state.decomp.describe()}: owned "
               f"{report['owned']}, ghosts {report['ghosts']}, contacts {report['contacts']} "
               f"({len(keys)} distinct), rebuilds {report['rebuilds']}, blocks that changed owner "
               f"{migrated}")
