@@ -7,9 +7,10 @@ a wide floor, thrown towards the opposite one, spreading and settling).
 Launches itself under ``mpiexec -n RANKS`` once per decomposition and prints, at six points of
 the run, the blocks each rank owns, its work (the blocks' weights: 1 + their contacts,
 pdem.parallel.decomposition.block_work) and the imbalance max / mean of each; then the wall
-time, the rebuilds and rebalances, and whether the two runs ended in bitwise the same state
-(they must: the decomposition changes the speed only). On an oversubscribed machine the wall
-times say little; the imbalance is the figure.
+time, the rebuilds and rebalances, each rank's compute time (its timed phases that are not
+messages: the busiest rank is the critical path) and whether the two runs ended in bitwise
+the same state (they must: the decomposition changes the speed only). On an oversubscribed
+machine the wall times say little; the imbalance and the busiest rank are the figures.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLES = 6
+COMPUTE = ("motion", "forces", "search", "contacts")  # the timed phases that are not messages
 
 
 def worker(args) -> None:
@@ -42,6 +44,7 @@ def worker(args) -> None:
     sim = Simulation(scene, comm, output=False)
     setup = time.perf_counter() - t0
     s = sim.state
+    s.timers.reset()
     rows = []
     elapsed = 0.0
     for k in range(SAMPLES + 1):
@@ -60,11 +63,13 @@ def worker(args) -> None:
     state = np.concatenate(comm.allgather(np.hstack([s.blocks.x[:n], s.blocks.v[:n]])))
     digest = hashlib.sha256(state[np.argsort(gids)].tobytes()).hexdigest()[:16]
     rebalanced = getattr(s.decomp, "n_balanced", 0)
+    # each rank's own work (not waiting for the others): the critical path is the busiest rank
+    busy = comm.allgather(sum(s.timers.total.get(k, 0.0) for k in COMPUTE))
     if comm.rank == 0:
         print("RESULT " + json.dumps({
             "balance": args.balance, "decomp": s.decomp.describe(), "blocks": s.glob.n,
             "setup": setup, "elapsed": elapsed, "rows": rows, "rebuilds": s.n_rebuilds,
-            "rebalanced": rebalanced, "digest": digest}), flush=True)
+            "rebalanced": rebalanced, "digest": digest, "busy": busy}), flush=True)
 
 
 def launch(balance: str, args) -> dict:
@@ -119,6 +124,8 @@ def main():
         print(f"{r['balance']:>8}: {r['decomp']}; set-up {r['setup']:.1f} s, run "
               f"{r['elapsed']:.1f} s, rebuilds {r['rebuilds']}, rebalanced {r['rebalanced']}, "
               f"mean work imbalance {mean_imb:.2f}, final state {r['digest']}")
+        print(f"{'':>8}  compute time per rank (motion, forces, search, contacts) "
+              f"{[round(b, 1) for b in r['busy']]} s: busiest {max(r['busy']):.1f} s")
     same = len({r["digest"] for r in runs}) == 1
     print(f"final states bitwise identical: {same}")
     if not same:

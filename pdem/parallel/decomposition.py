@@ -105,7 +105,7 @@ def block_work(blocks, n_owned: int, contacts) -> np.ndarray:
     fixed, 0 if it was deleted (a rank holds every contact of the free blocks it owns, so the
     weight does not depend on the decomposition; a fixed block's contacts are computed by the
     owners of the free blocks it touches)."""
-    w = (blocks.out[:n_owned] != 2).astype(np.int64)
+    w = (blocks.out[:n_owned] != 2).astype(np.int64)  # 2: deleted (pdem.domain.DELETED)
     if contacts.n and n_owned:
         free = blocks.fixed[:n_owned] == 0
         for side in ("ia", "ib"):
