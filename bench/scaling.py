@@ -2,10 +2,11 @@
 decomposition on 64 and 512 ranks.
 
     .venv/bin/python bench/scaling.py [--n 22] [--steps 200] [--warmup 20] [--ranks 1 2]
-                                      [--dims x|auto] [--model-only]
+                                      [--dims x|auto|rcb] [--model-only]
 
 Measured part: the script launches itself under ``mpiexec -n 1`` and ``mpiexec -n 2`` (n^3
-cubes, default 22^3 = 10648, split along x with ``parallel.dims [size, 1, 1]`` or ``auto``),
+cubes, default 22^3 = 10648, split along x with ``parallel.dims [size, 1, 1]``, ``auto`` (the
+uniform grid choose_dims picks) or ``rcb`` (``parallel.balance: rcb``, bench/balance.py)),
 times ``--steps`` steps after ``--warmup`` steps, and prints block-steps/s, the strong-scaling
 efficiency t1 / (p t_p), the halo bytes each rank sends per step (``load_report``) and the
 per-phase timers of every rank. On a 2-core machine the 2-rank figures are the real thing; on
@@ -58,8 +59,9 @@ def worker(args) -> None:
 
     comm = MPI.COMM_WORLD
     text = cube_stack_scene(args.n, "fast")
-    dims = "auto" if args.dims == "auto" else f"[{comm.size}, 1, 1]"
-    text += f"parallel: {{dims: {dims}}}\n"
+    par = {"x": f"dims: [{comm.size}, 1, 1]", "auto": "dims: auto, balance: uniform",
+           "rcb": "balance: rcb"}[args.dims]
+    text += f"parallel: {{{par}}}\n"
     t0 = time.perf_counter()
     solver = Simulation(parse_scene(text), comm, output=False)
     comm.Barrier()
@@ -73,9 +75,11 @@ def worker(args) -> None:
     elapsed = time.perf_counter() - t0
     report = solver.state.load_report()
     phases = comm.gather(solver.state.timers.report(), root=0)
+    dims = solver.state.decomp.dims
     if comm.rank == 0:
         print("RESULT " + json.dumps({
-            "size": comm.size, "dims": solver.state.decomp.dims.tolist(), "blocks": solver.state.glob.n,
+            "size": comm.size, "blocks": solver.state.glob.n,
+            "dims": dims.tolist() if dims is not None else ["rcb"],
             "free": int((solver.state.glob.fixed == 0).sum()), "setup": setup, "elapsed": elapsed,
             "steps": args.steps, "report": report, "phases": phases}), flush=True)
 
@@ -106,7 +110,7 @@ def measured(args) -> list[dict]:
         runs.append(launch(size, args))
     t1 = next((r["elapsed"] for r in runs if r["size"] == 1), None)
     print(f"\ncube stack {args.n}^3 = {runs[0]['free']} cubes (+ floor), dims "
-          f"{'[size, 1, 1]' if args.dims == 'x' else 'auto'}; cores here: {os.cpu_count()}")
+          f"{'[size, 1, 1]' if args.dims == 'x' else args.dims}; cores here: {os.cpu_count()}")
     print(f"{'ranks':>5} {'grid':>9} {'set-up s':>9} {'steps/s':>9} {'block-steps/s':>14} "
           f"{'efficiency':>10}  {'owned':>15} {'ghosts':>13} {'halo B/step/rank (sent)':>24}")
     for r in runs:
@@ -196,8 +200,8 @@ def main():
     ap.add_argument("--steps", type=int, default=200, help="timed steps")
     ap.add_argument("--warmup", type=int, default=20, help="untimed steps first")
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2], help="rank counts to run")
-    ap.add_argument("--dims", choices=["x", "auto"], default="x",
-                    help="x: parallel.dims [size, 1, 1]; auto: choose_dims")
+    ap.add_argument("--dims", choices=["x", "auto", "rcb"], default="x",
+                    help="x: parallel.dims [size, 1, 1]; auto: choose_dims; rcb: balance rcb")
     ap.add_argument("--model-only", action="store_true", help="skip the MPI runs")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()

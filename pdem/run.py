@@ -33,6 +33,7 @@ class Run:
         if self.stepper.advance():
             for p in self.plugins:
                 p.before_migration(self)
+            self.state.rebalance()  # new cuts if the work is imbalanced (balance: rcb)
             self.state.redistribute()
 
     def _advance_to_event(self, end_step, end_time, ratio_target, steps_left):
@@ -90,8 +91,8 @@ class Run:
                  s.scene.name, s.glob.n, s.contacts.n, s.dt, s.ctol, s.scene.solve.damping.mode,
                  self.n_estimate)
         if s.comm.size > 1:
-            log.info("decomposition: %s ranks on a %s grid, ghost margin %.3g m",
-                     s.comm.size, "x".join(map(str, s.decomp.dims)), s.resolved.margin)
+            log.info("decomposition: %s ranks, %s, ghost margin %.3g m",
+                     s.comm.size, s.decomp.describe(), s.resolved.margin)
         for p in self.plugins:
             p.start(self)
         t0 = wallclock.perf_counter()

@@ -39,6 +39,9 @@ class Simulation:
 
                 replay_stages(self.state, checkpoint["attrs"])
             self.state.restore(checkpoint)
+            # the start's cuts (balance: rcb) fit the scene's start, not the checkpoint's
+            if self.state.rebalance():
+                self.state.redistribute()
         if plugins is None:
             plugins = default_plugins(self.state, output)
         self.runner = Run(self.state, self.stepper, plugins)

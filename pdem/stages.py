@@ -136,6 +136,7 @@ def apply_stage(run, k: int) -> None:
     if st.reset_displacements:
         n = s.n_owned
         s.blocks.x_stage[:n] = s.blocks.x[:n]
+    s.rebalance()  # excavated blocks weigh nothing now (balance: rcb)
     s.redistribute()  # fixed/free changed who is computed where, and the halo plan
     wake_all(s)
     # a freed block has no contacts yet (none are kept between fixed blocks): find them now,

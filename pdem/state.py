@@ -31,7 +31,7 @@ from .model.build import block_store, expand_blocks
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields
-from .parallel.decomposition import Decomposition
+from .parallel.decomposition import make_decomposition
 from .parallel.migrate import rebuild
 from .parallel.mpi import allgather, broadcast
 from .timers import Timers
@@ -92,8 +92,7 @@ class ModelState:
         self.damping = DAMPING[scene.solve.damping.mode]
         self.scalar_inertia = scene.solve.inertia == "scalar"
         self.algorithm = ALGORITHMS[scene.contact.algorithm](resolved.ctol, resolved.snap_tol)
-        self.decomp = Decomposition(comm, np.array(resolved.domain_lo),
-                                    np.array(resolved.domain_hi), list(resolved.dims))
+        self.decomp = make_decomposition(comm, resolved, scene.parallel, glob.x)
         self.n_rebuilds = 0
         self.blocks = None
         self.n_owned = 0
@@ -197,6 +196,11 @@ class ModelState:
         b = self.blocks
         self.distribute(b.gid[:n].copy(), {k: getattr(b, k)[:n].copy() for k in MIGRATE},
                         self.contacts)
+
+    def rebalance(self) -> bool:
+        """At a rebuild point, before :meth:`redistribute`: new cuts if the owned work is
+        imbalanced (``parallel.rebalance``, balance rcb; collective), see parallel.decomposition."""
+        return self.decomp.rebalance(self.blocks, self.n_owned, self.contacts)
 
     def owned_gids(self) -> np.ndarray:
         return self.blocks.gid[:self.n_owned]

@@ -588,13 +588,28 @@ class Contact(Strict):
 
 
 class Parallel(Strict):
-    """Domain decomposition. ``dims``: ranks per axis (product = number of ranks), ``auto``
-    = MPI's factorisation with the largest factor on the longest axis, gravity's axis last.
-    ``margin`` (m): how far beyond its blocks a rank keeps ghosts; blocks moving half of it
-    trigger a rebuild (migration + ghost lists). ``auto`` = the cell size."""
+    """Domain decomposition (docs/parallel.md). ``balance``: ``uniform`` = a grid of ranks
+    splitting the model's box at start into equal bricks, fixed for the run; ``rcb`` =
+    recursive coordinate bisection of the blocks weighted by their contacts, recomputed when
+    the work is imbalanced; ``auto`` = ``rcb``, or ``uniform`` if ``dims`` is given. ``dims``
+    (uniform): ranks per axis (product = number of ranks), ``auto`` = MPI's factorisation with
+    the largest factor on the longest axis, gravity's axis last. ``rebalance`` (rcb): the
+    imbalance (max / mean of the ranks' owned work) above which a rebuild recomputes the cuts;
+    null = keep the start's cuts. ``margin`` (m): how far beyond its blocks a rank keeps
+    ghosts; blocks moving half of it trigger a rebuild (migration + ghost lists). ``auto`` =
+    the cell size."""
 
+    balance: Literal["auto", "uniform", "rcb"] = "auto"
     dims: tuple[PositiveInt, PositiveInt, PositiveInt] | Literal["auto"] = "auto"
+    rebalance: Annotated[float, Field(gt=1.0, le=1.0e6)] | None = 1.2
     margin: PositiveFloat | Literal["auto"] = "auto"
+
+    @model_validator(mode="after")
+    def _grid_or_rcb(self):
+        if self.balance == "rcb" and self.dims != "auto":
+            raise ValueError(f"dims {list(self.dims)} is a rank grid, for balance: uniform; "
+                             "balance: rcb places its own cuts: give one of dims, balance: rcb")
+        return self
 
 
 class History(Strict):

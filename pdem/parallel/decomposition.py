@@ -1,13 +1,26 @@
-"""Domain decomposition: a 3D Cartesian grid of ranks, each owning a brick of space.
+"""Domain decomposition: which rank owns which region of space (``parallel.balance``).
 
-A block is owned by the rank whose brick holds its centroid (clamped to the grid, so blocks
-that fly outside still have an owner). The bricks are fixed for the run: they split the bounding
-box of the model at start uniformly along each axis.
+A block is owned by the rank whose region holds its centroid; every point of space has exactly
+one owner (blocks that fly outside the model's box keep one). Two decompositions:
+
+- ``uniform`` (:class:`Decomposition`): a 3D Cartesian grid of ranks, each owning a brick; the
+  bricks split the bounding box of the model at start uniformly along each axis, fixed for the
+  run.
+- ``rcb`` (:class:`RCBDecomposition`): recursive coordinate bisection weighted by work (a block
+  weighs 1 + the contacts it is in), recomputed at a rebuild point when the owned work is
+  imbalanced beyond ``parallel.rebalance``.
+
+Which rank owns a block never changes the results (docs/architecture.md, Determinism): the
+decomposition is a matter of speed only.
 """
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
+
+log = logging.getLogger("pdem")
 
 
 def choose_dims(size: int, extent: np.ndarray, gravity: np.ndarray) -> list[int]:
@@ -31,6 +44,9 @@ def choose_dims(size: int, extent: np.ndarray, gravity: np.ndarray) -> list[int]
 
 class Decomposition:
     """Ranks on a ``dims`` grid over ``[lo, hi]``; ``owner_of`` maps points to ranks."""
+
+    balance = "uniform"
+    imbalance = None  # rcb only: the work imbalance measured at the last rebuild point
 
     def __init__(self, comm, lo: np.ndarray, hi: np.ndarray, dims: list[int]):
         self.comm = comm
@@ -58,5 +74,284 @@ class Decomposition:
         hi = np.array([self.edges[k][c[k] + 1] for k in range(3)])
         return lo, hi
 
+    def describe(self) -> str:
+        return f"a {'x'.join(map(str, self.dims))} grid"
+
+    def rebalance(self, blocks, n_owned: int, contacts) -> bool:
+        """The grid is fixed: never moves (no collective)."""
+        return False
+
     def free(self):
         self.cart.Free()
+
+
+# ---------------------------------------------------------------------------------------------
+# weighted decomposition: recursive coordinate bisection (parallel.balance: rcb)
+
+HIST_BINS = 256  # bins of one histogram pass of the weighted-quantile search
+HIST_PASSES = 3  # passes: a cut lands within extent / 256^3 of the exact weighted quantile
+
+
+def balance_of(parallel) -> str:
+    """The decomposition a scene's ``parallel`` section asks for: ``balance: auto`` is ``rcb``
+    unless ``dims`` names a rank grid (then ``uniform``)."""
+    if parallel.balance != "auto":
+        return parallel.balance
+    return "rcb" if parallel.dims == "auto" else "uniform"
+
+
+def block_work(blocks, n_owned: int, contacts) -> np.ndarray:
+    """The work weight of each owned block: 1 + the contacts it is in if it is free, 1 if it is
+    fixed, 0 if it was deleted (a rank holds every contact of the free blocks it owns, so the
+    weight does not depend on the decomposition; a fixed block's contacts are computed by the
+    owners of the free blocks it touches)."""
+    w = (blocks.out[:n_owned] != 2).astype(np.int64)  # 2: deleted (pdem.domain.DELETED)
+    if contacts.n and n_owned:
+        free = blocks.fixed[:n_owned] == 0
+        for side in ("ia", "ib"):
+            rows = np.asarray(contacts.arrays[side], np.int64)
+            rows = rows[rows < n_owned]
+            rows = rows[free[rows]]
+            w += np.bincount(rows, minlength=n_owned)
+    return w
+
+
+class CutTree:
+    """A binary tree of axis-aligned cuts; leaf ``k`` of ``parts`` is rank ``k``. Node ``i``
+    splits at ``cut[i]`` along ``axis[i]``: points with ``x[axis] < cut`` go to ``left[i]``,
+    the others to ``right[i]``; ``rank[i]`` is the rank of a leaf, -1 for a split. Every point
+    of space (outside the model's box, on a cut) has exactly one owner."""
+
+    def __init__(self, axis, cut, left, right, rank, lo, hi, leaf_work):
+        self.axis = np.asarray(axis, np.int64)
+        self.cut = np.asarray(cut, float)
+        self.left = np.asarray(left, np.int64)
+        self.right = np.asarray(right, np.int64)
+        self.rank = np.asarray(rank, np.int64)
+        self.lo = np.asarray(lo, float)  # the region of each node (the root: the model's box)
+        self.hi = np.asarray(hi, float)
+        self.leaf_work = np.asarray(leaf_work, np.int64)  # the weight each rank got, by rank
+        self.depth = _depth(self.left, self.right, self.rank)
+
+    def owner_of(self, points: np.ndarray) -> np.ndarray:
+        points = np.atleast_2d(np.asarray(points, float))
+        node = np.zeros(len(points), np.int64)
+        rows = np.arange(len(points))
+        for _ in range(self.depth):
+            inner = self.rank[node] < 0
+            if not inner.any():
+                break
+            nd = node[inner]
+            right = points[rows[inner], self.axis[nd]] >= self.cut[nd]
+            node[inner] = np.where(right, self.right[nd], self.left[nd])
+        return self.rank[node]
+
+    def region(self, rank: int) -> tuple[np.ndarray, np.ndarray]:
+        i = int(np.nonzero(self.rank == rank)[0][0])
+        return self.lo[i].copy(), self.hi[i].copy()
+
+
+def _depth(left, right, rank) -> int:
+    depth, level = 0, [0]
+    while True:
+        level = [c for i in level if rank[i] < 0 for c in (left[i], right[i])]
+        if not level:
+            return depth
+        depth += 1
+
+
+def _allreduce(comm, a: np.ndarray, op) -> np.ndarray:
+    out = np.empty_like(a)
+    comm.Allreduce(np.ascontiguousarray(a), out, op=op)
+    return out
+
+
+def rcb_tree(comm, x: np.ndarray, w: np.ndarray, parts: int, lo, hi) -> CutTree:
+    """The RCB of the points ``x`` (this rank's share; each point on one rank) with integer
+    weights ``w`` into ``parts`` regions (collective over ``comm``; ``parts`` need not be
+    ``comm.size``).
+
+    The set of ranks of a node, ``p`` of them, splits into the first ``p // 2`` and the rest,
+    across the longest extent of the box around the node's points, at the weighted quantile
+    ``p // 2 / p``, found by histogram refinement: each pass sums per-rank histograms of the
+    node's points in ``HIST_BINS`` bins (integer weights: exact sums, in any order) and
+    zooms into the bin holding the quantile; the cut is the bin edge nearer to it. The result
+    depends only on the set of points and weights (not on which rank holds which, nor on an
+    earlier decomposition) and is the same on every rank. A node holding no point is cut in
+    the middle of its region (the root's region: ``[lo, hi]``). Work per rank:
+    O(own points x levels x passes); messages: a few arrays of ``HIST_BINS`` per node."""
+    from mpi4py import MPI
+
+    x = np.asarray(x, float).reshape(-1, 3)
+    w = np.asarray(w, np.int64).reshape(-1)
+    axis, cut, left, right, rank = [-1], [0.0], [-1], [-1], [-1]
+    r0, r1 = [0], [parts]
+    rlo, rhi = [np.asarray(lo, float)], [np.asarray(hi, float)]
+    work = np.zeros(parts, np.int64)
+    node = np.zeros(len(x), np.int64)
+    active = [0] if parts > 1 else []
+    if parts == 1:
+        rank[0] = 0
+        work[0] = _allreduce(comm, np.array([w.sum()], np.int64), MPI.SUM)[0]
+    while active:
+        k = len(active)
+        slot = np.full(len(axis), -1, np.int64)
+        slot[active] = np.arange(k)
+        j_of = slot[node]
+        mine = np.nonzero(j_of >= 0)[0]
+        mine = mine[np.argsort(j_of[mine], kind="stable")]
+        bounds = np.searchsorted(j_of[mine], np.arange(k + 1))
+        groups = [mine[bounds[j]:bounds[j + 1]] for j in range(k)]
+        # the box around each node's points
+        box = np.full((k, 6), np.inf)
+        for j, g in enumerate(groups):
+            if len(g):
+                box[j, :3] = x[g].min(0)
+                box[j, 3:] = -x[g].max(0)
+        box = _allreduce(comm, box, MPI.MIN)
+        bmin, bmax = box[:, :3], -box[:, 3:]
+        has = np.isfinite(bmin[:, 0])
+        ax = np.empty(k, np.int64)
+        a = np.empty(k)
+        b = np.empty(k)
+        for j, i in enumerate(active):
+            ext = bmax[j] - bmin[j] if has[j] else rhi[i] - rlo[i]
+            ax[j] = int(np.argmax(ext))  # the first of equal extents: x, y, z
+            if has[j]:
+                a[j] = bmin[j, ax[j]]
+                b[j] = np.nextafter(bmax[j, ax[j]], np.inf)  # every point below b
+            else:
+                a[j] = b[j] = 0.5 * (rlo[i][ax[j]] + rhi[i][ax[j]])
+        coord = [x[g, ax[j]] for j, g in enumerate(groups)]
+        pl = np.array([(r1[i] - r0[i]) // 2 for i in active], np.int64)
+        p = np.array([r1[i] - r0[i] for i in active], np.int64)
+        below = np.zeros(k, np.int64)  # weight left of the window [a, b)
+        total = None
+        inside = np.zeros(k, np.int64)
+        for _ in range(HIST_PASSES):
+            edges = np.linspace(a, b, HIST_BINS + 1, axis=1)
+            hist = np.zeros((k, HIST_BINS), np.int64)
+            for j, g in enumerate(groups):
+                c = coord[j]
+                sel = (c >= a[j]) & (c < b[j])
+                if sel.any():
+                    bins = np.searchsorted(edges[j], c[sel], side="right") - 1
+                    hist[j] = np.bincount(bins, w[g][sel], HIST_BINS).astype(np.int64)
+            hist = _allreduce(comm, hist, MPI.SUM)
+            if total is None:
+                total = hist.sum(1)
+            cum = below[:, None] + np.cumsum(hist, axis=1)
+            # the first bin whose upper edge has at least the share p_left / p to its left
+            reach = cum * p[:, None] >= total[:, None] * pl[:, None]
+            jb = np.where(reach.any(1), np.argmax(reach, axis=1), HIST_BINS - 1)
+            rows = np.arange(k)
+            inside = hist[rows, jb]
+            below = cum[rows, jb] - inside
+            a, b = edges[rows, jb], edges[rows, jb + 1]
+        # the window's edge nearer the quantile (the lower one on a tie)
+        err_a = np.abs(below * p - total * pl)
+        err_b = np.abs((below + inside) * p - total * pl)
+        take_b = err_b < err_a
+        cuts = np.where(take_b, b, a)
+        left_w = np.where(take_b, below + inside, below)
+        nxt = []
+        for j, i in enumerate(active):
+            if not has[j]:
+                cuts[j] = a[j]
+            axis[i], cut[i] = int(ax[j]), float(cuts[j])
+            mid = r0[i] + int(pl[j])
+            for lo_r, hi_r, wt, side in ((r0[i], mid, left_w[j], "left"),
+                                         (mid, r1[i], total[j] - left_w[j], "right")):
+                c_lo, c_hi = rlo[i].copy(), rhi[i].copy()
+                if side == "left":
+                    c_hi[ax[j]] = cuts[j]
+                    left[i] = len(axis)
+                else:
+                    c_lo[ax[j]] = cuts[j]
+                    right[i] = len(axis)
+                axis.append(-1)
+                cut.append(0.0)
+                left.append(-1)
+                right.append(-1)
+                r0.append(lo_r)
+                r1.append(hi_r)
+                rlo.append(c_lo)
+                rhi.append(c_hi)
+                if hi_r - lo_r == 1:
+                    rank.append(lo_r)
+                    work[lo_r] = wt
+                else:
+                    rank.append(-1)
+                    nxt.append(len(axis) - 1)
+            g = groups[j]
+            go = coord[j] >= cuts[j]
+            node[g] = np.where(go, right[i], left[i])
+        active = nxt
+    return CutTree(axis, cut, left, right, rank, np.array(rlo), np.array(rhi), work)
+
+
+class RCBDecomposition:
+    """Ranks on the leaves of an RCB cut tree (:func:`rcb_tree`) of the blocks' centroids,
+    weighted by work; ``threshold``: the work imbalance (max / mean of the ranks' owned work)
+    above which :meth:`rebalance` recomputes the cuts (None: the cuts of the start are kept).
+    Construction is collective: the start's cuts, every block weighing 1 (``x``: this rank's
+    share of the start's centroids)."""
+
+    balance = "rcb"
+    dims = None  # no rank grid
+
+    def __init__(self, comm, lo: np.ndarray, hi: np.ndarray, x: np.ndarray,
+                 threshold: float | None):
+        self.comm = comm
+        self.size = comm.size
+        self.rank = comm.rank
+        self.lo = np.asarray(lo, float)
+        self.hi = np.asarray(hi, float)
+        self.threshold = threshold
+        self.imbalance = None
+        self.n_balanced = 0  # cut trees computed after the start's
+        self.tree = rcb_tree(comm, x, np.ones(len(x), np.int64), self.size, self.lo, self.hi)
+
+    def owner_of(self, points: np.ndarray) -> np.ndarray:
+        return self.tree.owner_of(points)
+
+    def brick(self, rank: int) -> tuple[np.ndarray, np.ndarray]:
+        """The region of ``rank`` (the outer ones bounded by the model's box at start; blocks
+        beyond it belong to the nearest region)."""
+        return self.tree.region(rank)
+
+    def describe(self) -> str:
+        return "recursive coordinate bisection (parallel.balance: rcb)"
+
+    def rebalance(self, blocks, n_owned: int, contacts) -> bool:
+        """At a rebuild point (collective, before the migration): if the owned work is more
+        imbalanced than the threshold, recompute the cuts from the owned blocks' centroids
+        and weights (:func:`block_work`); True if they were (the caller then migrates)."""
+        if self.threshold is None or self.size == 1:
+            return False
+        w = block_work(blocks, n_owned, contacts)
+        works = np.array(self.comm.allgather(int(w.sum())), float)
+        mean = works.mean()
+        self.imbalance = float(works.max() / mean) if mean > 0 else 1.0
+        if self.imbalance <= self.threshold:
+            return False
+        self.tree = rcb_tree(self.comm, blocks.x[:n_owned], w, self.size, self.lo, self.hi)
+        self.n_balanced += 1
+        got = self.tree.leaf_work
+        log.info("rebalanced: work imbalance %.3g -> %.3g (parallel.rebalance %.3g)",
+                 self.imbalance, got.max() / max(got.mean(), 1e-300), self.threshold)
+        return True
+
+    def free(self):
+        pass
+
+
+def make_decomposition(comm, resolved, parallel, x: np.ndarray):
+    """The decomposition ``parallel`` asks for (collective); ``x``: the start's centroids of
+    every block (the same on every rank)."""
+    lo, hi = np.array(resolved.domain_lo), np.array(resolved.domain_hi)
+    if balance_of(parallel) == "uniform":
+        return Decomposition(comm, lo, hi, list(resolved.dims))
+    n = len(x)
+    share = slice(n * comm.rank // comm.size, n * (comm.rank + 1) // comm.size)
+    return RCBDecomposition(comm, lo, hi, np.asarray(x, float)[share], parallel.rebalance)

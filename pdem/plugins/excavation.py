@@ -43,4 +43,5 @@ class Excavations(Plugin):
         if done and s.comm.size > 1:
             for p in run.plugins:
                 p.before_migration(run)
+            s.rebalance()  # excavated blocks weigh nothing now (balance: rcb)
             s.redistribute()

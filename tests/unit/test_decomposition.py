@@ -1,4 +1,6 @@
-"""Domain decomposition on one rank: the choice of the rank grid and the point -> rank map.
+"""Domain decomposition on one rank: the choice of the rank grid and the point -> rank map, and
+the RCB cut tree (parallel.balance: rcb; its ``parts`` need not be the communicator's size, so
+trees for 2-7 ranks are built here on MPI.COMM_SELF).
 
 ``Decomposition`` needs a communicator of ``prod(dims)`` ranks for its Cartesian topology, so
 the many-rank cases of ``owner_of`` run the real method on a stand-in holding the same edges and
@@ -15,7 +17,13 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pdem.parallel.decomposition import Decomposition, choose_dims
+from pdem.config import parse_scene
+from pdem.parallel.decomposition import (
+    Decomposition,
+    balance_of,
+    choose_dims,
+    rcb_tree,
+)
 
 DOWN = np.array([0.0, 0.0, -9.81])
 
@@ -119,3 +127,128 @@ def test_owner_of_on_edges_and_outside():
     assert grid.owner_of(far).tolist() == [0, 7, 1, 6, 0, 7]
     # one point, as a 1-D array
     assert grid.owner_of(np.array([2.5, 0.1, 1.9])).tolist() == [4]
+
+
+# ---------------------------------------------------------------------------------------------
+# RCB (parallel.balance: rcb)
+
+LO, HI = np.array([0.0, 0.0, 0.0]), np.array([10.0, 4.0, 2.0])
+
+
+def skewed(n=4000, seed=3):
+    """A pile in one corner (90 % of the points) and a sparse scatter; weights 1-30, the pile's
+    heavier (many contacts)."""
+    rng = np.random.default_rng(seed)
+    k = n * 9 // 10
+    x = np.concatenate([rng.random((k, 3)) * [1.5, 1.0, 0.5], rng.random((n - k, 3)) * HI])
+    w = np.concatenate([rng.integers(5, 31, k), rng.integers(1, 3, n - k)])
+    return x, w
+
+
+def tree(x, w, parts):
+    return rcb_tree(MPI.COMM_SELF, x, w, parts, LO, HI)
+
+
+@pytest.mark.parametrize("parts", [1, 2, 3, 4, 5, 7])
+def test_rcb_every_point_has_one_owner_and_the_work_is_balanced(parts):
+    x, w = skewed()
+    t = tree(x, w, parts)
+    owner = t.owner_of(x)
+    assert owner.min() >= 0 and owner.max() < parts
+    work = np.bincount(owner, w, parts)
+    assert np.array_equal(work.astype(np.int64), t.leaf_work)  # the tree's own bookkeeping
+    # within the heaviest block's weight of the exact share per leaf, at every level
+    assert work.max() / work.mean() < 1.0 + parts * w.max() / w.sum() + 1e-12, work
+    assert sorted(t.rank[t.rank >= 0].tolist()) == list(range(parts))
+    assert t.depth == int(np.ceil(np.log2(parts)))
+
+
+def test_rcb_balances_far_better_than_the_grid():
+    x, w = skewed()
+    for parts in (2, 3, 5):
+        work = np.bincount(tree(x, w, parts).owner_of(x), w, parts)
+        dims = [parts, 1, 1]  # the grid along the longest axis
+        grid = np.searchsorted(np.linspace(LO[0], HI[0], parts + 1)[1:-1], x[:, 0], side="right")
+        on_grid = np.bincount(grid, w, parts)
+        assert work.max() / work.mean() < 1.01, (parts, work)
+        assert on_grid.max() / on_grid.mean() > 1.5, (dims, on_grid)
+
+
+def test_rcb_is_deterministic_and_order_free():
+    x, w = skewed()
+    a = tree(x, w, 5)
+    perm = np.random.default_rng(0).permutation(len(x))
+    b = tree(x[perm], w[perm], 5)
+    for k in ("axis", "cut", "left", "right", "rank", "lo", "hi", "leaf_work"):
+        assert np.array_equal(getattr(a, k), getattr(b, k)), k
+
+
+def test_rcb_owner_of_everywhere():
+    """Points outside the model's box, on the cuts, far away, in any shape of array: one owner."""
+    x, w = skewed()
+    t = tree(x, w, 3)
+    inner = np.nonzero(t.rank < 0)[0]
+    on_cuts = np.array([[t.cut[i] if k == t.axis[i] else 0.5 for k in range(3)] for i in inner])
+    far = np.array([[-1e9, -1e9, -1e9], [1e9, 1e9, 1e9], [-1e9, 1e9, 0.0], [50.0, -3.0, 7.0]])
+    got = t.owner_of(np.concatenate([on_cuts, far]))
+    assert got.min() >= 0 and got.max() < 3
+    # a point on the root's cut belongs to the side above it (x[axis] >= cut): ranks 1, 2
+    p = np.full(3, 0.5)
+    p[t.axis[0]] = t.cut[0]
+    below = p.copy()
+    below[t.axis[0]] = np.nextafter(t.cut[0], -np.inf)
+    assert t.owner_of(p)[0] >= 1 and t.owner_of(below)[0] == 0
+    assert t.owner_of(np.array([0.1, 0.1, 0.1])).shape == (1,)
+    # the region of each rank holds the points it owns
+    owner = t.owner_of(x)
+    for r in range(3):
+        lo, hi = t.region(r)
+        assert np.all((x[owner == r] >= lo) & (x[owner == r] <= hi)), r
+
+
+def test_rcb_cuts_the_longest_extent_first():
+    rng = np.random.default_rng(1)
+    x = rng.random((1000, 3)) * [1.0, 1.0, 6.0]  # a tall column: the first cut is across z
+    t = tree(x, np.ones(1000, np.int64), 2)
+    assert t.axis[0] == 2 and abs(t.cut[0] - np.median(x[:, 2])) < 0.05
+
+
+def test_rcb_degenerate_inputs():
+    # fewer points than ranks, identical points, no points at all: every rank a region, one
+    # owner per point, the same tree twice
+    one = np.array([[1.0, 1.0, 1.0]])
+    for x in (one, np.repeat(one, 10, 0), np.zeros((0, 3))):
+        w = np.ones(len(x), np.int64)
+        a, b = tree(x, w, 5), tree(x, w, 5)
+        assert np.array_equal(a.cut, b.cut)
+        assert sorted(a.rank[a.rank >= 0].tolist()) == list(range(5))
+        if len(x):
+            assert a.leaf_work.sum() == len(x)
+            assert np.unique(a.owner_of(x)).size == 1
+
+
+def scene_with(parallel: str):
+    return parse_scene(f"""
+name: p
+materials: {{rock: {{density: 2000}}}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9}}}}
+blocks: [{{name: a, box: {{min: [0, 0, 0], max: [1, 1, 1]}}, material: rock}}]
+solve: {{steps: 1}}
+parallel: {parallel}
+""")
+
+
+def test_balance_setting():
+    assert scene_with("{}").parallel.rebalance == 1.2
+    assert balance_of(scene_with("{}").parallel) == "rcb"
+    assert balance_of(scene_with("{dims: [2, 1, 1]}").parallel) == "uniform"
+    assert balance_of(scene_with("{balance: uniform}").parallel) == "uniform"
+    assert balance_of(scene_with("{balance: rcb, rebalance: null}").parallel) == "rcb"
+    from pdem.config import ConfigError
+
+    with pytest.raises(ConfigError, match="parallel: dims \\[2, 1, 1\\] is a rank grid"):
+        scene_with("{balance: rcb, dims: [2, 1, 1]}")
+    with pytest.raises(ConfigError, match="parallel.rebalance"):
+        scene_with("{rebalance: 0.9}")
+    with pytest.raises(ConfigError, match="parallel.balance"):
+        scene_with("{balance: grid}")
