@@ -3,8 +3,9 @@
 Built from a scene (or a checkpoint) on every rank alike. The static model (shapes, masses,
 initial state) is built on every rank from the scene, keyed by gid (``glob``); a rank holds rows
 of it (owned + ghosts) in ``blocks``, and after set-up keeps only those rows' geometry (it
-travels with the blocks, pdem.parallel.migrate) and a few per-block fields of every block. Everything the cycle reads and writes lives here; the stepper
-(:mod:`pdem.stepper`) changes it, plugins (:mod:`pdem.plugins`) observe it.
+travels with the blocks, pdem.parallel.migrate) and a few per-block fields of every block.
+Everything the cycle reads and writes lives here; the stepper (:mod:`pdem.stepper`) changes
+it, plugins (:mod:`pdem.plugins`) observe it.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from .dynamics.kinematics import refresh_pose, thinnest_width
 from .errors import UserError
 from .io.checkpoint import new_run_id
 from .memory import return_freed_memory
-from .model.build import block_store, expand_blocks
+from .model.build import SpecTable, block_store, expand_blocks
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields
@@ -181,6 +182,7 @@ class ModelState:
             self.glob.keep_fields(CATALOGUE)
             for sp in self.specs:
                 sp.release()
+            self.specs = SpecTable(self.specs, self.scene.blocks)
         return_freed_memory()
 
     def distribute_initial(self):

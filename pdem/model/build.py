@@ -110,6 +110,77 @@ class BlockSpec:
         return [p.transformed(R.T, -c @ R) for p in self.pieces], c, R, moments
 
 
+class SpecView:
+    """One block of a :class:`SpecTable`, read like a released :class:`BlockSpec`."""
+
+    __slots__ = ("_t", "_g")
+
+    def __init__(self, table: SpecTable, gid: int):
+        self._t, self._g = table, gid
+
+    pieces = None  # released: the geometry lives with the blocks' owners
+
+    name = property(lambda self: self._t.names[self._g])
+    entry = property(lambda self: int(self._t.entry[self._g]))
+    spec = property(lambda self: self._t.scene_blocks[self.entry])
+    parent = property(lambda self: self._t.parents[self._t.parent[self._g]])
+    group = property(lambda self: self._t.labels[self._t.group[self._g]])
+    material = property(lambda self: self._t.labels[self._t.material[self._g]])
+    volume = property(lambda self: float(self._t.volume[self._g]))
+    surface = property(lambda self: float(self._t.surface[self._g]))
+    n_pieces = property(lambda self: int(self._t.n_pieces[self._g]))
+
+    @property
+    def excavate_at(self):
+        t = self._t.excavate_at[self._g]
+        return None if np.isnan(t) else float(t)
+
+    @property
+    def excavate_stage(self):
+        k = self._t.excavate_stage[self._g]
+        return None if k < 0 else int(k)
+
+
+class SpecTable:
+    """The blocks' specs after set-up, as columns by gid (a list of names, a few numbers a
+    block) instead of one Python object each: every rank keeps them for every block (names in
+    messages, selections by name, group or stage), ~1 KB a block as objects, ~0.1 KB here.
+    Indexing and iteration give :class:`SpecView` objects with the released spec's
+    attributes."""
+
+    def __init__(self, specs: list[BlockSpec], scene_blocks):
+        self.scene_blocks = scene_blocks
+        n = len(specs)
+        self.names = [sp.name for sp in specs]
+        parents: dict[str, int] = {}
+        labels: dict[str, int] = {}
+        self.parent = np.array([parents.setdefault(sp.parent, len(parents)) for sp in specs],
+                               np.int32)
+        self.parents = list(parents)
+        self.group = np.array([labels.setdefault(sp.group, len(labels)) for sp in specs],
+                              np.int32)
+        self.material = np.array([labels.setdefault(sp.material, len(labels)) for sp in specs],
+                                 np.int32)
+        self.labels = list(labels)
+        self.entry = np.fromiter((sp.entry for sp in specs), np.int32, n)
+        self.volume = np.fromiter((sp.volume for sp in specs), float, n)
+        self.surface = np.fromiter((sp.surface for sp in specs), float, n)
+        self.n_pieces = np.fromiter((sp.n_pieces for sp in specs), np.int32, n)
+        self.excavate_at = np.fromiter(
+            (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float, n)
+        self.excavate_stage = np.fromiter(
+            (-1 if sp.excavate_stage is None else sp.excavate_stage for sp in specs), np.int32, n)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __getitem__(self, gid) -> SpecView:
+        return SpecView(self, int(gid))
+
+    def __iter__(self):
+        return (SpecView(self, g) for g in range(len(self.names)))
+
+
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) of rotation matrix R (Shepperd's method), w >= 0."""
     t = np.trace(R)
