@@ -7,7 +7,7 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import h5py
 import numpy as np
@@ -71,38 +71,69 @@ def _share(rank: int, size: int, n: int) -> tuple[int, int]:
     return rank * n // size, (rank + 1) * n // size
 
 
-def _fan_triangulate(
-    body_faces: Sequence[Sequence[Sequence[int]]], nv: np.ndarray, vstart: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+class BodyMesh(NamedTuple):
+    """Every block's surface in its body frame, flat: vertices ``verts[vert_start[b]:
+    vert_start[b+1]]``; faces in block order, ``face_len`` vertex ids each (block-local,
+    counter-clockwise from outside) in ``face_verts``, ``face_block`` the block of each."""
+
+    vert_start: np.ndarray
+    verts: np.ndarray
+    face_len: np.ndarray
+    face_block: np.ndarray
+    face_verts: np.ndarray
+
+    @staticmethod
+    def from_lists(body_vertices, body_faces) -> BodyMesh:
+        """From per-block vertex arrays and face lists (checked: shapes)."""
+        verts = [np.asarray(v, dtype=np.float64) for v in body_vertices]
+        for b, v in enumerate(verts):
+            if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+                raise ValueError(f"body_vertices[{b}]: shape {v.shape}, expected (nv, 3)")
+        nv = np.array([len(v) for v in verts], dtype=np.int64)
+        face_len = np.array([len(f) for faces in body_faces for f in faces], dtype=np.int64)
+        face_block = np.repeat(np.arange(len(body_faces)), [len(faces) for faces in body_faces])
+        flat = np.fromiter(
+            (i for faces in body_faces for f in faces for i in f), np.int64, int(face_len.sum())
+        )
+        mesh = BodyMesh(np.concatenate([[0], np.cumsum(nv)]).astype(np.int64),
+                        np.concatenate(verts) if verts else np.zeros((0, 3)), face_len,
+                        face_block.astype(np.int64), flat)
+        bad = mesh.bad_face()
+        if bad is not None:
+            b = int(face_block[bad])
+            k = bad - int(np.searchsorted(face_block, b))
+            raise ValueError(f"body_faces[{b}][{k}] = {list(body_faces[b][k])}: need >= 3 "
+                             f"vertex ids < {nv[b]}")
+        return mesh
+
+    def bad_face(self) -> int | None:
+        """The first face with fewer than 3 vertices or a vertex id outside its block's."""
+        nv = np.diff(self.vert_start)
+        vert_block = np.repeat(self.face_block, self.face_len)
+        bad = self.face_len < 3
+        bad_v = (self.face_verts < 0) | (self.face_verts >= nv[vert_block])
+        if bad.any() or bad_v.any():
+            bad |= np.bincount(np.repeat(np.arange(len(self.face_len)), self.face_len), bad_v,
+                               len(bad)) > 0
+            return int(np.flatnonzero(bad)[0])
+        return None
+
+
+def _fan_triangulate(mesh: BodyMesh) -> tuple[np.ndarray, np.ndarray]:
     """Fan-triangulate every face: global connectivity ``(n_tri, 3)`` and block of each.
 
     Face ``(v0, v1, ..., vk)`` gives ``(v0, v1, v2), (v0, v2, v3), ...``: counter-clockwise
     faces give counter-clockwise triangles, so normals still point out of the block.
     """
-    face_len = np.array([len(f) for faces in body_faces for f in faces], dtype=np.int64)
-    face_block = np.repeat(np.arange(len(body_faces)), [len(faces) for faces in body_faces])
-    flat = np.fromiter(
-        (i for faces in body_faces for f in faces for i in f), np.int64, int(face_len.sum())
-    )
-    vert_block = np.repeat(face_block, face_len)
-    bad = face_len < 3
-    bad_v = (flat < 0) | (flat >= nv[vert_block])
-    if bad.any() or bad_v.any():
-        bad |= np.bincount(np.repeat(np.arange(len(face_len)), face_len), bad_v, len(bad)) > 0
-        f = int(np.flatnonzero(bad)[0])
-        b = int(face_block[f])
-        k = f - int(np.searchsorted(face_block, b))
-        raise ValueError(
-            f"body_faces[{b}][{k}] = {list(body_faces[b][k])}: need >= 3 vertex ids < {nv[b]}"
-        )
-    flat = flat + vstart[vert_block]
+    face_len = mesh.face_len
+    flat = mesh.face_verts + mesh.vert_start[np.repeat(mesh.face_block, face_len)]
     fstart = _starts(face_len)
     n_fan = face_len - 2
     tri_face = np.repeat(np.arange(len(face_len)), n_fan)
     j = np.arange(len(tri_face)) - np.repeat(_starts(n_fan), n_fan)
     first = fstart[tri_face]
     conn = np.stack([flat[first], flat[first + 1 + j], flat[first + 2 + j]], axis=1)
-    return conn.reshape(-1, 3), face_block[tri_face].astype(np.int64)
+    return conn.reshape(-1, 3), mesh.face_block[tri_face].astype(np.int64)
 
 
 def _starts(counts: np.ndarray) -> np.ndarray:
@@ -160,6 +191,8 @@ class OutputWriter:
     block_names, body_vertices, body_faces
         Per block in gid order, identical on every rank: name, vertices ``(nv, 3)`` in the
         body frame (origin at the centroid), faces as counter-clockwise vertex-id lists.
+    body_mesh
+        The same surfaces flat (:class:`BodyMesh`), instead of the two lists.
     scene_yaml
         The resolved scene, stored as the root attribute ``scene``.
     attrs
@@ -194,9 +227,10 @@ class OutputWriter:
         comm: MPI.Comm,
         *,
         block_names: Sequence[str],
-        body_vertices: Sequence[np.ndarray],
-        body_faces: Sequence[Sequence[Sequence[int]]],
-        scene_yaml: str,
+        body_vertices: Sequence[np.ndarray] | None = None,
+        body_faces: Sequence[Sequence[Sequence[int]]] | None = None,
+        scene_yaml: str = "",
+        body_mesh: BodyMesh | None = None,
         attrs: dict[str, Any] | None = None,
         parallel: bool | None = None,
         xdmf: bool = True,
@@ -230,18 +264,19 @@ class OutputWriter:
         n = len(block_names)
         if n == 0:
             raise ValueError("OutputWriter: the scene has no blocks")
-        if len(body_vertices) != n or len(body_faces) != n:
-            raise ValueError(
-                f"OutputWriter: {n} block names, {len(body_vertices)} vertex arrays, "
-                f"{len(body_faces)} face lists"
-            )
-        verts = [np.asarray(v, dtype=np.float64) for v in body_vertices]
-        for b, v in enumerate(verts):
-            if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
-                raise ValueError(f"body_vertices[{b}]: shape {v.shape}, expected (nv, 3)")
-        nv = np.array([len(v) for v in verts], dtype=np.int64)
-        self._vstart = np.concatenate([[0], np.cumsum(nv)])
-        conn, tri_block = _fan_triangulate(body_faces, nv, self._vstart)
+        if body_mesh is None:
+            if len(body_vertices) != n or len(body_faces) != n:
+                raise ValueError(
+                    f"OutputWriter: {n} block names, {len(body_vertices)} vertex arrays, "
+                    f"{len(body_faces)} face lists"
+                )
+            body_mesh = BodyMesh.from_lists(body_vertices, body_faces)
+        elif len(body_mesh.vert_start) != n + 1:
+            raise ValueError(f"OutputWriter: {n} block names, a body mesh of "
+                             f"{len(body_mesh.vert_start) - 1} blocks")
+        nv = np.diff(body_mesh.vert_start)
+        self._vstart = body_mesh.vert_start
+        conn, tri_block = _fan_triangulate(body_mesh)
         self.n_blocks, self.n_points, self.n_tri = n, int(self._vstart[-1]), len(conn)
         self.n_snap = 0
         self._extra_cells: list[tuple[str, str]] = []  # static results on the surfaces
@@ -258,10 +293,7 @@ class OutputWriter:
         self._lo, self._hi = int(self._bounds[rank]), int(self._bounds[rank + 1])
         lo, hi = self._lo, self._hi
         self._vlo, self._vhi = int(self._vstart[lo]), int(self._vstart[hi])
-        if hi > lo:
-            self._my_verts = np.concatenate(verts[lo:hi])
-        else:
-            self._my_verts = np.zeros((0, 3))
+        self._my_verts = body_mesh.verts[self._vlo:self._vhi].copy()
         self._my_vblock = np.repeat(np.arange(hi - lo), nv[lo:hi])
         self._init_fields(tri_block, initial_centroid, group, group_names, fixed)
         self.contacts = bool(contacts)

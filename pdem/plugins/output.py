@@ -13,26 +13,24 @@ from ..contact.forces import normal_forces
 from ..contact.laws import FAILED
 from ..errors import writing
 from ..io.checkpoint import written_contacts
-from ..io.writer import OutputWriter, quat_to_matrix
+from ..io.writer import BodyMesh, OutputWriter, quat_to_matrix
 from ..model import csr
 from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps, next_multiple
 
 
-def body_surfaces(specs):
-    """Per block, its body-frame vertices and faces (vertex ids into them): a joined block's
-    pieces side by side."""
-    vertices, faces = [], []
-    for spec in specs:
-        bodies = spec.principal_frame()[0]
-        v0, fs = 0, []
-        for sh in bodies:
-            fs += [[v0 + int(i) for i in sh.face_verts[sh.face_start[f]:sh.face_start[f + 1]]]
-                   for f in range(sh.n_faces)]
-            v0 += sh.n_vertices
-        vertices.append(np.concatenate([sh.vertices for sh in bodies]))
-        faces.append(fs)
-    return vertices, faces
+def body_surfaces(store) -> BodyMesh:
+    """Every block's surface in its body frame from a store holding every block in gid order
+    (the scene's, at set-up), flat: a joined block's pieces side by side. Vectorised over the
+    store's CSR geometry (a block's pieces, vertices and faces are consecutive rows)."""
+    first_piece = store.piece_start
+    vert_start = store.vert_start[first_piece]  # each block's first vertex row (and the end)
+    face_start = store.face_start[first_piece]
+    face_block = np.repeat(np.arange(store.n), np.diff(face_start))
+    face_len = np.diff(store.fvert_start)
+    vert_of = np.repeat(face_block, face_len)
+    return BodyMesh(vert_start - vert_start[0], store.verts_local.copy(), face_len,
+                    face_block, store.face_verts - vert_start[vert_of])
 
 
 def _mass_scaling_attrs(state) -> dict:
@@ -101,7 +99,6 @@ class Snapshots(Plugin):
         out = state.scene.output
         self.every = interval_steps(state, out.every_steps, out.every)
         self.after_write = []  # callbacks run after each snapshot (histories flush)
-        vertices, faces = body_surfaces(state.specs)
         r = state.resolved
         self.contacts = bool(out.contacts)
         self.bonded = bonded_joints(state.joints)
@@ -112,7 +109,7 @@ class Snapshots(Plugin):
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
             block_parents=[s.parent for s in state.specs],
-            body_vertices=vertices, body_faces=faces,
+            body_mesh=body_surfaces(state.glob),
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
             group_names=state.group_names, fixed=state.glob.fixed,
             attrs=attrs,
