@@ -58,7 +58,9 @@ class Run:
             budget = min(budget, steps_left)
         t0 = wallclock.perf_counter()
         done = self.stepper.advance_many(budget, stop_step, stop_time, ratio_target)
-        if done > 1:  # seconds per step, for the next slice
+        # seconds per step, for the next slice; a single step is measured too, else a slow
+        # first call (compiling fused_steps) would leave the budget at one step for good
+        if done >= 1:
             self._step_seconds = (wallclock.perf_counter() - t0) / done
 
     def _end(self, time, steps, ratio=None, max_steps=None):

@@ -181,7 +181,9 @@ class Stepper:
         jump = contact_energies(refreshed.pairs(), refreshed.subs(), joints, todo) * keep \
             - before
         forces.book_contact_energy(self.bodies(), c.ia, c.ib, jump, motion.WORK_GEOMETRY)
-        s.contacts = refreshed.select(keep.astype(bool))
+        # the common case deletes no contact: no need to copy every contact field (a select is
+        # a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts)
+        s.contacts = refreshed if keep.all() else refreshed.select(keep.astype(bool))
 
     def bodies(self) -> Bodies:
         b = self.s.blocks

@@ -121,7 +121,11 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     vert_start, verts_world, point_area = shapes.vert_start, shapes.verts_world, shapes.point_area
     nc = c_ia.shape[0]
     # output capacity: the old sub-contacts plus a few per refreshed contact, grown on demand
-    cap = old_start[nc] + 8 * nc + 16
+    # (trimmed at the end: the stepper keeps these arrays when no contact is deleted)
+    n_todo = 0
+    for c in range(nc):
+        n_todo += todo[c] != 0
+    cap = old_start[nc] + 8 * n_todo + 16
     keep = np.zeros(nc, np.uint8)
     counts = np.zeros(nc, np.int64)
     pa = np.empty((cap, 3))
@@ -249,5 +253,9 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         new_start[c] = tot
         tot += counts[c]
     new_start[nc] = tot
+    if cap > tot + (tot >> 3) + 64:  # a contiguous copy (memcpy) rather than hold the slack
+        return keep, new_start, pa[:tot].copy(), area[:tot].copy(), un[:tot].copy(), \
+            fs[:tot].copy(), us[:tot].copy(), dil[:tot].copy(), state[:tot].copy(), \
+            hist[:tot].copy()
     return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], dil[:tot], \
         state[:tot], hist[:tot]
