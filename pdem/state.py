@@ -126,6 +126,11 @@ class ModelState:
         joints = joint_table(scene, group_names)
         resolved = resolve(scene, comm.size, specs, glob, joints)
         check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn, resolved.ctol)
+        # the shapes are in the store now (the output's surfaces too): the specs keep names and
+        # scalars, as columns (every rank keeps them for every block)
+        for sp in specs:
+            sp.release()
+        specs = SpecTable(specs, scene.blocks)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
         state.estimate = estimate
         apply_scene(state)
@@ -175,14 +180,11 @@ class ModelState:
     def release_scene_geometry(self):
         """After set-up (blocks distributed, output opened): drop the geometry of the blocks
         this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
-        block: fixed, radius, ...), the blocks' specs their names and scalars; each rank's
-        store holds its blocks' and ghosts' geometry, which migrates with them."""
+        block: fixed, radius, ...); each rank's store holds its blocks' and ghosts' geometry,
+        which migrates with them."""
         if not self.needs_scene_geometry():
             self.glob.drop_geometry()
             self.glob.keep_fields(CATALOGUE)
-            for sp in self.specs:
-                sp.release()
-            self.specs = SpecTable(self.specs, self.scene.blocks)
         return_freed_memory()
 
     def distribute_initial(self):

@@ -11,7 +11,7 @@ import numpy as np
 def rock_mass_report(scene, specs, glob) -> list[str]:
     """Lines describing the expanded blocks ``specs`` and their static store ``glob``."""
     vol = np.array([s.volume for s in specs])
-    joined = [s for s in specs if len(s.pieces) > 1]
+    joined = [s for s in specs if s.n_pieces > 1]
     lines = [f"blocks: {len(specs)} from {len(scene.blocks)} scene entries, "
              f"{glob.n_pieces} convex pieces ({len(joined)} joined blocks), "
              f"{int(glob.fixed.sum())} fixed"]
