@@ -41,7 +41,8 @@ PY_BYTES_PER_BLOCK = 4096
 GHOST_FACTOR = 2.0
 # the fraction of physical memory the ranks may plan for by default: the rest is the OS, MPI's
 # buffers, HDF5's chunk cache and numba's compiled code. The estimate is of the set-up peak
-# (10^6 cubes on 2 ranks: 9.26 GiB estimated, 9.13 GiB measured, bench/setup.py)
+# (bench/scale.py, 10^6 cubes: 9.26 GiB estimated, 7.15 GiB measured on 2 ranks; 10.9 against
+# 11.3 GiB on 1)
 MEMORY_FRACTION = 0.85
 # static overlap m g / (kn A) beyond this fraction of the block size: the joint is too soft for
 # the load (the contact detection and the common plane assume small overlaps)
