@@ -75,6 +75,9 @@ class BlockSpec:
     @property
     def shape(self) -> ConvexPolyhedron:
         """The block's single convex piece (joined blocks have no single shape)."""
+        if self.pieces is None:
+            raise ValueError(f"block {self.name!r}: its shape was released after set-up (the "
+                             "geometry lives in the store of the rank holding the block)")
         if len(self.pieces) != 1:
             raise ValueError(f"block {self.name!r} is joined from {len(self.pieces)} pieces")
         return self.pieces[0]
