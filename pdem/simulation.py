@@ -29,6 +29,7 @@ class Simulation:
             paths["checkpoint.file"] = scene.checkpoint.file
         check_writable(comm, paths)
         self.state = ModelState.create(scene, comm, check_overlaps=checkpoint is None)
+        self.state.keep_scene_geometry = not release
         self.stepper = Stepper(self.state)
         self.stepper.stop = stop
         if checkpoint is None:

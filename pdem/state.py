@@ -102,6 +102,9 @@ class ModelState:
         self.cells = None
         self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
         self.check_overlaps = False  # refuse blocks overlapping at start (Stepper.start)
+        # keep the whole scene's geometry after set-up (pdem check's report; Simulation)
+        self.keep_scene_geometry = False
+        self.writer_mesh = None  # the output writer's share of the surfaces (set-up)
         # the largest motion of a block in one step that cannot take it through another block
         # unseen (pdem.dynamics.motion.motion_bookkeeping)
         self.max_step = max_step_motion(resolved.ctol, thinnest_width(
@@ -177,12 +180,23 @@ class ModelState:
         stage's boundary stress finds the exposed faces on the scene's store (pdem.boundary)."""
         return any(st.stress for st in self.scene.stages)
 
+    def _distributed_from_scene(self):
+        """After the first distribution from the scene's store: take the output writer's
+        share of the surfaces, then drop the rest of the scene's geometry (the start's
+        contact search and first update then run without it: the set-up's peak)."""
+        from .io.writer import writer_range
+        from .plugins.output import body_surfaces
+
+        self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
+        if not self.keep_scene_geometry:
+            self.release_scene_geometry()
+
     def release_scene_geometry(self):
         """After set-up (blocks distributed, output opened): drop the geometry of the blocks
         this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
         block: fixed, radius, ...); each rank's store holds its blocks' and ghosts' geometry,
         which migrates with them."""
-        if not self.needs_scene_geometry():
+        if not self.needs_scene_geometry() and self.glob.has_geometry:
             self.glob.drop_geometry()
             self.glob.keep_fields(CATALOGUE)
         return_freed_memory()
@@ -193,6 +207,7 @@ class ModelState:
         owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
         self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE},
                         ContactStore.empty(self.joints.hist_width), source=self._scene_store())
+        self._distributed_from_scene()
 
     def redistribute(self):
         """Migrate blocks whose centroid left the brick and rebuild ghosts (collective)."""
@@ -258,6 +273,7 @@ class ModelState:
         mine = np.zeros(self.glob.n, bool)
         mine[owned] = self.glob.fixed[owned] == 0
         self.distribute(owned, block_rows(owned), contacts(mine), source=self._scene_store())
+        self._distributed_from_scene()
 
     def _reader(self, path):
         """The checkpoint opened on every rank (collective), or one line of why not."""

@@ -106,6 +106,15 @@ class BodyMesh(NamedTuple):
                              f"vertex ids < {nv[b]}")
         return mesh
 
+    def blocks(self, lo: int, hi: int) -> BodyMesh:
+        """The surfaces of blocks ``lo .. hi-1`` (block and vertex ids from 0)."""
+        f0, f1 = np.searchsorted(self.face_block, [lo, hi])
+        fv = np.concatenate([[0], np.cumsum(self.face_len)])
+        v0, v1 = self.vert_start[lo], self.vert_start[hi]
+        return BodyMesh(self.vert_start[lo:hi + 1] - v0, self.verts[v0:v1],
+                        self.face_len[f0:f1], self.face_block[f0:f1] - lo,
+                        self.face_verts[fv[f0]:fv[f1]])
+
     def bad_face(self) -> int | None:
         """The first face with fewer than 3 vertices or a vertex id outside its block's."""
         nv = np.diff(self.vert_start)
@@ -117,6 +126,14 @@ class BodyMesh(NamedTuple):
                                len(bad)) > 0
             return int(np.flatnonzero(bad)[0])
         return None
+
+
+def writer_range(comm, n: int) -> tuple[int, int]:
+    """The gids ``[lo, hi)`` whose surfaces this rank's OutputWriter assembles and writes (an
+    even share; in the fallback without parallel h5py, rank 0 all of them)."""
+    if _h5py_has_mpi():
+        return _share(comm.rank, comm.size, n)
+    return (0, n) if comm.rank == 0 else (n, n)
 
 
 def _fan_triangulate(mesh: BodyMesh) -> tuple[np.ndarray, np.ndarray]:
@@ -264,26 +281,6 @@ class OutputWriter:
         n = len(block_names)
         if n == 0:
             raise ValueError("OutputWriter: the scene has no blocks")
-        if body_mesh is None:
-            if len(body_vertices) != n or len(body_faces) != n:
-                raise ValueError(
-                    f"OutputWriter: {n} block names, {len(body_vertices)} vertex arrays, "
-                    f"{len(body_faces)} face lists"
-                )
-            body_mesh = BodyMesh.from_lists(body_vertices, body_faces)
-        elif len(body_mesh.vert_start) != n + 1:
-            raise ValueError(f"OutputWriter: {n} block names, a body mesh of "
-                             f"{len(body_mesh.vert_start) - 1} blocks")
-        nv = np.diff(body_mesh.vert_start)
-        self._vstart = body_mesh.vert_start
-        conn, tri_block = _fan_triangulate(body_mesh)
-        self.n_blocks, self.n_points, self.n_tri = n, int(self._vstart[-1]), len(conn)
-        self.n_snap = 0
-        self._extra_cells: list[tuple[str, str]] = []  # static results on the surfaces
-        self._times: list[float] = []
-        self._hist_rows: dict[str, int] = {}
-        self._hist_cols: dict[str, int] = {}
-
         # Rank r assembles and writes gids [bounds[r], bounds[r+1]); in the fallback, rank 0
         # holds them all.
         if self.parallel:
@@ -292,10 +289,36 @@ class OutputWriter:
             self._bounds = np.array([0] + [n] * size)
         self._lo, self._hi = int(self._bounds[rank]), int(self._bounds[rank + 1])
         lo, hi = self._lo, self._hi
-        self._vlo, self._vhi = int(self._vstart[lo]), int(self._vstart[hi])
-        self._my_verts = body_mesh.verts[self._vlo:self._vhi].copy()
-        self._my_vblock = np.repeat(np.arange(hi - lo), nv[lo:hi])
-        self._init_fields(tri_block, initial_centroid, group, group_names, fixed)
+        if body_mesh is None:
+            if len(body_vertices) != n or len(body_faces) != n:
+                raise ValueError(
+                    f"OutputWriter: {n} block names, {len(body_vertices)} vertex arrays, "
+                    f"{len(body_faces)} face lists"
+                )
+            body_mesh = BodyMesh.from_lists(body_vertices, body_faces)
+        if len(body_mesh.vert_start) == n + 1:  # every block's surface: keep this rank's
+            body_mesh = body_mesh.blocks(lo, hi)
+        elif len(body_mesh.vert_start) != hi - lo + 1:
+            raise ValueError(f"OutputWriter: a body mesh of {len(body_mesh.vert_start) - 1} "
+                             f"blocks, neither the scene's {n} nor this rank's {hi - lo} "
+                             f"(writer_range)")
+        # this rank's vertices and triangles, and where they go in the whole surface: the
+        # counts of the ranks before it (rank order = gid order)
+        conn, tri_block = _fan_triangulate(body_mesh)
+        counts = np.array(comm.allgather((len(body_mesh.verts), len(conn))), np.int64)
+        before = counts[:rank].sum(axis=0)
+        self._vlo, self._tlo = int(before[0]), int(before[1])
+        self._vhi, self._thi = self._vlo + len(body_mesh.verts), self._tlo + len(conn)
+        self._conn, self._my_tblock = conn + self._vlo, tri_block
+        self.n_blocks, self.n_points, self.n_tri = n, int(counts[:, 0].sum()), int(counts[:, 1].sum())
+        self.n_snap = 0
+        self._extra_cells: list[tuple[str, str]] = []  # static results on the surfaces
+        self._times: list[float] = []
+        self._hist_rows: dict[str, int] = {}
+        self._hist_cols: dict[str, int] = {}
+        self._my_verts = body_mesh.verts.copy()
+        self._my_vblock = np.repeat(np.arange(hi - lo), np.diff(body_mesh.vert_start))
+        self._init_fields(initial_centroid, group, group_names, fixed)
         self.contacts = bool(contacts)
         self._n_contacts: list[int] = []  # per snapshot, contacts and sub-contacts
         self._n_subs: list[int] = []
@@ -346,8 +369,10 @@ class OutputWriter:
             self._series[fd.output].attrs["units"] = (
                 "1 (unit quaternion w, x, y, z; body to world)" if fd.name == "q" else fd.units)
         s = f.create_group("surface")
-        self._write_static(s.create_dataset("connectivity", (self.n_tri, 3), np.int64), conn)
-        self._write_static(s.create_dataset("block_id", (self.n_tri,), np.int64), tri_block)
+        self._write(s.create_dataset("connectivity", (self.n_tri, 3), np.int64), (self._tlo, 0),
+                    self._conn if len(self._conn) else None)
+        self._write_triangles(s.create_dataset("block_id", (self.n_tri,), np.int64),
+                              np.arange(n))
         self._points = series("surface/points", (self.n_points, 3), np.float64)
         self._points.attrs["units"] = "m"
         f.create_group("histories")
@@ -379,6 +404,12 @@ class OutputWriter:
         else:
             lo, hi = 0, len(data)
         self._write(dset, (lo,) + (0,) * (data.ndim - 1), data[lo:hi])
+
+    def _write_triangles(self, dset: h5py.Dataset, per_block: np.ndarray) -> None:
+        """A static per-triangle dataset from per-block values (every block's, gid order):
+        each rank writes the triangles of its gid range."""
+        mine = np.asarray(per_block)[self._lo + self._my_tblock]
+        self._write(dset, (self._tlo,) + (0,) * (mine.ndim - 1), mine if len(mine) else None)
 
     def _write_row(
         self, dset: h5py.Dataset, i: int, data: np.ndarray | None, first: int = 0
@@ -514,8 +545,8 @@ class OutputWriter:
             self._write_xdmf()
 
     # ------------------------------------------------------------------ viewer fields
-    def _init_fields(self, tri_block, initial_centroid, group, group_names, fixed) -> None:
-        """Check the static per-block data of the viewer fields; find this rank's triangles."""
+    def _init_fields(self, initial_centroid, group, group_names, fixed) -> None:
+        """Check the static per-block data of the viewer fields."""
         n = self.n_blocks
         group = np.zeros(n, np.int32) if group is None else np.asarray(group, np.int64).reshape(-1)
         names = ["default"] if group_names is None else [str(g) for g in group_names]
@@ -528,11 +559,6 @@ class OutputWriter:
         self._group, self._group_names = group.astype(np.int32), names
         self._fixed, self._x0_all = fixed.astype(np.int32), x0
         self._x0: np.ndarray | None = None  # reference centroids of this rank's gid range
-        # Triangles come in gid order, so a gid range owns a contiguous triangle range.
-        self._tri_block = tri_block
-        tstart = np.searchsorted(tri_block, np.arange(n + 1))
-        self._tlo, self._thi = int(tstart[self._lo]), int(tstart[self._hi])
-        self._my_tblock = tri_block[self._tlo : self._thi] - self._lo
 
     def _create_fields(self) -> None:
         """Static per-block and per-triangle data, and the per-triangle series (IO ranks)."""
@@ -546,7 +572,7 @@ class OutputWriter:
         if self._x0_all is not None:
             self._write_static(x0, self._x0_all)
         for name, values in (("group", self._group), ("fixed", self._fixed)):
-            self._write_static(f["surface"].create_dataset(name, (nt,), np.int32), values[self._tri_block])
+            self._write_triangles(f["surface"].create_dataset(name, (nt,), np.int32), values)
         self._cells = {}
         for name, width, units in CELL_FIELDS:
             tail = (nt, width) if width > 1 else (nt,)
@@ -809,8 +835,6 @@ class OutputWriter:
         ``group/surface_<name>``)."""
         self._check_open()
         for name in surface:
-            tri = np.asarray(datasets[name], np.float32)[self._tri_block]
-            datasets = {**datasets, f"surface_{name}": tri}
             if (name, f"/{group}/surface_{name}") not in self._extra_cells:
                 self._extra_cells.append((name, f"/{group}/surface_{name}"))
         if not self._io:
@@ -824,6 +848,12 @@ class OutputWriter:
             if name in g:
                 del g[name]
             self._write_static(g.create_dataset(name, data.shape, data.dtype), data)
+        for name in surface:
+            key = f"surface_{name}"
+            if key in g:
+                del g[key]
+            self._write_triangles(g.create_dataset(key, (self.n_tri,), np.float32),
+                                  np.asarray(datasets[name], np.float32))
         f.flush()
         if surface and self.xdmf_path is not None and self.comm.rank == 0:
             self._write_xdmf()

@@ -19,18 +19,21 @@ from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps, next_multiple
 
 
-def body_surfaces(store) -> BodyMesh:
-    """Every block's surface in its body frame from a store holding every block in gid order
-    (the scene's, at set-up), flat: a joined block's pieces side by side. Vectorised over the
-    store's CSR geometry (a block's pieces, vertices and faces are consecutive rows)."""
-    first_piece = store.piece_start
+def body_surfaces(store, lo: int = 0, hi: int | None = None) -> BodyMesh:
+    """The surfaces of rows ``lo .. hi-1`` of a store (default: all) in their body frame, flat:
+    a joined block's pieces side by side. Vectorised over the store's CSR geometry (a block's
+    pieces, vertices and faces are consecutive rows)."""
+    hi = store.n if hi is None else hi
+    first_piece = store.piece_start[lo:hi + 1]
     vert_start = store.vert_start[first_piece]  # each block's first vertex row (and the end)
     face_start = store.face_start[first_piece]
-    face_block = np.repeat(np.arange(store.n), np.diff(face_start))
-    face_len = np.diff(store.fvert_start)
+    face_block = np.repeat(np.arange(hi - lo), np.diff(face_start))
+    fv0, fv1 = store.fvert_start[face_start[0]], store.fvert_start[face_start[-1]]
+    face_len = np.diff(store.fvert_start[face_start[0]:face_start[-1] + 1])
     vert_of = np.repeat(face_block, face_len)
-    return BodyMesh(vert_start - vert_start[0], store.verts_local.copy(), face_len,
-                    face_block, store.face_verts - vert_start[vert_of])
+    return BodyMesh(vert_start - vert_start[0],
+                    store.verts_local[vert_start[0]:vert_start[-1]].copy(), face_len,
+                    face_block, store.face_verts[fv0:fv1] - vert_start[vert_of])
 
 
 def _mass_scaling_attrs(state) -> dict:
@@ -109,7 +112,8 @@ class Snapshots(Plugin):
         self.writer = OutputWriter(
             out.file, state.comm, block_names=[s.name for s in state.specs],
             block_parents=[s.parent for s in state.specs],
-            body_mesh=body_surfaces(state.glob),
+            body_mesh=state.writer_mesh if state.writer_mesh is not None
+            else body_surfaces(state.glob),
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
             group_names=state.group_names, fixed=state.glob.fixed,
             attrs=attrs,
