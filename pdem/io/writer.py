@@ -154,7 +154,11 @@ def _fan_triangulate(mesh: BodyMesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _starts(counts: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    """Exclusive prefix sums: where each run starts (empty for no runs: a rank whose gid range
+    is empty has no faces)."""
+    out = np.zeros(len(counts), np.int64)
+    np.cumsum(counts[:-1], out=out[1:])
+    return out
 
 
 def _block_fields(centroid, x0, velocity, omega, removed, stage_origin) -> dict[str, np.ndarray]:
