@@ -28,7 +28,8 @@ class Simulation:
         if scene.checkpoint is not None:
             paths["checkpoint.file"] = scene.checkpoint.file
         check_writable(comm, paths)
-        self.state = ModelState.create(scene, comm, check_overlaps=checkpoint is None)
+        self.state = ModelState.create(scene, comm, check_overlaps=checkpoint is None,
+                                       whole=not release)
         self.state.keep_scene_geometry = not release
         self.stepper = Stepper(self.state)
         self.stepper.stop = stop

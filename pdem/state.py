@@ -19,7 +19,7 @@ from .boundary import apply_scene
 from .config import ConfigError, Scene
 from .config.load import dump_scene
 from .config.preflight import check_derived, machine_memory, preflight, rescaled
-from .config.resolve import Resolved, resolve
+from .config.resolve import Resolved, contact_tolerance, resolve
 from .contact.algorithms import ALGORITHMS
 from .contact.cellspace import CellSpace
 from .contact.laws import joint_table
@@ -28,13 +28,14 @@ from .dynamics.kinematics import refresh_pose, thinnest_width
 from .errors import UserError
 from .io.checkpoint import new_run_id
 from .memory import return_freed_memory
-from .model.build import SpecTable, block_store, expand_blocks
+from .model.blocks import BlockStore
+from .model.build import SpecTable, block_store, expand_blocks, geometry_columns
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields
 from .parallel.decomposition import make_decomposition
 from .parallel.migrate import rebuild
-from .parallel.mpi import allgather, broadcast
+from .parallel.mpi import allgather, allgather_rows, broadcast
 from .timers import Timers
 
 # a block may move up to this fraction of the thinnest piece's width in one step (see
@@ -60,10 +61,36 @@ CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixe
              "out", "material", "group", "applied_force", "radius", "point_area")
 
 
+def needs_whole_scene(scene: Scene, comm) -> bool:
+    """Whether set-up needs every block's geometry on every rank: a boundary stress finds
+    the exposed faces of its blocks among all blocks (pdem.boundary), and without parallel
+    h5py rank 0 writes every block's surface."""
+    from .io.writer import _h5py_has_mpi
+
+    stress = bool(scene.boundary.stress) or any(st.stress for st in scene.stages)
+    return stress or (comm.size > 1 and not _h5py_has_mpi())
+
+
+def build_share(comm, n: int) -> tuple[int, int]:
+    """The gids ``[lo, hi)`` whose store this rank builds at set-up: an even share, the
+    output writer's (pdem.io.writer.writer_range with parallel h5py)."""
+    from .io.writer import _share
+
+    return _share(comm.rank, comm.size, n)
+
+
+def scene_catalogue(comm, share) -> BlockStore:
+    """The :data:`CATALOGUE` fields (and the envelopes ``lo``/``hi``) of every block, gathered
+    from the ranks' build shares (contiguous, in rank order: gid order); no geometry."""
+    return BlockStore.catalogue({k: allgather_rows(comm, getattr(share, k))
+                                 for k in CATALOGUE + ("lo", "hi")})
+
+
 class ModelState:
     """The model on one rank; construct with :meth:`create` (collective)."""
 
-    def __init__(self, scene: Scene, comm, specs, glob, group_names, joints, resolved: Resolved):
+    def __init__(self, scene: Scene, comm, specs, glob, group_names, joints, resolved: Resolved,
+                 thinnest: float):
         self.scene = scene
         self.scene_yaml = dump_scene(scene)
         self.comm = comm
@@ -107,13 +134,21 @@ class ModelState:
         self.writer_mesh = None  # the output writer's share of the surfaces (set-up)
         # the largest motion of a block in one step that cannot take it through another block
         # unseen (pdem.dynamics.motion.motion_bookkeeping)
-        self.max_step = max_step_motion(resolved.ctol, thinnest_width(
-            glob.vert_start, glob.verts_local, glob.face_start, glob.normals_local,
-            glob.offsets_local))
+        self.max_step = max_step_motion(resolved.ctol, thinnest)
+        # this rank's share of the scene's blocks with their geometry, from set-up to the
+        # first distribution (None: ``glob`` has every block's geometry)
+        self.share = None
 
     @staticmethod
-    def create(scene: Scene, comm, *, check_overlaps: bool = True) -> ModelState:
-        """Build the blocks, resolve the scene's ``auto`` values and check the start."""
+    def create(scene: Scene, comm, *, check_overlaps: bool = True, whole: bool = False
+               ) -> ModelState:
+        """Build the blocks, resolve the scene's ``auto`` values and check the start.
+
+        Each rank builds the store of its share of the gids (:func:`build_share`: geometry,
+        mass properties) and the ranks gather the per-block fields every rank keeps (the
+        catalogue) and the specs' geometric scalars; the blocks go to their owners at
+        :meth:`distribute_initial`. ``whole`` (or a scene that reads every block's faces, see
+        :func:`needs_whole_scene`): every rank builds every block, as ``pdem check`` does."""
         # refuse a scene too large for the machine before its blocks exist (docs/limits.md);
         # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
         memory = min(allgather(comm, machine_memory()))
@@ -125,16 +160,29 @@ class ModelState:
             if len(specs) > estimate.max_blocks or estimate.bytes_per_rank > estimate.max_bytes:
                 raise ConfigError([f"limits: the scene makes {estimate} (limits.max_blocks, "
                                    "limits.max_memory_per_rank; docs/limits.md)"])
-        glob, group_names = block_store(scene, specs)
+        whole = whole or needs_whole_scene(scene, comm)
+        lo, hi = (0, len(specs)) if whole else build_share(comm, len(specs))
+        share, group_names = block_store(scene, specs, lo, hi)
+        columns = geometry_columns(specs[lo:hi])
+        if not whole:
+            columns = {k: allgather_rows(comm, v) for k, v in columns.items()}
+        # the shapes are in the stores now (the output's surfaces too): the specs keep names
+        # and scalars, as columns (every rank keeps them for every block)
+        specs = SpecTable(specs, scene.blocks, columns)
         joints = joint_table(scene, group_names)
-        resolved = resolve(scene, comm.size, specs, glob, joints)
+        if whole:
+            glob, verts_max = share, None
+        else:
+            refresh_pose(share, 0.5 * contact_tolerance(scene, specs))
+            glob = scene_catalogue(comm, share)
+            verts_max = max(allgather(comm, float(np.abs(share.verts_world).max(initial=1.0))))
+        resolved = resolve(scene, comm.size, specs, glob, joints, verts_max)
         check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn, resolved.ctol)
-        # the shapes are in the store now (the output's surfaces too): the specs keep names and
-        # scalars, as columns (every rank keeps them for every block)
-        for sp in specs:
-            sp.release()
-        specs = SpecTable(specs, scene.blocks)
-        state = ModelState(scene, comm, specs, glob, group_names, joints, resolved)
+        thinnest = thinnest_width(share.vert_start, share.verts_local, share.face_start,
+                                  share.normals_local, share.offsets_local)
+        state = ModelState(scene, comm, specs, glob, group_names, joints, resolved,
+                           thinnest if whole else min(allgather(comm, thinnest)))
+        state.share = None if whole else share
         state.estimate = estimate
         apply_scene(state)
         # checked by the stepper's start on the first contact update (one search, not two)
@@ -187,7 +235,11 @@ class ModelState:
         from .io.writer import writer_range
         from .plugins.output import body_surfaces
 
-        self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
+        if self.share is None:
+            self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
+        else:  # the build share is the writer's (needs_whole_scene)
+            self.writer_mesh = body_surfaces(self.share)
+            self.share = None
         if not self.keep_scene_geometry:
             self.release_scene_geometry()
 
@@ -202,12 +254,26 @@ class ModelState:
         return_freed_memory()
 
     def distribute_initial(self):
-        """Every rank takes the blocks whose centroid lies in its brick (collective)."""
-        g = self.glob
-        owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
-        self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE},
-                        ContactStore.empty(self.joints.hist_width), source=self._scene_store())
+        """Every rank takes the blocks whose centroid lies in its brick (collective): from
+        its build share, sent to their owners, or from the whole scene's store."""
+        empty = ContactStore.empty(self.joints.hist_width)
+        if self.share is None:
+            g = self.glob
+            owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
+            self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE}, empty,
+                            source=self._scene_store())
+        else:
+            s = self._synced_share()
+            self.distribute(s.gid.copy(), {k: getattr(s, k) for k in MIGRATE}, empty, source=s)
         self._distributed_from_scene()
+
+    def _synced_share(self):
+        """The build share with what set-up changed on the scene's per-block fields since it
+        was built (boundary conditions, mass scaling, a restart's removed blocks)."""
+        s = self.share
+        for k in CATALOGUE:
+            getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
+        return s
 
     def redistribute(self):
         """Migrate blocks whose centroid left the brick and rebuild ghosts (collective)."""
@@ -264,15 +330,21 @@ class ModelState:
                     path)))
 
     def _restore_share(self, out, x, block_rows, contacts):
-        """The blocks this rank owns at the checkpoint's poses, from ``block_rows(gids)``, and
-        the contacts of its free ones, ``contacts(mask of free owned blocks by gid)``."""
+        """The blocks this rank brings in (its build share, or those it owns at the
+        checkpoint's poses) from ``block_rows(gids)``, and the contacts of their free ones,
+        ``contacts(mask of those free blocks by gid)``: the rebuild sends both to the owners."""
         gone = out > 0  # blocks that left the model domain act as fixed ones
         self.glob.fixed[gone] = 1
         self.glob.out[gone] = out[gone]
-        owned = np.nonzero(self.decomp.owner_of(x) == self.comm.rank)[0]
+        if self.share is None:  # every rank has every block: it takes its own
+            owned = np.nonzero(self.decomp.owner_of(x) == self.comm.rank)[0]
+            source = self._scene_store()
+        else:  # each rank sends its share's blocks, at their checkpoint poses, to the owners
+            source = self._synced_share()
+            owned = source.gid.copy()
         mine = np.zeros(self.glob.n, bool)
         mine[owned] = self.glob.fixed[owned] == 0
-        self.distribute(owned, block_rows(owned), contacts(mine), source=self._scene_store())
+        self.distribute(owned, block_rows(owned), contacts(mine), source=source)
         self._distributed_from_scene()
 
     def _reader(self, path):

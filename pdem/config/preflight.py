@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import face_areas
 from .load import ConfigError
 
 log = logging.getLogger("pdem")
@@ -322,6 +321,13 @@ def _check_start_speeds(scene, specs, glob, dt: float, ctol: float) -> None:
             f"solve.timestep.dt <= {dt_max:.3g} s (or stiffer joints) (docs/limits.md)"])
 
 
+def _column(specs, name: str, rows: np.ndarray) -> np.ndarray:
+    """A geometric scalar of blocks ``rows``: the SpecTable's column, or from each spec."""
+    if hasattr(specs, name):
+        return getattr(specs, name)[rows]
+    return np.array([getattr(specs[b], name) for b in rows], float)
+
+
 def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
     """m g / (kn A) of each free block resting on its largest face, with the softest joint its
     group can touch, against MAX_STATIC_OVERLAP of its size (cube root of the volume)."""
@@ -335,9 +341,7 @@ def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
     # softest joint per group: any pair this group is part of (joint_table's rows by group)
     soft = _softest_kn_per_group(scene, joints, group_names)
     # per block, vectorised (a Python loop over the blocks was seconds for 1e5 of them)
-    face_areas([p for b in free for p in specs[b].pieces])  # one batch, kept on the pieces
-    area = np.array([specs[b].face_areas.max() for b in free])
-    size = np.array([specs[b].volume ** (1.0 / 3.0) for b in free])
+    area, size = _column(specs, "max_face", free), _column(specs, "volume", free) ** (1.0 / 3.0)
     kn_all = np.array([kn for kn, _ in soft], float)[glob.group[free]]
     overlap = load / (kn_all * area)
     frac = overlap / size
@@ -366,7 +370,7 @@ def _check_impact_overlap(scene, specs, glob, joints, group_names) -> None:
     worst, vals = 0.0, None
     for b in moving:
         kn, jname = soft[int(glob.group[b])]
-        area = float(specs[b].face_areas.max())
+        area = specs[b].max_face
         speed = float(np.linalg.norm(glob.v[b]))
         depth = speed * math.sqrt(float(glob.mass[b]) / (kn * area))
         size = specs[b].volume ** (1.0 / 3.0)

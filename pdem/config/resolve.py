@@ -235,14 +235,28 @@ def _alpha(scene) -> float:
     return default
 
 
-def resolve(scene, comm_size: int, specs, glob, joints) -> Resolved:
-    """Resolve the scene's ``auto`` values for the built global store ``glob`` (whose world
-    vertices, envelopes and, with mass scaling, ``mscale`` are set here)."""
+def contact_tolerance(scene, specs) -> float:
+    """CTOL: ``contact.ctol``, or 2% of the smallest block's equivalent size."""
+    cs = scene.contact
+    return float(0.02 * block_sizes(specs).min()) if cs.ctol == "auto" else float(cs.ctol)
+
+
+def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None = None
+            ) -> Resolved:
+    """Resolve the scene's ``auto`` values for the scene's blocks ``glob`` (its per-block
+    fields; ``point_area`` and, with mass scaling, ``mscale`` are set here).
+
+    ``verts_max``: the largest world vertex coordinate (absolute) of every block, when
+    ``glob`` has the envelopes ``lo``/``hi`` (padded by CTOL/2) but no geometry (each rank
+    built its share, pdem.state); else ``glob`` has the geometry and its poses are refreshed
+    here."""
     cs = scene.contact
     sizes = block_sizes(specs)
-    ctol = 0.02 * sizes.min() if cs.ctol == "auto" else float(cs.ctol)
+    ctol = contact_tolerance(scene, specs)
     glob.point_area[:] = cs.point_area * sizes**2
-    refresh_pose(glob, 0.5 * ctol)
+    if verts_max is None:
+        refresh_pose(glob, 0.5 * ctol)
+        verts_max = float(np.abs(glob.verts_world).max(initial=1.0))
     lo, hi = glob.lo, glob.hi
     free = glob.fixed == 0
     ext = (hi - lo)[free] if free.any() else hi - lo
@@ -275,7 +289,7 @@ def resolve(scene, comm_size: int, specs, glob, joints) -> Resolved:
         cell_size=cell_size,
         overlap_tolerance=0.1 * ctol if cs.overlap_tolerance == "auto"
         else float(cs.overlap_tolerance),
-        snap_tol=1e-9 * max(1.0, float(np.abs(glob.verts_world).max(initial=1.0))),
+        snap_tol=1e-9 * max(1.0, verts_max),
         refresh_tolerance=cs.refresh_tolerance * ctol,
         dt=dt,
         alpha=float(_alpha(scene)),

@@ -59,6 +59,14 @@ class BlockStore:
         self.__dict__.update(arrays)
         self.__dict__.update(geometry)
 
+    @classmethod
+    def catalogue(cls, arrays: dict[str, np.ndarray]) -> BlockStore:
+        """A store of the given per-block fields only (no others allocated, no geometry):
+        the scene's fields every rank keeps for every block (pdem.state.CATALOGUE)."""
+        store = cls.__new__(cls)
+        store.__dict__.update(arrays)
+        return store
+
     @property
     def n(self) -> int:
         return len(self.gid)

@@ -15,6 +15,7 @@ from ..geometry import (
     GeometryError,
     box,
     check_convex,
+    face_areas,
     from_planes,
     from_vertices,
     prism,
@@ -48,11 +49,13 @@ class BlockSpec:
     def release(self) -> None:
         """Drop the pieces (after set-up their geometry lives with the blocks' owners, see
         pdem.state.ModelState.release_scene_geometry), keeping the scalars later stages
-        read: volume, surface area, piece count."""
+        read: volume, surface area, largest face, piece count."""
         if self.pieces is None:
             return
+        areas = self.face_areas
         self._volume = self.volume
-        self._surface = float(self.face_areas.sum())
+        self._surface = float(areas.sum())
+        self._max_face = float(areas.max())
         self._n_pieces = len(self.pieces)
         self.pieces = None
 
@@ -63,6 +66,11 @@ class BlockSpec:
     @property
     def surface(self) -> float:
         return self._surface if self.pieces is None else float(self.face_areas.sum())
+
+    @property
+    def max_face(self) -> float:
+        """The area of the block's largest face."""
+        return self._max_face if self.pieces is None else float(self.face_areas.max())
 
     @property
     def group(self) -> str:
@@ -131,6 +139,7 @@ class SpecView:
     material = property(lambda self: self._t.labels[self._t.material[self._g]])
     volume = property(lambda self: float(self._t.volume[self._g]))
     surface = property(lambda self: float(self._t.surface[self._g]))
+    max_face = property(lambda self: float(self._t.max_face[self._g]))
     n_pieces = property(lambda self: int(self._t.n_pieces[self._g]))
 
     @property
@@ -151,7 +160,10 @@ class SpecTable:
     Indexing and iteration give :class:`SpecView` objects with the released spec's
     attributes."""
 
-    def __init__(self, specs: list[BlockSpec], scene_blocks):
+    def __init__(self, specs: list[BlockSpec], scene_blocks, columns: dict | None = None):
+        """``columns``: the geometric scalars (:func:`geometry_columns`) of every block when
+        the specs' pieces were dropped unmeasured (each rank measured its share and the
+        columns were gathered, pdem.state); else read from the released specs."""
         self.scene_blocks = scene_blocks
         n = len(specs)
         self.names = [sp.name for sp in specs]
@@ -166,9 +178,11 @@ class SpecTable:
                                  np.int32)
         self.labels = list(labels)
         self.entry = np.fromiter((sp.entry for sp in specs), np.int32, n)
-        self.volume = np.fromiter((sp.volume for sp in specs), float, n)
-        self.surface = np.fromiter((sp.surface for sp in specs), float, n)
-        self.n_pieces = np.fromiter((sp.n_pieces for sp in specs), np.int32, n)
+        if columns is None:
+            columns = {k: np.fromiter((getattr(sp, k) for sp in specs), dt, n)
+                       for k, dt in GEOMETRY_COLUMNS.items()}
+        for k in GEOMETRY_COLUMNS:
+            setattr(self, k, columns[k])
         self.excavate_at = np.fromiter(
             (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float, n)
         self.excavate_stage = np.fromiter(
@@ -182,6 +196,36 @@ class SpecTable:
 
     def __iter__(self):
         return (SpecView(self, g) for g in range(len(self.names)))
+
+
+# the per-block scalars of a spec's geometry that set-up reads for every block (stiffness
+# estimate, contact tolerance, start checks, mass): the SpecTable's columns
+GEOMETRY_COLUMNS = {"volume": float, "surface": float, "max_face": float, "n_pieces": np.int32}
+
+
+def geometry_columns(specs: list[BlockSpec]) -> dict[str, np.ndarray]:
+    """:data:`GEOMETRY_COLUMNS` of ``specs`` (with their pieces), each as the spec's own
+    property computes it (bitwise): the face areas in one batch, one-piece blocks reduced in
+    stacks of equal face counts (numpy reduces each row as it reduces the block's 1-D
+    array), joined blocks one by one."""
+    n = len(specs)
+    face_areas([p for s in specs for p in s.pieces])  # one batch, kept on the pieces
+    cols = {k: np.empty(n, dt) for k, dt in GEOMETRY_COLUMNS.items()}
+    stacks: dict[int, list[int]] = {}
+    for r, s in enumerate(specs):
+        cols["n_pieces"][r] = len(s.pieces)
+        if len(s.pieces) == 1:
+            stacks.setdefault(s.pieces[0].n_faces, []).append(r)
+            cols["volume"][r] = s.pieces[0].volume
+        else:
+            cols["volume"][r] = s.volume
+            cols["surface"][r] = s.surface
+            cols["max_face"][r] = s.max_face
+    for rows in stacks.values():
+        areas = np.array([specs[r].pieces[0].face_areas() for r in rows])
+        cols["surface"][rows] = areas.sum(axis=1)
+        cols["max_face"][rows] = areas.max(axis=1)
+    return cols
 
 
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
@@ -379,19 +423,25 @@ for _name, _apply in (("fixed", _fixed), ("velocity", _velocity), ("force", _for
     BLOCK_CONDITIONS.register(_name, _apply)
 
 
-def block_store(scene: Scene, specs: list[BlockSpec]):
-    """BlockStore of every block of the scene (gid order), body frame = principal axes;
-    returns (store, sorted group names).
+def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | None = None):
+    """BlockStore of the scene's blocks ``lo .. hi-1`` (gids; default: every block), body
+    frame = principal axes; returns (store, sorted group names of the whole scene).
 
-    Vectorised over the blocks (one-piece blocks in batches of the same vertex and face
-    counts, joined blocks one by one), with numpy and LAPACK called on the same per-block
-    operands as the per-block code it replaces: the store is bitwise the same (tests compare
-    it), in a fraction of the time for a large model."""
-    n = len(specs)
-    arr = allocate(BLOCK, n)
+    Only the specs of ``lo .. hi-1`` need their pieces (a rank builds its share, pdem.state);
+    the others give their group and piece count. Vectorised over the blocks (one-piece
+    blocks in batches of the same vertex and face counts, joined blocks one by one), with
+    numpy and LAPACK called on the same per-block operands as the per-block code it
+    replaces: the store is bitwise the same (tests compare it) for any share, in a fraction
+    of the time for a large model."""
+    hi = len(specs) if hi is None else hi
     mats = {m: i for i, m in enumerate(scene.materials)}
     groups = sorted({b.group for b in scene.blocks if b.mesh is None} | {s.group for s in specs})
     group_index = {g: i for i, g in enumerate(groups)}
+    # the global ordinal of the share's first piece (contact keys name pieces by it)
+    first_piece = sum(s.n_pieces for s in specs[:lo])
+    specs = specs[lo:hi]
+    n = len(specs)
+    arr = allocate(BLOCK, n)
     frames = _body_frames(specs)
     # per piece, gid order: the world piece (topology) and its body-frame geometry
     pieces = [p for s in specs for p in s.pieces]
@@ -427,7 +477,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
                 offsets_local[face_start[k]:face_start[k + 1]] = body.offsets
                 centers[k] = body.centroid
             radius[rows] = max(np.linalg.norm(b.vertices, axis=1).max() for b in bv)
-    arr["gid"][:] = np.arange(n)
+    arr["gid"][:] = np.arange(lo, lo + n)
     arr["owned"][:] = 1
     arr["x0"][:] = arr["x"]
     arr["x_stage"][:] = arr["x"]
@@ -476,7 +526,7 @@ def block_store(scene: Scene, specs: list[BlockSpec]):
     return BlockStore(arr, dict(
         piece_start=piece_start,
         piece_block=np.repeat(np.arange(n), np.diff(piece_start)),
-        piece_gid=np.arange(n_pieces, dtype=np.int64),
+        piece_gid=np.arange(first_piece, first_piece + n_pieces, dtype=np.int64),
         piece_center=centers,
         piece_x=np.zeros((n_pieces, 3)),
         piece_lo=np.zeros((n_pieces, 3)),

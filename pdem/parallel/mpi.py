@@ -154,6 +154,25 @@ def allgather(comm, value) -> list:
     return comm.allgather(value) if comm.size > 1 else [value]
 
 
+def allgather_rows(comm, values: np.ndarray) -> np.ndarray:
+    """Every rank's rows of ``values`` concatenated in rank order (the same dtype and row
+    shape on every rank; a rank may have none): one Allgatherv of the raw bytes, not a pickle
+    of each part (the scene's per-block columns at set-up: hundreds of MB at 10^6 blocks)."""
+    values = np.ascontiguousarray(values)
+    if comm.size == 1:
+        return values.copy()
+    from mpi4py import MPI
+
+    row_bytes = values.dtype.itemsize * int(np.prod(values.shape[1:], dtype=np.int64))
+    counts = np.array(comm.allgather(len(values)), np.int64)
+    out = np.empty((int(counts.sum()), *values.shape[1:]), values.dtype)
+    sizes = counts * row_bytes
+    displs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    comm.Allgatherv(values.view(np.uint8).reshape(-1),
+                    [out.view(np.uint8).reshape(-1), sizes, displs, MPI.BYTE])
+    return out
+
+
 def alltoall(comm, values: list) -> list:
     """``values[r]`` goes to rank r; returns what each rank sent here (pickled: rare path)."""
     return comm.alltoall(values) if comm.size > 1 else values

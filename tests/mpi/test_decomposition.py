@@ -410,3 +410,44 @@ def test_block_leaving_the_domain_matches_one_rank(tmp_path):
     out = np.concatenate(comm.allgather(sim.blocks.out[:sim.n_owned]))
     assert out.max() == 2  # the rock was deleted
     compare_on_rank0(comm, f"{base}/ledge.h5", scene, f"{base}/ledge-ref.h5")
+
+
+# ---------------------------------------------------------------------------------------------
+# 6. the build by share (pdem.state.ModelState.create)
+
+
+def test_build_by_share_matches_whole_build():
+    """Each rank building the store of its share of the gids, gathering the per-block fields
+    and sending the blocks to their owners gives every rank bitwise the blocks, catalogue,
+    resolved values, spec columns and output surfaces of every rank building every block
+    (a joined block, cut faces with tags and an excavation: pieces numbered across shares)."""
+    from pdem.cases.rock_mass import l_on_stack_scene
+    from pdem.config import parse_scene
+    from pdem.model.blocks import pack
+    from pdem.state import CATALOGUE, ModelState
+
+    comm = MPI.COMM_WORLD
+    scene = parse_scene(l_on_stack_scene())
+    states = []
+    for whole in (False, True):
+        s = ModelState.create(scene, comm, whole=whole)
+        assert (s.share is None) == whole
+        s.distribute_initial()
+        states.append(s)
+    a, b = states
+    assert a.resolved == b.resolved and a.max_step == b.max_step
+    assert a.n_owned == b.n_owned and np.array_equal(a.blocks.gid, b.blocks.gid)
+    assert a.blocks.n_pieces == b.blocks.n_pieces and a.blocks.n_pieces > a.blocks.n
+    rows = np.arange(a.blocks.n)
+    pa, pb = pack(a.blocks, rows), pack(b.blocks, rows)
+    assert pa.keys() == pb.keys()
+    for k in pa:
+        assert np.array_equal(pa[k], pb[k]), k
+    for k in CATALOGUE:
+        assert np.array_equal(getattr(a.glob, k), getattr(b.glob, k)), k
+    for k in ("volume", "surface", "max_face", "n_pieces", "entry", "group"):
+        assert np.array_equal(getattr(a.specs, k), getattr(b.specs, k)), k
+    assert a.specs.names == b.specs.names
+    for x, y in zip(a.writer_mesh, b.writer_mesh, strict=True):
+        assert np.array_equal(x, y)
+    assert not a.glob.has_geometry and a.share is None
