@@ -144,8 +144,9 @@ class ModelState:
                ) -> ModelState:
         """Build the blocks, resolve the scene's ``auto`` values and check the start.
 
-        Each rank builds the store of its share of the gids (:func:`build_share`: geometry,
-        mass properties) and the ranks gather the per-block fields every rank keeps (the
+        Each rank builds the shapes (families' members: pdem.model.build.expand_blocks) and
+        the store (geometry, mass properties) of its share of the gids (:func:`build_share`)
+        only, and the ranks gather the per-block fields every rank keeps (the
         catalogue) and the specs' geometric scalars; the blocks go to their owners at
         :meth:`distribute_initial`. ``whole`` (or a scene that reads every block's faces, see
         :func:`needs_whole_scene`): every rank builds every block, as ``pdem check`` does."""
@@ -154,13 +155,14 @@ class ModelState:
         memory = min(allgather(comm, machine_memory()))
         warn = comm.rank == 0
         estimate = preflight(scene, comm.size, memory, warn)
-        specs = expand_blocks(scene, estimate.max_blocks)
+        whole = whole or needs_whole_scene(scene, comm)
+        specs = expand_blocks(scene, estimate.max_blocks,
+                              None if whole else lambda n: build_share(comm, n))
         if len(specs) != estimate.blocks:  # cuts and mesh cells are counted only once built
             estimate = rescaled(estimate, len(specs))
             if len(specs) > estimate.max_blocks or estimate.bytes_per_rank > estimate.max_bytes:
                 raise ConfigError([f"limits: the scene makes {estimate} (limits.max_blocks, "
                                    "limits.max_memory_per_rank; docs/limits.md)"])
-        whole = whole or needs_whole_scene(scene, comm)
         lo, hi = (0, len(specs)) if whole else build_share(comm, len(specs))
         share, group_names = block_store(scene, specs, lo, hi)
         columns = geometry_columns(specs[lo:hi])
@@ -169,6 +171,7 @@ class ModelState:
         # the shapes are in the stores now (the output's surfaces too): the specs keep names
         # and scalars, as columns (every rank keeps them for every block)
         specs = SpecTable(specs, scene.blocks, columns)
+        return_freed_memory()  # the shapes: the distribution's messages come on top
         joints = joint_table(scene, group_names)
         if whole:
             glob, verts_max = share, None
@@ -198,15 +201,17 @@ class ModelState:
         return self.damping.kernel_args(self.alpha)
 
     # ------------------------------------------------------------------ ownership
-    def distribute(self, owned_gids, state: dict, contacts: ContactStore, source=None):
+    def distribute(self, owned_gids, state: dict, contacts: ContactStore, source=None,
+                   consume: bool = False):
         """(Re)build this rank's blocks, contacts and halo (collective), see parallel.migrate.
-        ``source``: a store holding the blocks ``owned_gids`` (default: this rank's)."""
+        ``source``: a store holding the blocks ``owned_gids`` (default: this rank's);
+        ``consume``: it is dropped once sent (the build share)."""
         with self.timers.phase("migrate"):
             r = self.resolved
             self.blocks, self.n_owned, self.contacts, self.halo = rebuild(
                 self.comm, self.decomp, self.glob, self.blocks if source is None else source,
                 owned_gids, state, contacts, 0.5 * r.ctol, r.margin,
-                halo_fields(self.scene.solve.inactive is not None))
+                halo_fields(self.scene.solve.inactive is not None), consume)
             b = self.blocks
             refresh_pose(b, 0.5 * r.ctol)
             # a rank whose brick holds no block has no cell space until blocks arrive; blocks
@@ -235,11 +240,8 @@ class ModelState:
         from .io.writer import writer_range
         from .plugins.output import body_surfaces
 
-        if self.share is None:
+        if self.glob.has_geometry:  # else taken from the build share (_take_share)
             self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
-        else:  # the build share is the writer's (needs_whole_scene)
-            self.writer_mesh = body_surfaces(self.share)
-            self.share = None
         if not self.keep_scene_geometry:
             self.release_scene_geometry()
 
@@ -263,16 +265,22 @@ class ModelState:
             self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE}, empty,
                             source=self._scene_store())
         else:
-            s = self._synced_share()
-            self.distribute(s.gid.copy(), {k: getattr(s, k) for k in MIGRATE}, empty, source=s)
+            s = self._take_share()
+            self.distribute(s.gid.copy(), {k: getattr(s, k) for k in MIGRATE}, empty,
+                            source=s, consume=True)
         self._distributed_from_scene()
 
-    def _synced_share(self):
-        """The build share with what set-up changed on the scene's per-block fields since it
-        was built (boundary conditions, mass scaling, a restart's removed blocks)."""
-        s = self.share
+    def _take_share(self):
+        """The build share, to be sent to the owners (and dropped: ``self.share`` is None
+        after), with what set-up changed on the scene's per-block fields since it was built
+        (boundary conditions, mass scaling, a restart's removed blocks); the output writer
+        takes its surfaces first (the build share is the writer's, :func:`build_share`)."""
+        from .plugins.output import body_surfaces
+
+        s, self.share = self.share, None
         for k in CATALOGUE:
             getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
+        self.writer_mesh = body_surfaces(s)
         return s
 
     def redistribute(self):
@@ -340,11 +348,12 @@ class ModelState:
             owned = np.nonzero(self.decomp.owner_of(x) == self.comm.rank)[0]
             source = self._scene_store()
         else:  # each rank sends its share's blocks, at their checkpoint poses, to the owners
-            source = self._synced_share()
+            source = self._take_share()
             owned = source.gid.copy()
         mine = np.zeros(self.glob.n, bool)
         mine[owned] = self.glob.fixed[owned] == 0
-        self.distribute(owned, block_rows(owned), contacts(mine), source=source)
+        self.distribute(owned, block_rows(owned), contacts(mine), source=source,
+                        consume=source is not self.glob)
         self._distributed_from_scene()
 
     def _reader(self, path):

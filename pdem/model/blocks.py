@@ -92,6 +92,10 @@ class BlockStore:
             if f.name not in names:
                 self.__dict__.pop(f.name, None)
 
+    def clear(self) -> None:
+        """Drop every array (a store no longer used: its memory goes back at once)."""
+        self.__dict__.clear()
+
     def drop_geometry(self) -> None:
         """Keep the per-block fields only: the scene's store after set-up, when each rank
         holds the geometry of its own blocks and ghosts (pdem.parallel.migrate)."""

@@ -318,22 +318,22 @@ def _planes(p):
     yield None, from_planes(np.asarray(p.normals, float), np.asarray(p.offsets, float))
 
 
-def _array(a):
+def _array(a, members: range | None = None):
     """The members of ``base.transformed(np.eye(3), offset)`` (x fastest), computed for all
     members at once: the rotated base once, then per member the same additions and
-    matrix-vector products (stacked), so bitwise the same shapes as one call per member."""
+    matrix-vector products (stacked), so bitwise the same shapes as one call per member.
+    ``members``: only these member indices (a rank's share of a large array)."""
     base = box(a.box.min, a.box.max)
     eye = np.eye(3)
     base.transformed(eye, np.zeros(3))  # the same checks as a call per member
     nx, ny, nz = a.count
-    iz, iy, ix = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    idx = np.stack([ix.ravel(), iy.ravel(), iz.ravel()], axis=1).astype(float)
+    ks = np.arange(nx * ny * nz) if members is None else np.arange(members.start, members.stop)
+    idx = np.stack([ks % nx, ks // nx % ny, ks // (nx * ny)], axis=1).astype(float)
     offs = idx * np.array(a.spacing, float)
     verts_r = base.vertices @ eye.T
     normals = _frozen(base.normals @ eye.T)
     centroid_r = eye @ base.centroid
     inertia = _frozen(eye @ base.inertia @ eye.T)
-    k = 0
     for c0 in range(0, len(offs), _ARRAY_CHUNK):
         t = offs[c0:c0 + _ARRAY_CHUNK]
         verts = _frozen(verts_r + t[:, None, :])
@@ -341,9 +341,18 @@ def _array(a):
         offsets = _frozen(base.offsets + (stacked @ t[:, :, None])[:, :, 0])
         cents = _frozen(centroid_r + t)
         for j in range(len(t)):
-            yield k, base.moved(vertices=verts[j], normals=normals, offsets=offsets[j],
-                                centroid=cents[j], inertia=inertia)
-            k += 1
+            yield int(ks[c0 + j]), base.moved(vertices=verts[j], normals=normals,
+                                              offsets=offsets[j], centroid=cents[j],
+                                              inertia=inertia)
+
+
+def _family_size(b: Block) -> int | None:
+    """Members of a family entry (``array``, ``random``), None for a single block."""
+    if b.array is not None:
+        return math.prod(b.array.count)
+    if b.random is not None:
+        return b.random.count
+    return None
 
 
 _ARRAY_CHUNK = 1 << 16
@@ -372,11 +381,18 @@ for _name, _builder in (("box", _box), ("polyhedron", _polyhedron), ("prism", _p
     SHAPES.register(_name, _builder)
 
 
-def expand_blocks(scene: Scene, max_blocks: int | None = None) -> list[BlockSpec]:
+def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None) -> list[BlockSpec]:
     """Every block of the scene in gid order, shapes in the world frame: the ``blocks:``
-    entries, then their cuts, joins and excavations (pdem.model.rockmass)."""
+    entries, then their cuts, joins and excavations (pdem.model.rockmass).
+
+    ``share(n)``: the gids ``[lo, hi)`` whose shapes this rank needs, of ``n`` blocks; the
+    members of families (``array``, ``random``) outside it are specs without pieces (a
+    name, an entry, one piece), an array's never built. Only when the scene's blocks are
+    known without building them: no cuts, joins, excavations or meshes (:func:`lazy_scene`)."""
     out: list[BlockSpec] = []
     errors: list[str] = []
+    lo, hi = share(sum(_family_size(b) or 1 for b in scene.blocks)) \
+        if share is not None and lazy_scene(scene) else (0, None)
     for i, b in enumerate(scene.blocks):
         kind = b.shape_kind
         if kind == "mesh":
@@ -384,18 +400,52 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None) -> list[BlockSpec
 
             out.extend(mesh_blocks(scene, i, b))
             continue
+        size = _family_size(b)
+        g0 = len(out)
+        built = None
+        if hi is not None and size is not None:  # a family: its members in the share only
+            built = range(min(max(lo - g0, 0), size), min(max(hi - g0, 0), size))
+        # an array builds the members asked for; a random family draws every member (one
+        # random sequence) and those outside the share are dropped as they come
+        members = built if kind == "array" and built is not None else None
+        if members is not None:
+            out.extend(_unbuilt(b, i, k) for k in range(members.start))
         try:
-            for k, shape in SHAPES[kind](getattr(b, kind)):
+            args = (getattr(b, kind),) if members is None else (b.array, members)
+            for k, shape in SHAPES[kind](*args):
+                if built is not None and k not in built:  # drawn for the sequence only
+                    out.append(_unbuilt(b, i, k))
+                    continue
                 name = b.name if k is None else f"{b.name}[{k}]"
                 pieces = shape if isinstance(shape, list) else [shape]
                 out.append(BlockSpec(name, i, pieces, b, parent=name))
         except (GeometryError, ValueError) as exc:
             errors.append(f"blocks[{i}] ({b.name!r}).{kind}: {exc}")
+            continue
+        if members is not None:
+            out.extend(_unbuilt(b, i, k) for k in range(members.stop, size))
     if errors:
         raise ConfigError(errors)
     from .rockmass import build_rock_mass
 
     return build_rock_mass(scene, out, max_blocks)
+
+
+def lazy_scene(scene: Scene) -> bool:
+    """Whether every block of the scene is known by its entry and member index alone (no
+    cut, join, excavation or mesh changes what the entries make)."""
+    return not (scene.cuts or scene.join or scene.excavate
+                or any(st.excavate for st in scene.stages)
+                or any(b.mesh is not None for b in scene.blocks))
+
+
+def _unbuilt(b: Block, entry: int, k: int) -> BlockSpec:
+    """Member ``k`` of family entry ``b`` outside this rank's build share: no pieces (one
+    convex piece when built; its geometric scalars come from the rank that builds it)."""
+    name = f"{b.name}[{k}]"
+    spec = BlockSpec(name, entry, None, b, parent=name)
+    spec._n_pieces = 1
+    return spec
 
 
 def _fixed(spec, arr, r):

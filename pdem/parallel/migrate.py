@@ -56,7 +56,8 @@ def rows_of(gids_held: np.ndarray, gids: np.ndarray) -> np.ndarray:
 
 
 def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.ndarray,
-            state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO):
+            state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO,
+            consume: bool = False):
     """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo).
 
     ``glob``: the per-block static fields of every block, by gid (fixed, radius);
@@ -64,7 +65,10 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     rank's store later): their static data and geometry go with them;
     ``owned_gids``/``state``: the blocks this rank owns now and their MIGRATE arrays;
     ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here);
-    ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields).
+    ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields);
+    ``consume``: ``source`` is not used after this call (the set-up's build share): its
+    arrays are dropped as soon as its blocks are packed, not kept through the rebuild's
+    peak.
     """
     size, rank = comm.size, comm.rank
     owned_gids = np.asarray(owned_gids, np.int64)
@@ -82,8 +86,11 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
                 leaving_free = owned_gids[go & ~fixed[owned_gids]]
                 msg["contacts"] = contacts.select(contacts_needed(contacts, leaving_free))
         out.append(msg)
-    got = alltoall(comm, out)
     stays = pack(source, src_rows[dest == rank])
+    if consume:
+        source.clear()
+    got = alltoall(comm, out)
+    del out
     gids = np.concatenate([m["gid"] for m in got])
     order = np.argsort(gids, kind="stable")
     gids = gids[order]
@@ -91,9 +98,11 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     arrived = unpack([stays if r == rank else m["store"] for r, m in enumerate(got)],
                      np.zeros(len(gids), np.uint8))
     mine_store = take_rows(arrived, order, np.ones(len(gids), np.uint8))
-    del arrived
+    del arrived, stays
     parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
+    del got
     merged = _merge_contacts(parts)
+    del parts
 
     # 2. interest boxes and ghosts
     free_now = gids[~fixed[gids]]

@@ -184,3 +184,52 @@ def test_vectorised_setup_is_bitwise_the_per_block_definition():
             ref = unique_directions(body.vertices[body.edges[:, 1]]
                                     - body.vertices[body.edges[:, 0]])
             assert np.array_equal(_bits(d), _bits(ref))
+
+
+SHARE_SCENE = """
+name: shares
+materials: {rock: {density: 2500}}
+joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 30}}
+blocks:
+  - {name: floor, box: {min: [-1, -1, -1], max: [12, 12, 0]}, material: rock, fixed: true}
+  - {name: cubes, array: {box: {min: [0, 0, 0], max: [0.9, 0.8, 0.7]}, count: [5, 4, 3],
+     spacing: [1.0, 1.0, 1.0]}, material: rock}
+  - {name: tilted, polyhedron: {vertices: [[0, 0, 5], [1, 0, 5], [0, 1, 5], [0.2, 0.3, 6]]},
+     material: rock}
+  - {name: stones, random: {region: {min: [0, 0, 7], max: [6, 6, 9]}, count: 9,
+     size: [0.5, 0.9], seed: 4}, material: rock}
+solve: {steps: 1}
+"""
+
+
+@pytest.mark.parametrize("share", [(0, 71), (0, 30), (30, 71), (1, 2), (61, 66), (64, 68),
+                                   (5, 5), (70, 71)])
+def test_share_builds_only_its_members_bitwise(share):
+    """expand_blocks with a build share makes the family members outside it without pieces
+    (an array's are never built); the share's store and geometric columns are bitwise the
+    whole build's rows (gids, piece numbering, geometry, mass properties)."""
+    from pdem.model.blocks import pack
+    from pdem.model.build import geometry_columns
+
+    scene = parse_scene(SHARE_SCENE)
+    whole = expand_blocks(scene)
+    assert len(whole) == 71
+    lo, hi = share
+    lazy = expand_blocks(scene, share=lambda n: (lo, hi))
+    assert [(s.name, s.parent, s.entry) for s in lazy] == \
+        [(s.name, s.parent, s.entry) for s in whole]
+    built = [g for g, s in enumerate(lazy) if s.pieces is not None]
+    singles = {0, 61}  # the entries that are not families are always built
+    assert set(built) == set(range(lo, hi)) | singles
+    assert all(s.n_pieces == 1 for s in lazy)
+    ref, _ = block_store(scene, whole)
+    mine, _ = block_store(scene, lazy, lo, hi)
+    assert np.array_equal(mine.gid, np.arange(lo, hi))
+    a, b = pack(mine, np.arange(hi - lo)), pack(ref, np.arange(lo, hi))
+    for k in a:
+        assert np.array_equal(_bits(a[k]), _bits(b[k])), k
+    cols = geometry_columns(lazy[lo:hi])
+    for r, s in enumerate(whole[lo:hi]):
+        assert _bits(cols["volume"][r]) == _bits(s.volume)
+        assert _bits(cols["surface"][r]) == _bits(float(s.face_areas.sum()))
+        assert _bits(cols["max_face"][r]) == _bits(float(s.face_areas.max()))
