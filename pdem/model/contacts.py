@@ -84,11 +84,19 @@ class ContactStore:
         m = len(fields["ia"])
         if m == 0:
             return self
-        new = allocate(CONTACT, m)
-        new.update(fields)
-        arrays = {k: np.concatenate([self.arrays[k], new[k]]) for k in self.arrays}
-        merged = ContactStore(arrays, self.sub,
-                              np.concatenate([self.sc_start, np.full(m, self.sc_start[-1])]))
+        new = allocate(tuple(f for f in CONTACT if f.name not in fields), m)
+        new.update({f.name: np.asarray(fields[f.name], f.dtype) for f in CONTACT
+                    if f.name in fields})
+        if self.n == 0:  # the start's search: no copies of a store as large as the model's
+            merged = ContactStore(new, self.sub, np.zeros(m + 1, np.int64))
+            keys = merged.keys()
+            if np.all(keys[1:] > keys[:-1]):  # found in key order (as the search makes them)
+                return merged
+        else:
+            arrays = {k: np.concatenate([self.arrays[k], new[k]]) for k in self.arrays}
+            del new
+            merged = ContactStore(arrays, self.sub,
+                                  np.concatenate([self.sc_start, np.full(m, self.sc_start[-1])]))
         return merged.take(np.argsort(merged.keys(), kind="stable"))
 
     @staticmethod
