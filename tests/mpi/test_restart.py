@@ -1,6 +1,7 @@
 """Checkpoint/restart continuity: 2N steps straight == N steps + checkpoint + restart + N,
 bitwise, when the checkpoint written on 2 ranks is restarted on 1 rank and on all ranks; on
-all ranks each reads the rows of its own blocks and contacts only (as ``pdem restart``)."""
+all ranks each reads the rows of its build share's blocks and their contacts only (as ``pdem
+restart``)."""
 
 import os
 
@@ -13,6 +14,7 @@ import pdem.io.checkpoint as checkpoint_io
 from pdem.config import parse_scene
 from pdem.io.checkpoint import open_checkpoint, read_checkpoint
 from pdem.simulation import Simulation
+from pdem.state import build_share
 
 SCENE = """
 name: restart-pile
@@ -93,11 +95,15 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     for k in FIELDS:
         assert np.array_equal(got[k], ref[k]), k
     n_blocks, n_contacts = len(ck["blocks"]["x"]), ck["contacts"].n
-    # the centroids by every rank (who owns what), then the owned rows (centroid included)
-    assert read["/blocks/x"] == n_blocks + owned and read["/blocks/q"] == owned
-    assert comm.allreduce(owned) == n_blocks
+    # the centroids by every rank (who owns what), then the rows of its build share (centroid
+    # included), which the rebuild sends to their owners; gathered before asserting, so that
+    # no rank waits in a collective for one that failed
+    lo, hi = build_share(comm, n_blocks)
+    rows = comm.allgather((read["/blocks/x"], read["/blocks/q"], hi - lo, owned))
+    assert all(x == n_blocks + share and q == share for x, q, share, _ in rows), rows
+    assert sum(o for *_, o in rows) == n_blocks
     if comm.size > 1:
         assert owned < n_blocks
     counts = comm.allgather(read.get("/contacts/normal", 0))
-    # each contact by a rank owning one of its free blocks: once, or twice across a boundary
+    # each contact by a rank whose share holds one of its free blocks: once, or twice
     assert n_contacts <= sum(counts) < 2 * n_contacts and max(counts) < n_contacts, counts
