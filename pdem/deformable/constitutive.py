@@ -1,0 +1,250 @@
+"""Zone constitutive models by name (``materials.<name>.model``), each a numba kernel.
+
+A model is a :class:`ZoneModel` registered in :data:`ZONE_MODELS`: its scene parameters
+(a :class:`~pdem.strict.Strict` model), ``table(params)`` -> the kernel's constants (a
+namedtuple of floats: one material per deformable block) and ``update``, a kernel
+
+    update(table, stress_row, de) -> (plastic_bits, sigma_p)
+
+that takes a zone's stress row (``xx yy zz xy yz zx``, tension positive, updated in place) and
+this step's strain increment ``de`` (a 6-tuple in the same order, shear components as tensor,
+not engineering, strains) and returns the zone's "now" plastic bits and ``sigma_p = K de_v^p``,
+the plastic volumetric stress correction the nodal mixed discretization on stress averages
+(eq. 73). :func:`update_stress` resolves the kernel per table type at compile time, as
+:func:`pdem.dynamics.damping.damped_momentum` does per damping mode: no runtime dispatch.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import numpy as np
+from numba.extending import overload
+from pydantic import Field, NonNegativeFloat, PositiveFloat, model_validator
+
+from ..jit import inline_kernel
+from ..registry import Registry
+from ..strict import Strict
+
+# per-zone plastic state bits (FLAC3D's convention: "now" is this step, "past" ever before)
+SHEAR_NOW = 1
+TENSION_NOW = 2
+SHEAR_PAST = 4
+TENSION_PAST = 8
+
+
+class ElasticParams(Strict):
+    """Isotropic linear elasticity: ``young`` (Pa), ``poisson``, ``density`` (kg/m^3)."""
+
+    model: Literal["elastic"] = "elastic"
+    density: PositiveFloat
+    young: PositiveFloat
+    poisson: Annotated[float, Field(gt=-1.0, lt=0.5)]
+
+    @property
+    def bulk(self) -> float:
+        return self.young / (3.0 * (1.0 - 2.0 * self.poisson))
+
+    @property
+    def shear(self) -> float:
+        return self.young / (2.0 * (1.0 + self.poisson))
+
+
+class MohrCoulombParams(ElasticParams):
+    """Elastic-perfectly plastic Mohr-Coulomb with a tension cut-off and non-associated flow:
+    ``cohesion``, ``tension`` (Pa), ``friction`` and ``dilation`` angles (degrees)."""
+
+    model: Literal["mohr_coulomb"] = "mohr_coulomb"  # type: ignore[assignment]
+    cohesion: NonNegativeFloat
+    friction: Annotated[float, Field(ge=0.0, lt=90.0)]
+    tension: NonNegativeFloat = 0.0
+    dilation: Annotated[float, Field(ge=0.0, lt=90.0)] = 0.0
+
+    @model_validator(mode="after")
+    def _dilation_below_friction(self):
+        if self.dilation > self.friction:
+            raise ValueError(f"dilation {self.dilation} exceeds friction {self.friction}: "
+                             "the flow rule would generate energy")
+        return self
+
+
+ElasticTable = namedtuple("ElasticTable", "bulk shear")
+MohrCoulombTable = namedtuple(
+    "MohrCoulombTable", "bulk shear n_phi two_c_sqrt_n_phi tension n_psi alpha_p sigma_p")
+
+
+def elastic_table(p: ElasticParams) -> ElasticTable:
+    return ElasticTable(p.bulk, p.shear)
+
+
+def mohr_coulomb_table(p: MohrCoulombParams) -> MohrCoulombTable:
+    """Angles become N_phi, N_psi once here; the tension cut-off is capped at the apex of the
+    shear cone, ``c / tan(phi)`` (FLAC3D does the same), so the two surfaces always meet."""
+    s_phi = math.sin(math.radians(p.friction))
+    s_psi = math.sin(math.radians(p.dilation))
+    n_phi = (1.0 + s_phi) / (1.0 - s_phi)
+    n_psi = (1.0 + s_psi) / (1.0 - s_psi)
+    tension = p.tension
+    if p.friction > 0.0:
+        tension = min(tension, p.cohesion / math.tan(math.radians(p.friction)))
+    two_c = 2.0 * p.cohesion * math.sqrt(n_phi)
+    alpha_p = math.sqrt(1.0 + n_phi * n_phi) + n_phi
+    return MohrCoulombTable(p.bulk, p.shear, n_phi, two_c, tension, n_psi, alpha_p,
+                            tension * n_phi - two_c)
+
+
+@dataclass(frozen=True)
+class ZoneModel:
+    name: str
+    params: type[ElasticParams]
+    table: Callable
+    update: Callable
+
+
+def update_stress(table, stress_row, de):
+    """Apply the model of ``table``'s type to one zone (see the module doc); numba only."""
+    raise NotImplementedError("update_stress is only callable from numba kernels")
+
+
+@inline_kernel
+def _elastic_increment(k, g, s, de):
+    """``s += K tr(de) I + 2 G dev(de)`` (eq. 59 with lambda = K - 2G/3)."""
+    ev = de[0] + de[1] + de[2]
+    lam = (k - 2.0 * g / 3.0) * ev
+    s[0] += lam + 2.0 * g * de[0]
+    s[1] += lam + 2.0 * g * de[1]
+    s[2] += lam + 2.0 * g * de[2]
+    s[3] += 2.0 * g * de[3]
+    s[4] += 2.0 * g * de[4]
+    s[5] += 2.0 * g * de[5]
+
+
+@inline_kernel
+def elastic_update(p, s, de):
+    _elastic_increment(p.bulk, p.shear, s, de)
+    return 0, 0.0
+
+
+@inline_kernel
+def symmetric_eigen(s, vec):
+    """Eigenvalues (ascending) of the symmetric tensor row ``s``; eigenvectors into the columns
+    of ``vec (3, 3)``. Cyclic Jacobi: no LAPACK (numba's needs scipy), exact to round-off."""
+    a = np.empty((3, 3))
+    a[0, 0], a[1, 1], a[2, 2] = s[0], s[1], s[2]
+    a[0, 1] = a[1, 0] = s[3]
+    a[1, 2] = a[2, 1] = s[4]
+    a[0, 2] = a[2, 0] = s[5]
+    for i in range(3):
+        for j in range(3):
+            vec[i, j] = 1.0 if i == j else 0.0
+    scale = abs(a[0, 0]) + abs(a[1, 1]) + abs(a[2, 2]) + abs(s[3]) + abs(s[4]) + abs(s[5])
+    for _ in range(50):
+        off = abs(a[0, 1]) + abs(a[1, 2]) + abs(a[0, 2])
+        if off <= 1e-300 or off <= 1e-17 * scale:
+            break
+        for p, q in ((0, 1), (1, 2), (0, 2)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            sn = t * c
+            for k in range(3):  # a <- J^T a J
+                akp, akq = a[k, p], a[k, q]
+                a[k, p] = c * akp - sn * akq
+                a[k, q] = sn * akp + c * akq
+            for k in range(3):
+                apk, aqk = a[p, k], a[q, k]
+                a[p, k] = c * apk - sn * aqk
+                a[q, k] = sn * apk + c * aqk
+            for k in range(3):
+                vkp, vkq = vec[k, p], vec[k, q]
+                vec[k, p] = c * vkp - sn * vkq
+                vec[k, q] = sn * vkp + c * vkq
+    lam = np.array([a[0, 0], a[1, 1], a[2, 2]])
+    order = np.argsort(lam)
+    out = np.empty(3)
+    v2 = vec.copy()
+    for j in range(3):
+        out[j] = lam[order[j]]
+        for k in range(3):
+            vec[k, j] = v2[k, order[j]]
+    return out
+
+
+@inline_kernel
+def _assemble(lam, vec, s):
+    """``s = sum_i lam_i v_i v_i^T`` (principal stresses back with their directions)."""
+    for r, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))):
+        s[r] = lam[0] * vec[i, 0] * vec[j, 0] + lam[1] * vec[i, 1] * vec[j, 1] \
+            + lam[2] * vec[i, 2] * vec[j, 2]
+
+
+@inline_kernel
+def mohr_coulomb_update(p, s, de):
+    """FLAC3D's Mohr-Coulomb return in principal stresses (s1 <= s2 <= s3, tension positive).
+
+    Elastic trial, then on ``f_s = s1 - s3 N_phi + 2 c sqrt(N_phi) < 0`` (shear) or
+    ``f_t = t - s3 < 0`` (tension), split by ``h = s3 - t + alpha_P (s1 - sigma_P)`` (the
+    bisector of the corner): the shear return with plastic potential ``s1 - s3 N_psi``
+    (plastic strains ``(l, 0, -l N_psi)``: non-associated, volume change ``l (1 - N_psi)``),
+    or the tension return bringing ``s3`` to ``t``. Principal directions are kept.
+    """
+    k, g = p.bulk, p.shear
+    _elastic_increment(k, g, s, de)
+    vec = np.empty((3, 3))
+    lam = symmetric_eigen(s, vec)
+    s1, s2, s3 = lam[0], lam[1], lam[2]
+    fs = s1 - s3 * p.n_phi + p.two_c_sqrt_n_phi
+    ft = p.tension - s3
+    if fs >= 0.0 and ft >= 0.0:
+        return 0, 0.0
+    a1 = k + 4.0 * g / 3.0
+    a2 = k - 2.0 * g / 3.0
+    h = s3 - p.tension + p.alpha_p * (s1 - p.sigma_p)
+    if fs < 0.0 and (h <= 0.0 or ft >= 0.0):
+        ls = fs / ((a1 - a2 * p.n_psi) - (a2 - a1 * p.n_psi) * p.n_phi)
+        lam[0] = s1 - ls * (a1 - a2 * p.n_psi)
+        lam[1] = s2 - ls * a2 * (1.0 - p.n_psi)
+        lam[2] = s3 - ls * (a2 - a1 * p.n_psi)
+        bits = 1
+        ev_p = ls * (1.0 - p.n_psi)
+    else:
+        dp = -ft / a1  # plastic extension along s3
+        lam[0] = s1 - a2 * dp
+        lam[1] = s2 - a2 * dp
+        lam[2] = p.tension
+        bits = 2
+        ev_p = dp
+    _assemble(lam, vec, s)
+    return bits, k * ev_p
+
+
+_KERNELS = {ElasticTable: elastic_update, MohrCoulombTable: mohr_coulomb_update}
+
+
+@overload(update_stress, inline="always")
+def _update_stress(table, stress_row, de):
+    k = _KERNELS[table.instance_class]
+
+    def impl(table, stress_row, de):
+        return k(table, stress_row, de)
+    return impl
+
+
+ZONE_MODELS: Registry[ZoneModel] = Registry("zone constitutive model")
+ZONE_MODELS.register("elastic", ZoneModel("elastic", ElasticParams, elastic_table, elastic_update))
+ZONE_MODELS.register("mohr_coulomb", ZoneModel("mohr_coulomb", MohrCoulombParams,
+                                               mohr_coulomb_table, mohr_coulomb_update))
+
+
+def material(spec: dict):
+    """A scene material (``{density, young, poisson, model?, ...}``) -> (params, kernel table)."""
+    model = ZONE_MODELS[spec.get("model", "elastic")]
+    params = model.params(**spec)
+    return params, model.table(params)
