@@ -68,11 +68,14 @@ class DeformableBody:
 
     def update_mass(self) -> None:
         """Inertial masses: true lumped masses, or scaled for ``dt = 1`` (static mode)."""
-        self.mass = scaled_masses(self.stiffness()) if self.mass_scaling else self.gravity_mass
+        self.mass = (scaled_masses(self.stiffness(), alpha=self.damping) if self.mass_scaling
+                     else self.gravity_mass)
 
     def timestep(self) -> float:
         """The zone term of eq. 88 for the current geometry and inertial masses."""
-        return 1.0 if self.mass_scaling else critical_timestep(self.stiffness(), self.mass)
+        if self.mass_scaling:
+            return 1.0
+        return critical_timestep(self.stiffness(), self.mass, self.damping)
 
     def fix(self, mask, dofs=(0, 1, 2), velocity: float = 0.0) -> None:
         """Prescribe ``velocity`` on the ``dofs`` of the gridpoints in ``mask``."""
@@ -87,6 +90,7 @@ class DeformableBody:
 
     # --- stepping --------------------------------------------------------------------------
     def step(self, n_steps: int, dt: float | None = None) -> int:
+        """Advance ``n_steps`` steps of ``dt`` (default: :meth:`timestep` at the start)."""
         dt = self.timestep() if dt is None else dt
         applied = self.applied + gravity_forces(self.gravity_mass, self.gravity)
         done = cycle(n_steps, dt, self.nodes, self.vel, self.mass, applied, self.fixed,

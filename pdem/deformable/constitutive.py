@@ -186,6 +186,36 @@ def _assemble(lam, vec, s):
 
 
 @inline_kernel
+def _tension_return(a1, a2, k, t, lam):
+    """Bring the principal stresses above ``t`` to ``t`` (lam ascending, in place); return the
+    plastic volumetric strain. The exact return of the Rankine corners: plastic extension
+    along s3 only; if s2 is then still above ``t``, along s2 and s3 together; if s1 too, to
+    the apex (all three ``t``). FLAC3D's one-surface return stops after the first, which
+    leaves s1, s2 > t in a hydrostatic pull."""
+    s1, s2, s3 = lam[0], lam[1], lam[2]
+    d3 = (s3 - t) / a1
+    if s2 - a2 * d3 <= t:
+        lam[0] = s1 - a2 * d3
+        lam[1] = s2 - a2 * d3
+        lam[2] = t
+        return d3
+    # [a1 a2; a2 a1] (d2, d3) = (s2 - t, s3 - t)
+    det = a1 * a1 - a2 * a2
+    d2 = (a1 * (s2 - t) - a2 * (s3 - t)) / det
+    d3 = (a1 * (s3 - t) - a2 * (s2 - t)) / det
+    if s1 - a2 * (d2 + d3) <= t:
+        lam[0] = s1 - a2 * (d2 + d3)
+        lam[1] = t
+        lam[2] = t
+        return d2 + d3
+    ev_p = (s1 + s2 + s3 - 3.0 * t) / (3.0 * k)
+    lam[0] = t
+    lam[1] = t
+    lam[2] = t
+    return ev_p
+
+
+@inline_kernel
 def mohr_coulomb_update(p, s, de):
     """FLAC3D's Mohr-Coulomb return in principal stresses (s1 <= s2 <= s3, tension positive).
 
@@ -193,7 +223,8 @@ def mohr_coulomb_update(p, s, de):
     ``f_t = t - s3 < 0`` (tension), split by ``h = s3 - t + alpha_P (s1 - sigma_P)`` (the
     bisector of the corner): the shear return with plastic potential ``s1 - s3 N_psi``
     (plastic strains ``(l, 0, -l N_psi)``: non-associated, volume change ``l (1 - N_psi)``),
-    or the tension return bringing ``s3`` to ``t``. Principal directions are kept.
+    or the tension return bringing ``s3`` (and ``s2``, ``s1`` if still above) to ``t``.
+    Principal directions are kept.
     """
     k, g = p.bulk, p.shear
     _elastic_increment(k, g, s, de)
@@ -215,12 +246,8 @@ def mohr_coulomb_update(p, s, de):
         bits = 1
         ev_p = ls * (1.0 - p.n_psi)
     else:
-        dp = -ft / a1  # plastic extension along s3
-        lam[0] = s1 - a2 * dp
-        lam[1] = s2 - a2 * dp
-        lam[2] = p.tension
+        ev_p = _tension_return(a1, a2, k, p.tension, lam)
         bits = 2
-        ev_p = dp
     _assemble(lam, vec, s)
     return bits, k * ev_p
 
