@@ -11,7 +11,8 @@ this step's strain increment ``de`` (a 6-tuple in the same order, shear componen
 not engineering, strains) and returns the zone's "now" plastic bits and ``sigma_p = K de_v^p``,
 the plastic volumetric stress correction the nodal mixed discretization on stress averages
 (eq. 73). :func:`update_stress` resolves the kernel per table type at compile time, as
-:func:`pdem.dynamics.damping.damped_momentum` does per damping mode: no runtime dispatch.
+:func:`pdem.dynamics.damping.damped_momentum` does per damping mode: no runtime dispatch, and
+a model registered from outside this file is found the same way.
 """
 
 from __future__ import annotations
@@ -99,8 +100,12 @@ def mohr_coulomb_table(p: MohrCoulombParams) -> MohrCoulombTable:
 
 @dataclass(frozen=True)
 class ZoneModel:
+    """``params``: the scene model; ``table(params)`` -> an instance of ``table_type`` (a
+    namedtuple owned by this model alone: it selects ``update`` at compile time)."""
+
     name: str
     params: type[ElasticParams]
+    table_type: type
     table: Callable
     update: Callable
 
@@ -252,12 +257,12 @@ def mohr_coulomb_update(p, s, de):
     return bits, k * ev_p
 
 
-_KERNELS = {ElasticTable: elastic_update, MohrCoulombTable: mohr_coulomb_update}
-
-
 @overload(update_stress, inline="always")
 def _update_stress(table, stress_row, de):
-    k = _KERNELS[table.instance_class]
+    owners = [m for m in ZONE_MODELS.values() if m.table_type is table.instance_class]
+    if not owners:
+        raise KeyError(f"no registered zone model has the table type {table}")
+    k = owners[0].update
 
     def impl(table, stress_row, de):
         return k(table, stress_row, de)
@@ -265,8 +270,9 @@ def _update_stress(table, stress_row, de):
 
 
 ZONE_MODELS: Registry[ZoneModel] = Registry("zone constitutive model")
-ZONE_MODELS.register("elastic", ZoneModel("elastic", ElasticParams, elastic_table, elastic_update))
-ZONE_MODELS.register("mohr_coulomb", ZoneModel("mohr_coulomb", MohrCoulombParams,
+ZONE_MODELS.register("elastic", ZoneModel("elastic", ElasticParams, ElasticTable, elastic_table,
+                                          elastic_update))
+ZONE_MODELS.register("mohr_coulomb", ZoneModel("mohr_coulomb", MohrCoulombParams, MohrCoulombTable,
                                                mohr_coulomb_table, mohr_coulomb_update))
 
 
