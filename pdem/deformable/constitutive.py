@@ -191,6 +191,25 @@ def _assemble(lam, vec, s):
 
 
 @inline_kernel
+def _extreme_principal(s):
+    """Smallest and largest principal value of the row ``s`` by the trigonometric closed form
+    (no eigenvectors); used only to screen out elastic zones."""
+    q = (s[0] + s[1] + s[2]) / 3.0
+    p1 = s[3] * s[3] + s[4] * s[4] + s[5] * s[5]
+    dx, dy, dz = s[0] - q, s[1] - q, s[2] - q
+    p2 = dx * dx + dy * dy + dz * dz + 2.0 * p1
+    if p2 <= 1e-30 * (q * q + 1e-300):
+        return q, q
+    pp = math.sqrt(p2 / 6.0)
+    bx, by, bz = dx / pp, dy / pp, dz / pp
+    bxy, byz, bzx = s[3] / pp, s[4] / pp, s[5] / pp
+    det = bx * (by * bz - byz * byz) - bxy * (bxy * bz - byz * bzx) + bzx * (bxy * byz - by * bzx)
+    r = min(1.0, max(-1.0, 0.5 * det))
+    phi = math.acos(r) / 3.0
+    return q + 2.0 * pp * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * pp * math.cos(phi)
+
+
+@inline_kernel
 def _tension_return(a1, a2, k, t, lam):
     """Bring the principal stresses above ``t`` to ``t`` (lam ascending, in place); return the
     plastic volumetric strain. The exact return of the Rankine corners: plastic extension
@@ -233,6 +252,12 @@ def mohr_coulomb_update(p, s, de):
     """
     k, g = p.bulk, p.shear
     _elastic_increment(k, g, s, de)
+    # cheap screen first: most zones stay elastic, and the closed-form principal values
+    # need no eigenvectors (the return below recomputes everything with Jacobi)
+    lo, hi = _extreme_principal(s)
+    if lo - hi * p.n_phi + p.two_c_sqrt_n_phi > 1e-12 * (abs(lo) + abs(hi)) \
+            and p.tension - hi > 1e-12 * abs(hi):
+        return 0, 0.0
     vec = np.empty((3, 3))
     lam = symmetric_eigen(s, vec)
     s1, s2, s3 = lam[0], lam[1], lam[2]

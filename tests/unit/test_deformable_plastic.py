@@ -20,6 +20,7 @@ from pdem.deformable.constitutive import (
     ZONE_MODELS,
     ElasticParams,
     ZoneModel,
+    _extreme_principal,
     elastic_update,
     material,
     mohr_coulomb_update,
@@ -95,6 +96,8 @@ def test_symmetric_eigen_matches_numpy():
         lam = symmetric_eigen(s, vec)
         assert np.allclose(lam, np.linalg.eigvalsh(t), rtol=0, atol=1e-13 * np.abs(t).max())
         assert np.allclose(vec @ np.diag(lam) @ vec.T, t, rtol=0, atol=1e-13 * np.abs(t).max())
+        lo, hi = _extreme_principal(s)  # the elastic screen's closed form
+        assert np.allclose([lo, hi], lam[[0, 2]], rtol=0, atol=1e-12 * np.abs(t).max())
 
 
 @pytest.mark.parametrize("dilation", [0.0, 5.0, 20.0])
