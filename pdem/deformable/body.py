@@ -118,6 +118,7 @@ class DeformableBody:
         k, g = self.params.bulk, self.params.shear
         return float(np.sum(self.vol * (p ** 2 / (2.0 * k) + ss / (4.0 * g))))
 
-    def max_unbalanced(self) -> float:
-        """Largest gridpoint speed (a convergence measure of static solves)."""
+    def max_speed(self) -> float:
+        """Largest gridpoint velocity component: with mass scaling (dt = 1) the displacement per
+        step, the convergence measure of static solves."""
         return float(np.abs(self.vel).max())

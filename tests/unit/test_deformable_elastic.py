@@ -19,7 +19,7 @@ def relax(body: DeformableBody, chunk: int = 500, max_chunks: int = 40, rtol: fl
     are below ``rtol`` of its largest displacement."""
     for _ in range(max_chunks):
         body.step(chunk)
-        if body.max_unbalanced() < rtol * np.abs(body.displacement).max():
+        if body.max_speed() < rtol * np.abs(body.displacement).max():
             return
     raise AssertionError("static solve did not converge")
 
