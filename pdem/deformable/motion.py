@@ -1,0 +1,167 @@
+"""Gridpoint motion: the explicit cycle of a deformable block and its critical timestep.
+
+One step (the FLAC/3DEC sequence, reference eqs. 53-59 and 68-76):
+
+1. gridpoint forces at t: applied + gravity (eq. 56) + zone stresses (eq. 55);
+2. velocities at t + dt/2 by central differences (eq. 57) with local damping
+   ``F_d = alpha |F| sgn(v)`` per component (eqs. 78-79, as pdem's rigid ``local`` mode), or
+   the prescribed velocity on fixed degrees of freedom; positions to t + dt;
+3. strain rates and spins (eq. 58) on the geometry at t + dt/2, NMD on strain (eqs. 68-71);
+   the zone geometry at t + dt for the next forces;
+4. stresses: Jaumann rotation by the spin, then the constitutive model (eq. 59 / plasticity),
+   then NMD on the plastic volumetric stress correction (eqs. 73-76).
+
+Timestep (the zone term of eq. 88): eq. 84, ``dt_n = 2 min_i sqrt(m_i / k_i)``, with ``k_i``
+the largest Gershgorin row sum of the assembled elastic zone stiffness at gridpoint ``i``
+(sum over its zones and over the 3 x 4 columns of ``|K_e|``). Gershgorin bounds the largest
+eigenvalue of ``M^-1 K``, so ``dt_n`` is a guaranteed-stable central-difference step for the
+elastic grid (``omega_max dt <= 2``), yet usually within 1.2-1.6x of the true limit (the tests
+measure it). Eq. 86's ``k_z = 8/3 (K + 4G/3) b_max^2 / h_min`` is an estimate of the same
+quantity without that guarantee; :func:`nodal_stiffness_3dec` gives it for comparison.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..jit import kernel
+from .constitutive import SHEAR_NOW, SHEAR_PAST, TENSION_NOW, TENSION_PAST, update_stress
+from .nmd import nmd_strain, nmd_stress
+from .zones import add_zone_forces, rotate_stress, strain_rates, zone_geometry
+
+
+@kernel
+def nodal_stiffness(tets, grad, vol, bulk, shear, n_nodes):
+    """Gershgorin stiffness ``k_i`` of every gridpoint (see module doc)."""
+    lam = bulk - 2.0 * shear / 3.0
+    rows = np.zeros((n_nodes, 3))
+    for z in range(tets.shape[0]):
+        v = vol[z]
+        for a in range(4):
+            ga = grad[z, a]
+            for b in range(4):
+                gb = grad[z, b]
+                dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2]
+                for i in range(3):
+                    acc = 0.0
+                    for j in range(3):
+                        kij = lam * ga[i] * gb[j] + shear * ga[j] * gb[i]
+                        if i == j:
+                            kij += shear * dot
+                        acc += abs(kij)
+                    rows[tets[z, a], i] += v * acc
+    out = np.empty(n_nodes)
+    for n in range(n_nodes):
+        out[n] = max(rows[n, 0], rows[n, 1], rows[n, 2])
+    return out
+
+
+_FACES = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
+
+
+@kernel
+def nodal_stiffness_3dec(nodes, tets, vol, bulk, shear):
+    """Eq. 86 summed over the zones of each gridpoint (eq. 85 without joints)."""
+    out = np.zeros(nodes.shape[0])
+    m = bulk + 4.0 * shear / 3.0
+    for z in range(tets.shape[0]):
+        b2 = 0.0
+        for a in range(4):
+            for b in range(a + 1, 4):
+                d = nodes[tets[z, a]] - nodes[tets[z, b]]
+                b2 = max(b2, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        h_min = np.inf
+        for f in range(4):  # height over each face = 3 V / area
+            p, q, r = tets[z, _FACES[f][0]], tets[z, _FACES[f][1]], tets[z, _FACES[f][2]]
+            u = nodes[q] - nodes[p]
+            w = nodes[r] - nodes[p]
+            cx = u[1] * w[2] - u[2] * w[1]
+            cy = u[2] * w[0] - u[0] * w[2]
+            cz = u[0] * w[1] - u[1] * w[0]
+            area = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+            h_min = min(h_min, 3.0 * vol[z] / area)
+        kz = 8.0 / 3.0 * m * b2 / h_min
+        for a in range(4):
+            out[tets[z, a]] += kz
+    return out
+
+
+def critical_timestep(stiffness: np.ndarray, mass: np.ndarray, alpha: float = 0.0) -> float:
+    """Eq. 84: ``2 min sqrt(m_i / k_i)``, reduced by ``sqrt(1 + alpha)`` under local damping.
+
+    Local damping subtracts ``alpha |F| sgn(v)``: when the force opposes the velocity (every
+    half cycle of an oscillation) it *adds* ``alpha |F|`` to it, so the effective stiffness is
+    up to ``(1 + alpha) k``; without this factor a damped grid at the undamped limit diverges
+    (found: alpha = 0.8 with mass scaling at 0.9 of the undamped limit blew up in 30 steps).
+    """
+    return float(2.0 * np.sqrt(np.min(mass / ((1.0 + alpha) * stiffness))))
+
+
+def scaled_masses(stiffness: np.ndarray, dt: float = 1.0, frac: float = 0.9,
+                  alpha: float = 0.0) -> np.ndarray:
+    """Inertial masses making ``dt`` a ``frac`` of the critical step (with local damping
+    ``alpha``) at every gridpoint: 3DEC's density scaling for static solutions (gravity keeps
+    the true masses)."""
+    return (1.0 + alpha) * stiffness * (dt / (2.0 * frac)) ** 2
+
+
+@kernel
+def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
+          plastic, model, nmd, alpha):
+    """Advance ``n_steps`` steps in place (see module doc); return the steps done.
+
+    ``mass (n,)`` inertial gridpoint masses; ``applied (n, 3)`` applied + gravity forces;
+    ``fixed (n, 3) bool`` prescribed-velocity degrees of freedom with ``fixed_vel (n, 3)``;
+    ``plastic (m,) int32`` state bits; ``model`` a constitutive table; ``nmd`` bool;
+    ``alpha`` the local damping coefficient (0: undamped). Stops early (returning fewer
+    steps) if a zone inverts.
+    """
+    n_nodes = nodes.shape[0]
+    n_zones = tets.shape[0]
+    force = np.empty((n_nodes, 3))
+    mid = np.empty((n_nodes, 3))
+    rate = np.empty((n_zones, 6))
+    spin = np.empty((n_zones, 3))
+    sigma_p = np.zeros(n_zones)
+    for step in range(n_steps):
+        force[:] = applied
+        add_zone_forces(tets, grad, vol, stress, force)
+        for n in range(n_nodes):
+            c = dt / mass[n]
+            for i in range(3):
+                if fixed[n, i]:
+                    vel[n, i] = fixed_vel[n, i]
+                    continue
+                f = force[n, i]
+                v = vel[n, i]
+                if v > 0.0:
+                    f -= alpha * abs(f)
+                elif v < 0.0:
+                    f += alpha * abs(f)
+                vel[n, i] = v + f * c
+            for i in range(3):
+                mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
+                nodes[n, i] += vel[n, i] * dt
+        # strain rates on the mid-step geometry: for a rigid rotation over the step the
+        # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
+        if zone_geometry(mid, tets, grad, vol) <= 0.0:
+            return step
+        strain_rates(vel, tets, grad, rate, spin)
+        if nmd:
+            nmd_strain(tets, vol, rate, n_nodes)
+        if zone_geometry(nodes, tets, grad, vol) <= 0.0:  # forces of the next step at t + dt
+            return step
+        rotate_stress(stress, spin, dt)
+        for z in range(n_zones):
+            de = (rate[z, 0] * dt, rate[z, 1] * dt, rate[z, 2] * dt, rate[z, 3] * dt,
+                  rate[z, 4] * dt, rate[z, 5] * dt)
+            bits, sigma_p[z] = update_stress(model, stress[z], de)
+            past = plastic[z] & (SHEAR_PAST | TENSION_PAST)
+            if plastic[z] & SHEAR_NOW:
+                past |= SHEAR_PAST
+            if plastic[z] & TENSION_NOW:
+                past |= TENSION_PAST
+            plastic[z] = past | bits
+        if nmd:
+            nmd_stress(tets, vol, sigma_p, stress, n_nodes)
+    return n_steps

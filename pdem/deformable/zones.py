@@ -1,0 +1,171 @@
+"""Constant-strain tetrahedral zones: kernels over flat arrays (reference eqs. 53-59).
+
+Array layouts shared by every kernel of :mod:`pdem.deformable`:
+
+- ``nodes (n, 3)``, ``vel (n, 3)``, ``force (n, 3)``: gridpoint positions, velocities, forces.
+- ``tets (m, 4) int64``: positively oriented node ids (see :mod:`.mesh`).
+- ``grad (m, 4, 3)``: shape-function gradients dN_a/dx_j of each zone at the current positions.
+- ``vol (m,)``: zone volumes at the current positions.
+- symmetric tensors as ``(m, 6)`` rows ``xx, yy, zz, xy, yz, zx``; stresses are tension-positive
+  (the FLAC/3DEC sign convention; compression is negative).
+
+For a linear tet, ``dN_a/dx = -A_a n_a / (3 V)`` with ``A_a n_a`` the outward area vector of
+the face opposite node ``a``; so the gridpoint force ``f_a = -V sigma . grad N_a`` is
+``sigma . n_a A_a / 3``: the contour integral of eq. 55 (each face's traction shared equally by
+its three nodes). Summed over a boundary gridpoint's zones this is ``-sigma . n A / 3`` of its
+boundary triangles: the internal force that balances the surface traction there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..jit import inline_kernel, kernel
+
+
+@inline_kernel
+def _tet_gradients(x, t, out):
+    """Fill ``out (4, 3)`` with dN_a/dx of tet ``t`` at positions ``x``; return its volume."""
+    i0, i1, i2, i3 = t[0], t[1], t[2], t[3]
+    ax, ay, az = x[i1, 0] - x[i0, 0], x[i1, 1] - x[i0, 1], x[i1, 2] - x[i0, 2]
+    bx, by, bz = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1], x[i2, 2] - x[i0, 2]
+    cx, cy, cz = x[i3, 0] - x[i0, 0], x[i3, 1] - x[i0, 1], x[i3, 2] - x[i0, 2]
+    # rows of the inverse Jacobian: b x c, c x a, a x b over det = 6 V
+    bc = (by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx)
+    ca = (cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax)
+    ab = (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
+    det = ax * bc[0] + ay * bc[1] + az * bc[2]
+    inv = 1.0 / det
+    for j in range(3):
+        out[1, j] = bc[j] * inv
+        out[2, j] = ca[j] * inv
+        out[3, j] = ab[j] * inv
+        out[0, j] = -(out[1, j] + out[2, j] + out[3, j])
+    return det / 6.0
+
+
+@kernel
+def zone_geometry(nodes, tets, grad, vol):
+    """Shape-function gradients and volumes of every zone at the current positions.
+
+    Returns the smallest volume (<= 0 means a zone inverted: the caller must stop).
+    """
+    vmin = np.inf
+    for z in range(tets.shape[0]):
+        vol[z] = _tet_gradients(nodes, tets[z], grad[z])
+        vmin = min(vmin, vol[z])
+    return vmin
+
+
+@kernel
+def strain_rates(vel, tets, grad, rate, spin):
+    """Strain rate ``rate (m, 6)`` and spin ``spin (m, 3)`` (W_xy, W_yz, W_zx) per zone (eq. 58).
+
+    Exact for a linear velocity field (the patch test): ``L_ij = sum_a v_ai dN_a/dx_j``.
+    """
+    for z in range(tets.shape[0]):
+        lxx = lyy = lzz = lxy = lyx = lyz = lzy = lzx = lxz = 0.0
+        for a in range(4):
+            n = tets[z, a]
+            gx, gy, gz = grad[z, a, 0], grad[z, a, 1], grad[z, a, 2]
+            vx, vy, vz = vel[n, 0], vel[n, 1], vel[n, 2]
+            lxx += vx * gx
+            lyy += vy * gy
+            lzz += vz * gz
+            lxy += vx * gy
+            lyx += vy * gx
+            lyz += vy * gz
+            lzy += vz * gy
+            lzx += vz * gx
+            lxz += vx * gz
+        rate[z, 0] = lxx
+        rate[z, 1] = lyy
+        rate[z, 2] = lzz
+        rate[z, 3] = 0.5 * (lxy + lyx)
+        rate[z, 4] = 0.5 * (lyz + lzy)
+        rate[z, 5] = 0.5 * (lzx + lxz)
+        spin[z, 0] = 0.5 * (lxy - lyx)
+        spin[z, 1] = 0.5 * (lyz - lzy)
+        spin[z, 2] = 0.5 * (lzx - lxz)
+
+
+@kernel
+def add_zone_forces(tets, grad, vol, stress, force):
+    """Add ``f_a = -V sigma . dN_a/dx`` of every zone to its gridpoints (eq. 55)."""
+    for z in range(tets.shape[0]):
+        sxx, syy, szz = stress[z, 0], stress[z, 1], stress[z, 2]
+        sxy, syz, szx = stress[z, 3], stress[z, 4], stress[z, 5]
+        v = vol[z]
+        for a in range(4):
+            n = tets[z, a]
+            gx, gy, gz = grad[z, a, 0], grad[z, a, 1], grad[z, a, 2]
+            force[n, 0] -= v * (sxx * gx + sxy * gy + szx * gz)
+            force[n, 1] -= v * (sxy * gx + syy * gy + syz * gz)
+            force[n, 2] -= v * (szx * gx + syz * gy + szz * gz)
+
+
+@kernel
+def lumped_mass(n_nodes, tets, vol, density):
+    """Gridpoint mass: a quarter of the mass of every zone around it (eq. 56 for tets)."""
+    mass = np.zeros(n_nodes)
+    for z in range(tets.shape[0]):
+        q = 0.25 * density * vol[z]
+        for a in range(4):
+            mass[tets[z, a]] += q
+    return mass
+
+
+@kernel
+def gravity_forces(mass, g):
+    """``F = m_g g`` per gridpoint (eq. 56), ``g (3,)``."""
+    out = np.empty((mass.shape[0], 3))
+    for n in range(mass.shape[0]):
+        for i in range(3):
+            out[n, i] = mass[n] * g[i]
+    return out
+
+
+@kernel
+def rotate_stress(stress, spin, dt):
+    """Jaumann correction of every zone's stress: ``sigma += (W sigma - sigma W) dt``.
+
+    ``W`` is the spin of eq. 58 (``W_ij = (v_i,j - v_j,i) / 2``), so a rigid rotation carries
+    the stress with the material instead of straining it (the large-strain update of the
+    reference: positions move every step, stresses turn with the zone).
+    """
+    for z in range(stress.shape[0]):
+        wxy, wyz, wzx = spin[z, 0], spin[z, 1], spin[z, 2]
+        sxx, syy, szz = stress[z, 0], stress[z, 1], stress[z, 2]
+        sxy, syz, szx = stress[z, 3], stress[z, 4], stress[z, 5]
+        # (W s - s W)_ij with W = [[0, wxy, -wzx], [-wxy, 0, wyz], [wzx, -wyz, 0]]
+        dxx = 2.0 * (wxy * sxy - wzx * szx)
+        dyy = 2.0 * (wyz * syz - wxy * sxy)
+        dzz = 2.0 * (wzx * szx - wyz * syz)
+        dxy = wxy * (syy - sxx) - wzx * syz + wyz * szx
+        dyz = wyz * (szz - syy) - wxy * szx + wzx * sxy
+        dzx = wzx * (sxx - szz) - wyz * sxy + wxy * syz
+        stress[z, 0] += dxx * dt
+        stress[z, 1] += dyy * dt
+        stress[z, 2] += dzz * dt
+        stress[z, 3] += dxy * dt
+        stress[z, 4] += dyz * dt
+        stress[z, 5] += dzx * dt
+
+
+@kernel
+def surface_load(nodes, surface, traction):
+    """Gridpoint forces of a uniform traction ``(3,)`` on the triangles ``surface (k, 3)``:
+    each triangle's ``t A`` shared equally by its three nodes (linear velocity on faces)."""
+    out = np.zeros_like(nodes)
+    for k in range(surface.shape[0]):
+        a, b, c = surface[k, 0], surface[k, 1], surface[k, 2]
+        ux, uy, uz = nodes[b, 0] - nodes[a, 0], nodes[b, 1] - nodes[a, 1], nodes[b, 2] - nodes[a, 2]
+        wx, wy, wz = nodes[c, 0] - nodes[a, 0], nodes[c, 1] - nodes[a, 1], nodes[c, 2] - nodes[a, 2]
+        area = 0.5 * np.sqrt((uy * wz - uz * wy) ** 2 + (uz * wx - ux * wz) ** 2
+                             + (ux * wy - uy * wx) ** 2)
+        for i in range(3):
+            f = traction[i] * area / 3.0
+            out[a, i] += f
+            out[b, i] += f
+            out[c, i] += f
+    return out
