@@ -12,8 +12,10 @@ block-steps/s over 20 steps. Saved as JSON (``--save``, default bench/scale-last
 Model: a rank's memory after set-up is ``base + a N + h (owned + ghosts)``: ``a`` the bytes
 every rank keeps per scene block (the scene's per-block fields and block names), ``h`` the bytes
 per block it holds (its row and geometry, and its share of the contacts: the stack has ~12 per
-cube). The set-up peak is ``base + s N + h' (owned + ghosts)`` (every rank builds the whole
-scene at set-up). ``a, h, s, h'`` are least-squares fits to the measured runs; owned blocks,
+cube). The set-up peak is ``base + s N + h' (owned + ghosts)``: ``s`` what every rank still
+makes for every block at set-up (the specs' names and entries, the gathered per-block
+fields), ``h'`` per block held (a rank builds an even share of the blocks, about what it
+holds, and receives its own). ``a, h, s, h'`` are least-squares fits to the measured runs; owned blocks,
 ghosts and halo bytes per rank come from bench/scaling.py's decomposition model (exact for
 the stack's lattice). Strong scaling: N fixed (10^6, 10^7); weak: 10^4 blocks per rank.
 

@@ -154,8 +154,8 @@ class ModelState:
         # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
         memory = min(allgather(comm, machine_memory()))
         warn = comm.rank == 0
-        estimate = preflight(scene, comm.size, memory, warn)
         whole = whole or needs_whole_scene(scene, comm)
+        estimate = preflight(scene, comm.size, memory, warn, whole)
         specs = expand_blocks(scene, estimate.max_blocks,
                               None if whole else lambda n: build_share(comm, n))
         if len(specs) != estimate.blocks:  # cuts and mesh cells are counted only once built

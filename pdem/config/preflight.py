@@ -35,6 +35,10 @@ SUBS_PER_CONTACT = 6
 # Python objects per block (BlockSpec, ConvexPolyhedron and its arrays), measured with
 # tracemalloc on 2 500 boxes and 10-vertex random polyhedra: about 2.3 KB, rounded up
 PY_BYTES_PER_BLOCK = 4096
+# what every rank makes and keeps of every scene block at set-up when it builds only its share
+# (a spec without shape, the gathered catalogue and spec columns, and the heap they leave):
+# bench/scale.py's fit on the cube stack, 0.48 KB, rounded up
+SCENE_BYTES_PER_BLOCK = 1024
 # a rank holds its owned blocks plus ghosts; a slab of ghosts about as thick as a block on each
 # side of a brick, at most as many again as it owns
 GHOST_FACTOR = 2.0
@@ -146,30 +150,39 @@ def rescaled(est: Estimate, n_blocks: int) -> Estimate:
                     est.max_blocks, est.max_bytes)
 
 
-def estimate(scene, comm_size: int, memory: float | None = None
+def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = False
              ) -> tuple[Estimate, list[tuple[int, int]]]:
     """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry.
-    ``memory``: the physical memory to plan for (default: this machine's)."""
+    ``memory``: the physical memory to plan for (default: this machine's); ``whole``: every
+    rank builds every block's store (pdem.state.needs_whole_scene), else its share."""
+    from ..model.build import lazy_scene
     from ..model.fields import BLOCK, CONTACT, SUB
 
     block_row = _row_bytes(BLOCK)
     contact_row = _row_bytes(CONTACT) + SUBS_PER_CONTACT * _row_bytes(SUB)
     per_entry = []
     n_total = 0
-    # the whole scene is built on every rank at set-up (blocks by gid), then each rank keeps
-    # its own blocks' and ghosts' geometry (pdem.parallel.migrate): the set-up peak is the
-    # scene's store and its Python objects on every rank, plus the rank's share
-    static_bytes = 0.0
+    # Set-up (pdem.state.ModelState.create): every rank makes a spec of every block and keeps
+    # the per-block catalogue (SCENE_BYTES_PER_BLOCK); it builds the shapes and store of its
+    # share of the gids (of every block when ``whole``; the shapes of every block when cuts,
+    # joins, excavations or meshes decide what the blocks are) and then holds its own blocks
+    # and ghosts (pdem.parallel.migrate)
+    built_bytes = 0.0  # a block's row, geometry and shape objects while it is built
     held_bytes = 0.0  # a block's row and geometry in a rank's store
     for i, b in enumerate(scene.blocks):
         n, v, f, e = _shape_size(b)
         per_entry.append((i, n))
         n_total += n
         # vertices local + world, face normals/offsets/starts, face vertex lists (2E), edges,
-        # edge directions; plus the block row and its Python objects
+        # edge directions; plus the block row
         geom = 8 * (6 * v + 6 * f + 2 * e + 2 * e + 3 * e + 4)
-        static_bytes += float(n) * (geom + block_row + PY_BYTES_PER_BLOCK)
+        built_bytes += float(n) * (geom + block_row + PY_BYTES_PER_BLOCK)
         held_bytes += float(n) * (geom + block_row)
+    shapes_everywhere = whole or not lazy_scene(scene)
+    built_fraction = 1.0 if whole else 1.0 / max(comm_size, 1)
+    static_bytes = SCENE_BYTES_PER_BLOCK * float(n_total) + built_fraction * built_bytes
+    if shapes_everywhere and not whole:  # the shapes of every block, the store of a share
+        static_bytes += PY_BYTES_PER_BLOCK * float(n_total) * (1.0 - built_fraction)
     share = n_total / max(comm_size, 1)
     contacts = math.ceil(share * CONTACTS_PER_BLOCK / 2)
     avg_block = static_bytes / max(n_total, 1)
@@ -200,11 +213,13 @@ def _generator_text(b) -> str:
     return ""
 
 
-def preflight(scene, comm_size: int, memory: float | None = None, warn: bool = True) -> Estimate:
+def preflight(scene, comm_size: int, memory: float | None = None, warn: bool = True,
+              whole: bool = False) -> Estimate:
     """Refuse a scene too large for ``limits:`` before any block is made; log warnings for
     physical parameters outside their usual ranges (``warn``: on one rank only). Every rank
-    must decide alike (or the others wait forever): give them the same ``memory``."""
-    est, per_entry = estimate(scene, comm_size, memory)
+    must decide alike (or the others wait forever): give them the same ``memory``. ``whole``:
+    every rank builds every block (see :func:`estimate`)."""
+    est, per_entry = estimate(scene, comm_size, memory, whole)
     if est.blocks > est.max_blocks or est.bytes_per_rank > est.max_bytes:
         big = sorted(per_entry, key=lambda t: -t[1])[:3]
         where = "; ".join(f"blocks[{i}] ({scene.blocks[i].name!r}){_generator_text(scene.blocks[i])}"
