@@ -856,6 +856,14 @@ class Scene(Strict):
                 if getattr(self, key):
                     errors.append(f"{key}: not yet supported with zoned blocks "
                                   f"({', '.join(zoned)})")
+            sv = self.solve
+            for key, bad in (("solve.inactive", sv.inactive is not None),
+                             ("solve.mass_scaling", sv.mass_scaling is not False),
+                             ("solve.damping.mode", sv.damping.mode not in ("none", "local")),
+                             ("domain", self.domain is not None)):
+                if bad:
+                    errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
+                                  + ("; use none or local" if key == "solve.damping.mode" else ""))
             if self.boundary.velocity or self.boundary.stress:
                 errors.append(f"boundary: not yet supported with zoned blocks ({', '.join(zoned)})")
         if "default" not in self.joints and not self.joint_pairs:
