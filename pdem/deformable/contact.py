@@ -136,7 +136,7 @@ def _grid_force(grid, s, side, fx, fy, fz):
         f[g, 2] += w[s, side, i] * fz
 
 
-@inline_kernel
+@kernel  # a call, not inlined: numba's IR inlining of the inlined joint law inside it warns
 def _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny, nz):
     """One sub-contact's joint update from the relative velocity (as in contact_forces):
     returns the force on B and the energy the joint dissipated."""

@@ -100,6 +100,7 @@ class GridStore:
 
     def __init__(self, scene, specs, first_gid: int):
         self.gids = []
+        self.names = []
         bodies = []
         surf = []
         for i, s in enumerate(specs):
@@ -110,6 +111,7 @@ class GridStore:
             bodies.append(DeformableBody(mesh, mat.zone_spec(), nmd=s.spec.zones.nmd))
             surf.append(surf_nodes)
             self.gids.append(first_gid + i)
+            self.names.append(s.name)
         self.bodies = bodies
         self.surf = surf
         counts = [len(b.nodes) for b in bodies]
@@ -236,7 +238,10 @@ class GridStore:
             applied = self.force[a:e] + gravity_forces(b.gravity_mass, self.gravity)
             done = _cycle(b, applied, dt)
             if done < 1:
-                raise FloatingPointError(f"a zone of zoned block gid {self.gids[d]} inverted")
+                from ..errors import SimulationError
+
+                raise SimulationError(f"zoned block {self.names[d]!r}: a zone inverted (the "
+                                      "grid folded: a load or speed too large for its zones)")
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:
