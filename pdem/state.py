@@ -339,6 +339,8 @@ class ModelState:
             self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
                                 lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
                                 lambda mine: ck["contacts"])
+            if self.grids is not None:
+                self.grids.read(ck["path"], self)
             return
         path = ck["path"]
         with self._reader(path) as reader:
@@ -353,6 +355,8 @@ class ModelState:
                 lambda mine: reader.contacts(self._checked(lambda: np.nonzero(
                     mine[reader.contact_column("ga")] | mine[reader.contact_column("gb")])[0],
                     path)))
+        if self.grids is not None:  # zoned blocks (serial runs only)
+            self.grids.read(path, self)
 
     def _restore_share(self, out, x, block_rows, contacts):
         """The blocks this rank brings in (its build share, or those it owns at the

@@ -862,9 +862,7 @@ class Scene(Strict):
                              ("solve.damping.mode", sv.damping.mode not in ("none", "local")),
                              ("domain", self.domain is not None),
                              # the unbalanced-force ratio counts rigid blocks only yet
-                             ("solve.ratio", sv.ratio is not None),
-                             # the grids' state is not in checkpoints yet
-                             ("checkpoint", self.checkpoint is not None)):
+                             ("solve.ratio", sv.ratio is not None)):
                 if bad:
                     errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
                                   + ("; use none or local" if key == "solve.damping.mode" else ""))

@@ -223,6 +223,66 @@ class GridStore:
             self.located = contacts
         return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w)
 
+    # ------------------------------------------------------------------ checkpoints
+    def write(self, f, contacts) -> None:
+        """The grids' state into group ``grids`` of an open checkpoint file (serial): gridpoint
+        positions, velocities and contact forces, zone stresses and plastic bits, each
+        sub-contact's gridpoints and weights (for ``contacts``, checked by their keys on
+        reading) and the gridpoint of each gridpoint sub-contact by contact key."""
+        g = f.create_group("grids")
+        g.create_dataset("gid", data=np.asarray(self.gids, np.int64))
+        for k in ("nodes", "vel", "force"):
+            g.create_dataset(k, data=getattr(self, k))
+        g.create_dataset("stress", data=np.concatenate([b.stress for b in self.bodies]))
+        g.create_dataset("plastic", data=np.concatenate([b.plastic for b in self.bodies]))
+        located = self.located is contacts
+        g.create_dataset("sc_keys", data=contacts.keys() if located else np.zeros(0, np.int64))
+        g.create_dataset("sc_node", data=self.sc_node if located else np.zeros((0, 2, 3), np.int64))
+        g.create_dataset("sc_w", data=self.sc_w if located else np.zeros((0, 2, 3)))
+        keys = np.array(sorted(self.gnode), np.int64)
+        g.create_dataset("gnode_keys", data=keys)
+        g.create_dataset("gnode_count", data=np.array([len(self.gnode[int(k)]) for k in keys],
+                                                      np.int64))
+        g.create_dataset("gnode", data=np.concatenate([self.gnode[int(k)] for k in keys])
+                         if len(keys) else np.zeros(0, np.int64))
+
+    def read(self, path, state) -> None:
+        """Continue from the grids of a checkpoint written by :meth:`write` (after the blocks
+        and contacts are restored): the arrays, the zones' geometry, the rows and pieces."""
+        import h5py
+
+        from ..errors import UserError
+        from .zones import zone_geometry
+
+        with h5py.File(path, "r") as f:
+            if "grids" not in f or not np.array_equal(f["grids/gid"][()], self.gids) \
+                    or f["grids/nodes"].shape != self.nodes.shape:
+                raise UserError(f"checkpoint {path}: no grids of this scene's zoned blocks")
+            g = f["grids"]
+            for k in ("nodes", "vel", "force"):
+                getattr(self, k)[:] = g[k][()]
+            stress, plastic = g["stress"][()], g["plastic"][()]
+            sc_keys, sc_node, sc_w = g["sc_keys"][()], g["sc_node"][()], g["sc_w"][()]
+            keys, counts, flat = g["gnode_keys"][()], g["gnode_count"][()], g["gnode"][()]
+        z = 0
+        for b in self.bodies:
+            m = len(b.tets)
+            b.stress[:] = stress[z:z + m]
+            b.plastic[:] = plastic[z:z + m]
+            z += m
+            zone_geometry(b.nodes, b.tets, b.grad, b.vol)
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        blocks = state.blocks
+        self.bind(blocks, state.owned_row)
+        self.gnode = {int(k): flat[starts[i]:starts[i + 1]] for i, k in enumerate(keys)}
+        c = state.contacts
+        if len(sc_keys) and np.array_equal(sc_keys, c.keys()) and len(sc_node) == c.n_sub:
+            self.sc_node, self.sc_w, self.located = sc_node, sc_w, c
+        x_saved = blocks.x[self.rows].copy()
+        self.sync(blocks)
+        blocks.x[self.rows] = x_saved  # the stored centroids (the same numbers, recomputed)
+        blocks.dx[self.rows] = 0.0
+
     def vnode(self, blocks) -> np.ndarray:
         """The gridpoint (flat index) of every vertex row of ``blocks``; -1 for rigid pieces."""
         out = np.full(len(blocks.verts_local), -1, np.int64)

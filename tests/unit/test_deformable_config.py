@@ -69,8 +69,6 @@ def test_contract_scene_parses_with_defaults():
     ("solve: {steps: 10}", "solve: {steps: 10}\njoin: [[pillar, roof]]",
      "join: not yet supported with zoned blocks (pillar)"),
     ("solve: {steps: 10}", "solve: {ratio: 1.0e-5}", "solve.ratio: not yet supported with zoned"),
-    ("solve: {steps: 10}", "solve: {steps: 10}\ncheckpoint: {file: c.h5, every: 10}",
-     "checkpoint: not yet supported with zoned"),
     ("solve: {steps: 10}", "solve: {steps: 10, damping: combined}",
      "solve.damping.mode: not yet supported with zoned blocks (pillar); use none or local"),
     ("solve: {steps: 10}", "solve: {steps: 10, mass_scaling: true}",
