@@ -163,6 +163,12 @@ class GridStore:
         self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
         self.dt = GRID_FRAC * self.timestep(kn)
+        if self.dt < resolved.dt:
+            import logging
+
+            logging.getLogger("pdem").info(
+                "the zoned blocks' grids limit the step: %.3g s (%.2f of their Gershgorin "
+                "bound with kn %.3g; the rigid step %.3g s)", self.dt, GRID_FRAC, kn, resolved.dt)
         return dataclasses.replace(resolved, dt=min(resolved.dt, self.dt))
 
     # ------------------------------------------------------------------ in a model state
