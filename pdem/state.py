@@ -86,6 +86,17 @@ def scene_catalogue(comm, share) -> BlockStore:
                                  for k in CATALOGUE + ("lo", "hi")})
 
 
+def zoned_grids(scene: Scene, comm, specs, first_gid: int):
+    """The grids of the zoned blocks among ``specs`` (None for a scene without ``zones``)."""
+    if not any(b.zones is not None for b in scene.blocks):
+        return None
+    if comm.size > 1:
+        raise ConfigError([f"blocks: zoned blocks run on one rank yet (got {comm.size} ranks)"])
+    from .deformable.store import GridStore
+
+    return GridStore(scene, specs, first_gid)
+
+
 class ModelState:
     """The model on one rank; construct with :meth:`create` (collective)."""
 
@@ -135,6 +146,8 @@ class ModelState:
         # the largest motion of a block in one step that cannot take it through another block
         # unseen (pdem.dynamics.motion.motion_bookkeeping)
         self.max_step = max_step_motion(resolved.ctol, thinnest)
+        # the grids of the zoned blocks (pdem.deformable.store.GridStore); None: all rigid
+        self.grids = None
         # this rank's share of the scene's blocks with their geometry, from set-up to the
         # first distribution (None: ``glob`` has every block's geometry)
         self.share = None
@@ -165,6 +178,7 @@ class ModelState:
                                    "limits.max_memory_per_rank; docs/limits.md)"])
         lo, hi = (0, len(specs)) if whole else build_share(comm, len(specs))
         share, group_names = block_store(scene, specs, lo, hi)
+        grids = zoned_grids(scene, comm, specs[lo:hi], lo)
         columns = geometry_columns(specs[lo:hi])
         if not whole:
             columns = {k: allgather_rows(comm, v) for k, v in columns.items()}
@@ -180,12 +194,15 @@ class ModelState:
             glob = scene_catalogue(comm, share)
             verts_max = max(allgather(comm, float(np.abs(share.verts_world).max(initial=1.0))))
         resolved = resolve(scene, comm.size, specs, glob, joints, verts_max)
+        if grids is not None:
+            resolved = grids.resolve(scene, resolved)
         check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn, resolved.ctol)
         thinnest = thinnest_width(share.vert_start, share.verts_local, share.face_start,
                                   share.normals_local, share.offsets_local)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved,
                            thinnest if whole else min(allgather(comm, thinnest)))
         state.share = None if whole else share
+        state.grids = grids
         state.estimate = estimate
         apply_scene(state)
         # checked by the stepper's start on the first contact update (one search, not two)
@@ -322,6 +339,8 @@ class ModelState:
             self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
                                 lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
                                 lambda mine: ck["contacts"])
+            if self.grids is not None:
+                self.grids.read(ck["path"], self)
             return
         path = ck["path"]
         with self._reader(path) as reader:
@@ -336,6 +355,8 @@ class ModelState:
                 lambda mine: reader.contacts(self._checked(lambda: np.nonzero(
                     mine[reader.contact_column("ga")] | mine[reader.contact_column("gb")])[0],
                     path)))
+        if self.grids is not None:  # zoned blocks (serial runs only)
+            self.grids.read(path, self)
 
     def _restore_share(self, out, x, block_rows, contacts):
         """The blocks this rank brings in (its build share, or those it owns at the

@@ -70,6 +70,8 @@ class Stepper:
         """Contacts of the initial state, its forces, and the staggered start velocities."""
         s = self.s
         s.distribute_initial()
+        if s.grids is not None:
+            s.grids.bind(s.blocks, s.owned_row)
         self.search(np.ones(s.blocks.n, bool))
         self.refresh(all_contacts=True)
         if s.check_overlaps:
@@ -184,6 +186,9 @@ class Stepper:
         # the common case deletes no contact: no need to copy every contact field (a select is
         # a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts)
         s.contacts = refreshed if keep.all() else refreshed.select(keep.astype(bool))
+        if s.grids is not None:  # zoned blocks: sub-contacts at their surface gridpoints
+            s.contacts = s.grids.regrid(c, s.contacts, todo[keep.astype(bool)], b,
+                                        TOUCH_FRACTION * s.ctol)
 
     def bodies(self) -> Bodies:
         b = self.s.blocks
@@ -194,8 +199,16 @@ class Stepper:
         c = self.s.contacts
         b.force[:] = 0.0
         b.moment[:] = 0.0
-        contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
-                       b.still)
+        g = self.s.grids
+        if g is None:
+            contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
+                           b.still)
+            return
+        from .deformable.contact import contact_forces_grid
+
+        g.force[:] = 0.0
+        contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
+                            g.record(b, c))
 
     def update_inactive(self):
         """Count, hold and wake inactive blocks after the contact forces (solve.inactive)."""
@@ -218,7 +231,7 @@ class Stepper:
         """Whether steps may run in one compiled call (pdem.cycle): serial runs without
         prescribed boundary motion, unless ``solve.fused`` is off."""
         s = self.s
-        return (s.comm.size == 1 and s.scene.solve.fused
+        return (s.comm.size == 1 and s.scene.solve.fused and s.grids is None
                 and not (s.boundary is not None and s.boundary.active))
 
     def advance_many(self, max_steps: int, stop_step: int | None = None,
@@ -268,8 +281,14 @@ class Stepper:
             if s.boundary is not None and s.boundary.active:
                 s.boundary.prescribe(s)  # velocity histories at t + dt/2
                 s.boundary.tractions(s)  # boundary stresses at t, on the pose at t
-            motion.integrate(motion_record(b, n, self.holds), s.gravity, s.dt,
-                             s.damping_args(), s.scalar_inertia, self.stats)
+            rec = motion_record(b, n, self.holds)
+            if s.grids is not None:  # zoned blocks move with their grids
+                rec = rec._replace(fixed=s.grids.rigid_fixed(rec.fixed))
+            motion.integrate(rec, s.gravity, s.dt, s.damping_args(), s.scalar_inertia,
+                             self.stats)
+            if s.grids is not None:
+                s.grids.step(s.dt)
+                s.grids.sync(b)
             s.step += 1
             s.time += s.dt
             # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the

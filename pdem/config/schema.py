@@ -13,6 +13,7 @@ from pydantic import (
     PrivateAttr,
     Tag,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
@@ -34,8 +35,69 @@ Vec3Speed = tuple[Speed, Speed, Speed]
 Vec3Force = tuple[Force, Force, Force]
 
 
+Angle = Annotated[float, Field(ge=0.0, lt=90.0)]
+
+
 class Material(Strict):
+    """A block material: ``density`` alone for rigid blocks; with ``young`` and ``poisson``
+    also the elasticity of deformable (``zones:``) blocks, and ``model`` the zone constitutive
+    model (:data:`pdem.deformable.ZONE_MODELS`: ``elastic``, or ``mohr_coulomb`` with
+    ``cohesion``, ``friction``, ``tension``, ``dilation``). Rigid blocks ignore the elastic
+    keys."""
+
     density: PositiveFloat
+    young: PositiveFloat | None = None
+    poisson: Annotated[float, Field(gt=-1.0, lt=0.5)] | None = None
+    model: str | None = None
+    cohesion: NonNegativeFloat | None = None
+    friction: Angle | None = None
+    tension: NonNegativeFloat | None = None
+    dilation: Angle | None = None
+
+    @model_validator(mode="after")
+    def _zone_model(self):
+        """The elastic keys are checked by the zone model's own parameters (one message that
+        names the key); the model name, with a did-you-mean, by the registry."""
+        given = {k: v for k, v in self if v is not None and k != "density"}
+        if not given:
+            return self
+        if self.young is None:
+            raise ValueError(f"young: needed with {', '.join(sorted(given))} (the elasticity of "
+                             "deformable blocks)")
+        if self.poisson is None:
+            raise ValueError("poisson: needed with young")
+        from pydantic import ValidationError
+
+        from ..deformable.constitutive import ZONE_MODELS
+
+        try:
+            model = ZONE_MODELS[self.model or "elastic"]
+        except KeyError as exc:
+            raise ValueError(f"model: {exc.args[0]}") from None
+        try:
+            model.params(density=self.density, **given)
+        except ValidationError as exc:
+            e = exc.errors()[0]
+            key = ".".join(str(p) for p in e["loc"])
+            text = e["msg"].removeprefix("Value error, ")
+            if e["type"] == "extra_forbidden":
+                text = f"not a parameter of the {model.name} model"
+            raise ValueError(f"{key}: {text}" if key else text) from None
+        return self
+
+    @model_serializer(mode="wrap")
+    def _drop_unset(self, handler):
+        # a rigid material dumps as before the elastic keys existed (outputs, checkpoints)
+        return {k: v for k, v in handler(self).items() if v is not None}
+
+    @property
+    def deformable(self) -> bool:
+        """Has the elasticity a zoned block needs."""
+        return self.young is not None
+
+    def zone_spec(self) -> dict:
+        """The zone model's parameters (``pdem.deformable.material``'s input)."""
+        return {k: v for k, v in self if v is not None}
 
 
 def _joint_law_union():
@@ -142,6 +204,18 @@ class RandomPolyhedra(Strict):
     seed: int = 0
 
 
+class Zones(Strict):
+    """A deformable block: zoned into tetrahedra no longer than ``size`` (m) on any edge;
+    ``nmd``: nodal mixed discretization (3DEC's default; off only to compare)."""
+
+    size: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)]
+    nmd: bool = True
+
+
+# shapes a zoned block may have today (one convex piece); the others are refused with why
+ZONED_SHAPES = ("box", "polyhedron", "prism", "planes")
+
+
 class Block(Strict):
     """One block (or, for ``array``/``random``, a family named ``name[i]``)."""
 
@@ -160,6 +234,7 @@ class Block(Strict):
     angular_velocity: Vec3Speed = (0.0, 0.0, 0.0)
     velocity_fixed: bool = False
     force: Vec3Force = (0.0, 0.0, 0.0)
+    zones: Zones | None = None
 
     @model_validator(mode="after")
     def _one_shape(self):
@@ -168,7 +243,24 @@ class Block(Strict):
             raise ValueError(
                 "give exactly one shape of " + ", ".join(SHAPE_KEYS) + f" (got {given or 'none'})"
             )
+        if self.zones is not None:
+            kind = next(k for k in SHAPE_KEYS if getattr(self, k) is not None)
+            if kind not in ZONED_SHAPES:
+                raise ValueError(f"zones: not yet supported on {kind!r} blocks (a zoned block is "
+                                 f"one convex {', '.join(ZONED_SHAPES)} shape)")
+            for key, rigid in (("fixed", False), ("velocity_fixed", False),
+                               ("angular_velocity", (0.0, 0.0, 0.0)), ("force", (0.0, 0.0, 0.0))):
+                if getattr(self, key) != rigid:
+                    raise ValueError(f"{key}: not yet supported on a zoned block (rigid only)")
         return self
+
+    @model_serializer(mode="wrap")
+    def _drop_rigid(self, handler):
+        # a rigid block dumps as before ``zones`` existed (outputs, checkpoints)
+        out = handler(self)
+        if out.get("zones", 0) is None:
+            del out["zones"]
+        return out
 
     @property
     def shape_kind(self) -> str:
@@ -754,6 +846,28 @@ class Scene(Strict):
             if b.name in names:
                 errors.append(f"blocks[{i}].name: {b.name!r} already names blocks[{names[b.name]}]")
             names[b.name] = i
+            if b.zones is not None and b.material in self.materials:
+                if not self.materials[b.material].deformable:
+                    errors.append(f"blocks[{i}].zones: material {b.material!r} has no young and "
+                                  "poisson (a zoned block needs its elasticity)")
+        zoned = [b.name for b in self.blocks if b.zones is not None]
+        if zoned:
+            for key in ("cuts", "join", "excavate", "stages", "insitu"):
+                if getattr(self, key):
+                    errors.append(f"{key}: not yet supported with zoned blocks "
+                                  f"({', '.join(zoned)})")
+            sv = self.solve
+            for key, bad in (("solve.inactive", sv.inactive is not None),
+                             ("solve.mass_scaling", sv.mass_scaling is not False),
+                             ("solve.damping.mode", sv.damping.mode not in ("none", "local")),
+                             ("domain", self.domain is not None),
+                             # the unbalanced-force ratio counts rigid blocks only yet
+                             ("solve.ratio", sv.ratio is not None)):
+                if bad:
+                    errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
+                                  + ("; use none or local" if key == "solve.damping.mode" else ""))
+            if self.boundary.velocity or self.boundary.stress:
+                errors.append(f"boundary: not yet supported with zoned blocks ({', '.join(zoned)})")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}

@@ -106,6 +106,8 @@ def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = 
     if f is not None:
         try:
             _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s)
+            if state.grids is not None:  # zoned blocks (serial runs only)
+                state.grids.write(f, state.contacts)
         except BaseException:
             # the previous checkpoint is untouched (it has another name); drop the partial temp
             # file. A parallel file is not closed here: closing is collective and the other
@@ -296,6 +298,7 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
         for k in ("ga", "gb"):
             r.contact_column(k)
         out["contacts"] = r.contacts(np.arange(len(r.nsub)))
+    out["path"] = str(path)  # groups read at the restore (zoned blocks' grids)
     return out
 
 

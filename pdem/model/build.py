@@ -45,6 +45,8 @@ class BlockSpec:
     # group and material when not the scene entry's (mesh cells carry their own)
     group_name: str | None = None
     material_name: str | None = None
+    # a zoned block's (TetMesh, surface node ids), pdem.deformable.store.zone_specs
+    zoning: tuple | None = None
 
     def release(self) -> None:
         """Drop the pieces (after set-up their geometry lives with the blocks' owners, see
@@ -428,7 +430,12 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None) -> li
         raise ConfigError(errors)
     from .rockmass import build_rock_mass
 
-    return build_rock_mass(scene, out, max_blocks)
+    out = build_rock_mass(scene, out, max_blocks)
+    if any(b.zones is not None for b in scene.blocks):
+        from ..deformable.store import zone_specs
+
+        zone_specs(scene, out)
+    return out
 
 
 def lazy_scene(scene: Scene) -> bool:
@@ -573,7 +580,7 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
         if p.face_tag is not None:
             face_tag[face_start[k]:face_start[k + 1]] = p.face_tag
     edirs, edir_start = _edge_directions(verts_local, edges.astype(np.int64), edge_start)
-    return BlockStore(arr, dict(
+    geometry = dict(
         piece_start=piece_start,
         piece_block=np.repeat(np.arange(n), np.diff(piece_start)),
         piece_gid=np.arange(first_piece, first_piece + n_pieces, dtype=np.int64),
@@ -594,7 +601,12 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
         edges=edges.astype(np.int64),
         edir_start=edir_start,
         edirs_local=edirs,
-    )), groups
+    )
+    if any(s.zoning is not None for s in specs):
+        from ..deformable.store import identity_frames
+
+        identity_frames(geometry, arr, specs)
+    return BlockStore(arr, geometry), groups
 
 
 def _body_frames(specs: list[BlockSpec]):

@@ -1,0 +1,147 @@
+"""Sub-contacts of a zoned block at its surface gridpoints (3DEC's deformable-block contacts).
+
+pdem's rigid sub-contacts are the corners of the common area of the two blocks' touching
+faces (:mod:`pdem.contact.subcontacts`): for a zoned block that would load only the corners
+of its contact face and leave its other gridpoints free (measured: a zoned column on a floor
+settled 6x the joint closure at its base). 3DEC instead puts one sub-contact at every surface
+gridpoint of the deformable block touching the other block, with the gridpoint's share of
+the surface area. That is done here, after the common-plane update:
+
+- the zoned side ``D`` is A if A is zoned, else B; ``O`` the other block's piece;
+- a surface gridpoint ``g`` of ``D`` is a sub-contact if it faces ``O`` (its area share below
+  is positive) and lies within the touch tolerance of ``O``: ``d(g) = max_f (n_f . g - o_f)``
+  over ``O``'s faces (the distance outside ``O``'s nearest face plane, negative inside);
+- its area is ``sum_t max(0, n_t . u) A_t / 3`` over its surface triangles ``t``, ``u`` the
+  direction from ``D`` to ``O`` (``n`` for D = A, ``-n`` for D = B): a flat contact face's
+  shares sum to its area; its overlap ``un = -d(g)``; its point the gridpoint itself;
+- its joint history (shear force and displacement, dilation, state bits, law columns) is the
+  previous sub-contact's at the same gridpoint of the same contact, if there was one: the
+  gridpoints are material points, so this transfer is exact.
+
+Both sides zoned: sub-contacts at A's gridpoints only (3DEC takes both sides and halves the
+stiffness; not done yet).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..jit import kernel
+from ..model.contacts import ContactStore
+
+
+@kernel
+def gridpoint_candidates(verts_d, face_d, fvert_d, face_verts, normals_d, nodes_row0, ux, uy,
+                         uz, normals_o, offsets_o, tol):
+    """For D's piece (vertex rows ``verts_d`` world, faces ``face_d`` range, world normals
+    ``normals_d`` of those faces), the vertex offsets (from ``nodes_row0``) that are
+    sub-contacts against O (world planes ``normals_o``, ``offsets_o``), their areas and
+    overlaps."""
+    nv = verts_d.shape[0]
+    area = np.zeros(nv)
+    for f in range(face_d[0], face_d[1]):
+        j = fvert_d[f]
+        p, q, t = face_verts[j] - nodes_row0, face_verts[j + 1] - nodes_row0, \
+            face_verts[j + 2] - nodes_row0
+        e1 = verts_d[q] - verts_d[p]
+        e2 = verts_d[t] - verts_d[p]
+        cx = e1[1] * e2[2] - e1[2] * e2[1]
+        cy = e1[2] * e2[0] - e1[0] * e2[2]
+        cz = e1[0] * e2[1] - e1[1] * e2[0]
+        k = f - face_d[0]
+        facing = normals_d[k, 0] * ux + normals_d[k, 1] * uy + normals_d[k, 2] * uz
+        if facing <= 0.0:
+            continue
+        share = facing * 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz) / 3.0
+        area[p] += share
+        area[q] += share
+        area[t] += share
+    sel = np.zeros(nv, np.int64)
+    un = np.zeros(nv)
+    m = 0
+    for i in range(nv):
+        if area[i] <= 0.0:
+            continue
+        d = -np.inf
+        for f in range(normals_o.shape[0]):
+            d = max(d, normals_o[f, 0] * verts_d[i, 0] + normals_o[f, 1] * verts_d[i, 1]
+                    + normals_o[f, 2] * verts_d[i, 2] - offsets_o[f])
+        if d <= tol:
+            sel[m] = i
+            un[m] = -d
+            m += 1
+    return sel[:m], area[sel[:m]], un[:m]
+
+
+def _world_planes(b, k, r):
+    f0, f1 = b.face_start[k], b.face_start[k + 1]
+    n = b.normals_local[f0:f1] @ b.R[r].T
+    return n, b.offsets_local[f0:f1] + n @ b.x[r]
+
+
+def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol: float
+           ) -> ContactStore:
+    """``new`` (after a common-plane update of the contacts ``todo``) with the sub-contacts of
+    every updated contact of a zoned block at its gridpoints (module doc); history from
+    ``old``'s sub-contacts at the same gridpoints (``grid.gnode``: the gridpoint of each
+    sub-contact by contact key)."""
+    ia, ib, ka, kb = new.ia, new.ib, new.ka, new.kb
+    dz = grid.dindex
+    redo = (todo != 0) & ((dz[ia] >= 0) | (dz[ib] >= 0))
+    if not redo.any():
+        return new
+    old_keys = old.keys()
+    keys = new.keys()
+    parts = {k: [] for k in new.sub}
+    counts = np.diff(new.sc_start).copy()
+    gnode = dict(grid.gnode)
+    cursor = 0
+    for c in np.nonzero(redo)[0]:
+        # the untouched contacts before c keep their sub-contacts
+        s0 = new.sc_start[cursor]
+        s1 = new.sc_start[c]
+        for k, a in new.sub.items():
+            parts[k].append(a[s0:s1])
+        cursor = c + 1
+        a_side = dz[ia[c]] >= 0
+        rd, kd = (ia[c], ka[c]) if a_side else (ib[c], kb[c])
+        ro, ko = (ib[c], kb[c]) if a_side else (ia[c], ka[c])
+        n = new.normal[c]
+        u = n if a_side else -n
+        v0, v1 = b.vert_start[kd], b.vert_start[kd + 1]
+        verts = b.verts_local[v0:v1] + b.x[rd]  # identity pose
+        normals_d = b.normals_local[b.face_start[kd]:b.face_start[kd + 1]]
+        no, oo = _world_planes(b, ko, ro)
+        sel, area, un = gridpoint_candidates(
+            verts, np.array([b.face_start[kd], b.face_start[kd + 1]]), b.fvert_start,
+            b.face_verts, normals_d, v0, u[0], u[1], u[2], no, oo, tol)
+        nodes = grid.vnode_rows[v0 + sel]
+        m = len(sel)
+        ra = b.R[ia[c]]
+        sub = {"sc_pa": (verts[sel] - b.x[ia[c]]) @ ra, "sc_area": area, "sc_un": un,
+               "sc_fn": np.zeros(m)}
+        for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist"):
+            a = new.sub[k]
+            sub[k] = np.zeros((m,) + a.shape[1:], a.dtype)
+        key = int(keys[c])
+        prev = gnode.get(key)
+        j = int(np.searchsorted(old_keys, key))
+        if prev is not None and j < old.n and old_keys[j] == key \
+                and len(prev) == old.sc_start[j + 1] - old.sc_start[j]:
+            where = {int(g): old.sc_start[j] + i for i, g in enumerate(prev)}
+            for i, g in enumerate(nodes):
+                s = where.get(int(g))
+                if s is not None:
+                    for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist"):
+                        sub[k][i] = old.sub[k][s]
+        gnode[key] = nodes
+        for k in parts:
+            parts[k].append(sub[k])
+        counts[c] = m
+    for k, a in new.sub.items():
+        parts[k].append(a[new.sc_start[cursor]:])
+    start = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=start[1:])
+    live = set(int(k) for k in keys)
+    grid.gnode = {k: v for k, v in gnode.items() if k in live}
+    return ContactStore(new.arrays, {k: np.concatenate(v) for k, v in parts.items()}, start)
