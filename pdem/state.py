@@ -90,11 +90,9 @@ def zoned_grids(scene: Scene, comm, specs, first_gid: int):
     """The grids of the zoned blocks among ``specs`` (None for a scene without ``zones``)."""
     if not any(b.zones is not None for b in scene.blocks):
         return None
-    if comm.size > 1:
-        raise ConfigError([f"blocks: zoned blocks run on one rank yet (got {comm.size} ranks)"])
     from .deformable.store import GridStore
 
-    return GridStore(scene, specs, first_gid)
+    return GridStore.build(scene, specs, first_gid)
 
 
 class ModelState:
@@ -135,7 +133,7 @@ class ModelState:
         self.n_rebuilds = 0
         self.blocks = None
         self.n_owned = 0
-        self.contacts = ContactStore.empty(joints.hist_width)
+        self.contacts = ContactStore.empty(joints.hist_width)  # zoned: empty_contacts
         self.halo = None
         self.cells = None
         self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
@@ -195,7 +193,7 @@ class ModelState:
             verts_max = max(allgather(comm, float(np.abs(share.verts_world).max(initial=1.0))))
         resolved = resolve(scene, comm.size, specs, glob, joints, verts_max)
         if grids is not None:
-            resolved = grids.resolve(scene, resolved)
+            resolved = grids.resolve(scene, resolved, comm)
         check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn, resolved.ctol)
         thinnest = thinnest_width(share.vert_start, share.verts_local, share.face_start,
                                   share.normals_local, share.offsets_local)
@@ -203,6 +201,8 @@ class ModelState:
                            thinnest if whole else min(allgather(comm, thinnest)))
         state.share = None if whole else share
         state.grids = grids
+        if grids is not None:  # the sub-contacts carry their gridpoints (sc_grid)
+            state.contacts = state.empty_contacts()
         state.estimate = estimate
         apply_scene(state)
         # checked by the stepper's start on the first contact update (one search, not two)
@@ -212,6 +212,13 @@ class ModelState:
     @property
     def ctol(self) -> float:
         return self.resolved.ctol
+
+    def empty_contacts(self) -> ContactStore:
+        """A store of no contacts with this scene's sub-contact columns."""
+        from .deformable.store import GRID_WIDTH
+
+        return ContactStore.empty(self.joints.hist_width,
+                                  GRID_WIDTH if self.grids is not None else 0)
 
     def damping_args(self):
         """The damping kernel's constants now (alpha changes under adaptive damping)."""
@@ -225,11 +232,16 @@ class ModelState:
         ``consume``: it is dropped once sent (the build share)."""
         with self.timers.phase("migrate"):
             r = self.resolved
-            self.blocks, self.n_owned, self.contacts, self.halo = rebuild(
+            grids = self.grids
+            self.blocks, self.n_owned, self.contacts, self.halo, held = rebuild(
                 self.comm, self.decomp, self.glob, self.blocks if source is None else source,
                 owned_gids, state, contacts, 0.5 * r.ctol, r.margin,
-                halo_fields(self.scene.solve.inactive is not None), consume)
+                halo_fields(self.scene.solve.inactive is not None), consume,
+                None if grids is None else grids.payload())
             b = self.blocks
+            if grids is not None:  # zoned blocks' grids came with them (owned and ghosts)
+                self.grids = type(grids).arrived(grids, b, self.n_owned, held)
+                self.grids.plan_halo(self.halo)
             refresh_pose(b, 0.5 * r.ctol)
             # a rank whose brick holds no block has no cell space until blocks arrive; blocks
             # deleted from the model take no space
@@ -275,7 +287,7 @@ class ModelState:
     def distribute_initial(self):
         """Every rank takes the blocks whose centroid lies in its brick (collective): from
         its build share, sent to their owners, or from the whole scene's store."""
-        empty = ContactStore.empty(self.joints.hist_width)
+        empty = self.empty_contacts()
         if self.share is None:
             g = self.glob
             owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
@@ -338,9 +350,7 @@ class ModelState:
         if "blocks" in ck:  # read whole by one process (read_checkpoint)
             self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
                                 lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
-                                lambda mine: ck["contacts"])
-            if self.grids is not None:
-                self.grids.read(ck["path"], self)
+                                lambda mine: ck["contacts"], ck["path"])
             return
         path = ck["path"]
         with self._reader(path) as reader:
@@ -354,11 +364,9 @@ class ModelState:
                                                     path),
                 lambda mine: reader.contacts(self._checked(lambda: np.nonzero(
                     mine[reader.contact_column("ga")] | mine[reader.contact_column("gb")])[0],
-                    path)))
-        if self.grids is not None:  # zoned blocks (serial runs only)
-            self.grids.read(path, self)
+                    path)), path)
 
-    def _restore_share(self, out, x, block_rows, contacts):
+    def _restore_share(self, out, x, block_rows, contacts, path):
         """The blocks this rank brings in (its build share, or those it owns at the
         checkpoint's poses) from ``block_rows(gids)``, and the contacts of their free ones,
         ``contacts(mask of those free blocks by gid)``: the rebuild sends both to the owners."""
@@ -373,8 +381,17 @@ class ModelState:
             owned = source.gid.copy()
         mine = np.zeros(self.glob.n, bool)
         mine[owned] = self.glob.fixed[owned] == 0
+        if self.grids is not None:  # the grids held here (by the build) from the file
+            self._checked(lambda: self.grids.load(path), path)
         self.distribute(owned, block_rows(owned), contacts(mine), source=source,
                         consume=source is not self.glob)
+        if self.grids is not None:  # zoned rows and pieces from the stored gridpoints
+            b, rows = self.blocks, self.grids.rows
+            x_saved = b.x[rows].copy()
+            self.grids.sync(b)
+            self.grids.sync(b, ghosts=True)
+            b.x[rows] = x_saved  # the stored centroids (the same numbers, recomputed)
+            b.dx[rows] = 0.0
         self._distributed_from_scene()
 
     def _reader(self, path):
@@ -421,8 +438,9 @@ class ModelState:
     # ------------------------------------------------------------------ reports
     def load_report(self) -> dict:
         """Blocks, ghosts and contacts per rank and the imbalance (collective)."""
+        grid_halo = self.grids.halo if self.grids is not None else None
         mine = (self.n_owned, self.blocks.n - self.n_owned, self.contacts.n,
-                self.halo.bytes_per_step)
+                self.halo.bytes_per_step + (grid_halo.bytes_per_step if grid_halo else 0))
         rows = np.array(allgather(self.comm, mine))
         owned = rows[:, 0]
         imbalance = float(owned.max() / owned.mean()) if owned.mean() > 0 else 1.0

@@ -59,6 +59,7 @@ class Stepper:
         # a pdem.signals.StopRequest (or None): polled every step, agreed in the flag reduction
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
+        self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
 
     @property
     def holds(self) -> bool:
@@ -70,8 +71,6 @@ class Stepper:
         """Contacts of the initial state, its forces, and the staggered start velocities."""
         s = self.s
         s.distribute_initial()
-        if s.grids is not None:
-            s.grids.bind(s.blocks, s.owned_row)
         self.search(np.ones(s.blocks.n, bool))
         self.refresh(all_contacts=True)
         if s.check_overlaps:
@@ -177,6 +176,10 @@ class Stepper:
         # normal forces of refreshed sub-contacts are recomputed by the next force update
         sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fn": np.zeros(len(area)),
                "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
+        if s.grids is not None:  # the kept sub-contacts keep their gridpoints
+            from .deformable.subcontacts import carry_grid_columns
+
+            sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
         c.frozen[todo.astype(bool)] = 0  # new sub-contacts: held forces are void
         refreshed = ContactStore(c.arrays, sub, start)
         # energy budget: what the update changed in the joints' springs, with no work done
@@ -287,7 +290,7 @@ class Stepper:
             motion.integrate(rec, s.gravity, s.dt, s.damping_args(), s.scalar_inertia,
                              self.stats)
             if s.grids is not None:
-                s.grids.step(s.dt)
+                self._grid_bad = s.grids.step(s.dt)
                 s.grids.sync(b)
             s.step += 1
             s.time += s.dt
@@ -300,6 +303,8 @@ class Stepper:
                 s.max_step)  # a block moving more in a step could tunnel
         with tm.phase("halo"):
             s.halo.forward(b)
+            if s.grids is not None:  # the ghost grids' gridpoints, their rows and pieces
+                s.grids.forward(b)
         rotation_matrices(b.q, b.R)
         with tm.phase("forces"):
             self.compute_forces(s.dt)
@@ -336,8 +341,10 @@ class Stepper:
             signum = self.stop.signum if self.stop is not None else 0
             flags = mpi.allreduce_max_array(s.comm, np.array(
                 [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild),
-                 float(left), float(signum)]))
+                 float(left), float(signum), float(self._grid_bad + 1)]))
         self.stop_signal = int(flags[4])
+        if flags[5]:
+            self._raise_folded(int(flags[5]) - 1)
         if flags[1]:
             self._raise_non_finite(bad)
         if flags[3]:
@@ -350,6 +357,14 @@ class Stepper:
                 s.alpha or 1e-3, sums[0], sums[1], s.scene.solve.damping.ratio, dt=s.dt)
         s.ratio = float(flags[0]) / r.ref_force
         return bool(flags[2]) and s.comm.size > 1
+
+    def _raise_folded(self, gid: int):
+        """Every rank raises alike: a zoned block's grid folded this step (found by its
+        owner, the gid agreed in the step's reduction)."""
+        s = self.s
+        raise SimulationError(f"step {s.step} (t={s.time:.6g} s): zoned block "
+                              f"{s.specs[gid].name!r}: a zone inverted (the grid folded: a load "
+                              "or speed too large for its zones)")
 
     def _raise_non_finite(self, row: int):
         """Every rank raises the same SimulationError, naming the first bad block (by gid) and

@@ -7,7 +7,8 @@
 - :mod:`.motion` the explicit cycle and the zone critical timestep;
 - :mod:`.body` :class:`DeformableBody`, one block stepped without contacts.
 
-See ``docs/deformable.md``. Contacts, scene wiring and MPI are not here yet.
+See ``docs/deformable.md``; the scene wiring is in :mod:`.store`, :mod:`.contact` and
+:mod:`.subcontacts`.
 """
 
 from .body import DeformableBody

@@ -83,13 +83,14 @@ def _closest_on_triangle(px, py, pz, a, b, c):
 
 @kernel
 def locate(ia, ib, ka, kb, sc_start, pa, x, R, face_start, fvert_start, face_verts, nodes,
-           vnode, dindex, sc_node, sc_w):
-    """Triangle and barycentric weights of every sub-contact on each zoned side: the surface
-    triangle of that side's piece nearest the sub-contact point (world ``x_a + R_a pa``).
-    ``vnode`` maps vertex rows to gridpoints, ``nodes`` the gridpoint positions."""
+           vnode, dindex, todo, sc_node, sc_w):
+    """Triangle and barycentric weights of every sub-contact of the contacts ``todo`` on
+    each zoned side: the surface triangle of that side's piece nearest the sub-contact point
+    (world ``x_a + R_a pa``). ``vnode`` maps vertex rows to gridpoints, ``nodes`` the
+    gridpoint positions."""
     for c in range(ia.shape[0]):
         a, b = ia[c], ib[c]
-        if dindex[a] < 0 and dindex[b] < 0:
+        if todo[c] == 0 or (dindex[a] < 0 and dindex[b] < 0):
             continue
         for s in range(sc_start[c], sc_start[c + 1]):
             p0, p1, p2 = pa[s, 0], pa[s, 1], pa[s, 2]

@@ -8,9 +8,10 @@ identity, so the piece's body frame is the world frame shifted to ``x``, the gri
 mass-weighted centroid; every step :func:`pdem.deformable.contact.refresh_pieces` rewrites the
 piece from the moved gridpoints, and the common plane and sub-contacts work unchanged.
 
-:class:`GridStore` holds the grids of the zoned blocks of one rank (serial runs today), the
-node arrays of all of them flat (``nodes``, ``vel``, ``force``: CSR by ``node_start``), each
-block stepped by :func:`pdem.deformable.motion.cycle` on its own slice.
+:class:`GridStore` holds the grids of the zoned blocks a rank holds (owned ones first, then
+ghost copies; docs/deformable.md "On several ranks"), the node arrays of all of them flat
+(``nodes``, ``vel``, ``force``: CSR by ``node_start``), each owned block stepped by
+:func:`pdem.deformable.motion.cycle` on its own slice.
 """
 
 from __future__ import annotations
@@ -95,43 +96,94 @@ def identity_frames(geometry: dict, arr: dict, specs) -> None:
 GRID_FRAC = 0.9
 
 
-class GridStore:
-    """The grids of a rank's zoned blocks (see module doc), keyed by gid."""
+# columns of the sub-contacts' ``sc_grid`` (scenes with zoned blocks only): the block-local
+# gridpoint of the zoned side the sub-contact sits at (-1: none), then for side A and side B
+# the block-local gridpoints of the surface triangle it lies on and their weights (a rigid
+# side's are unused). Block-local, so that they travel with the contact between ranks and
+# into checkpoints; :meth:`GridStore.record` turns them into the flat indices the kernel reads.
+GRID_WIDTH = 13
+_GNODE = 0
+_TRI = (slice(1, 4), slice(7, 10))
+_W = (slice(4, 7), slice(10, 13))
 
-    def __init__(self, scene, specs, first_gid: int):
-        self.gids = []
-        self.names = []
-        bodies = []
-        surf = []
-        for i, s in enumerate(specs):
-            if s.zoning is None:
-                continue
-            mesh, surf_nodes = s.zoning
-            mat = scene.materials[s.material]
-            bodies.append(DeformableBody(mesh, mat.zone_spec(), nmd=s.spec.zones.nmd))
-            surf.append(surf_nodes)
-            self.gids.append(first_gid + i)
-            self.names.append(s.name)
-        self.bodies = bodies
-        self.surf = surf
-        counts = [len(b.nodes) for b in bodies]
+
+class ZonedGrid:
+    """One zoned block's grid as it travels between ranks (pickled by the rebuild's
+    messages): its name, body (zones, gridpoints, stresses), surface gridpoints and the
+    contact forces on its gridpoints (the next step's load)."""
+
+    def __init__(self, name: str, body: DeformableBody, surf: np.ndarray, force: np.ndarray):
+        self.name, self.body, self.surf, self.force = name, body, surf, force
+
+
+class GridStore:
+    """The grids of a rank's zoned blocks (see module doc), in block-row order: the first
+    ``n_owned`` are the blocks this rank owns (stepped here), the others ghost copies (their
+    gridpoints forwarded by the owners every step, :meth:`forward`)."""
+
+    def __init__(self, gravity, gids, grids: list[ZonedGrid], n_owned: int | None = None):
+        self.gids = [int(g) for g in gids]
+        self.names = [z.name for z in grids]
+        self.bodies = [z.body for z in grids]
+        self.surf = [z.surf for z in grids]
+        self.n_owned = len(grids) if n_owned is None else int(n_owned)
+        counts = [len(b.nodes) for b in self.bodies]
         self.node_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         n = int(self.node_start[-1])
         self.nodes = np.empty((n, 3))
         self.vel = np.zeros((n, 3))
         self.force = np.zeros((n, 3))  # contact forces on the gridpoints (F^c of eq. 54)
         self.gmass = np.empty(n)
-        for d, b in enumerate(bodies):  # the bodies' node arrays become views of the flat ones
+        for d, (b, z) in enumerate(zip(self.bodies, grids, strict=True)):
+            # the bodies' node arrays become views of the flat ones
             a, e = self.node_start[d], self.node_start[d + 1]
             self.nodes[a:e] = b.nodes
             self.vel[a:e] = b.vel
+            self.force[a:e] = z.force
             self.gmass[a:e] = b.gravity_mass
             b.nodes, b.vel = self.nodes[a:e], self.vel[a:e]
-        self.gravity = np.asarray(scene.gravity, float)
-        self.rows = np.zeros(len(bodies), np.int64)
+        self.gravity = np.asarray(gravity, float)
+        self.rows = np.zeros(len(self.bodies), np.int64)
+        self.dt = np.inf
+        self.halo = None
+
+    @classmethod
+    def build(cls, scene, specs, first_gid: int) -> GridStore:
+        """The grids of the zoned blocks among ``specs`` (gids from ``first_gid``)."""
+        gids, grids = [], []
+        for i, s in enumerate(specs):
+            if s.zoning is None:
+                continue
+            mesh, surf_nodes = s.zoning
+            mat = scene.materials[s.material]
+            body = DeformableBody(mesh, mat.zone_spec(), nmd=s.spec.zones.nmd)
+            body.vel[:] = np.asarray(s.spec.velocity, float)  # the block's start velocity
+            gids.append(first_gid + i)
+            grids.append(ZonedGrid(s.name, body, surf_nodes, np.zeros((len(body.nodes), 3))))
+        return cls(scene.gravity, gids, grids)
 
     def __len__(self) -> int:
         return len(self.bodies)
+
+    def payload(self) -> dict:
+        """Each grid by gid, for :func:`pdem.parallel.migrate.rebuild` to send with its
+        block (owned grids only: a ghost's owner sends it)."""
+        return {g: ZonedGrid(self.names[d], self.bodies[d], self.surf[d],
+                             self.force[self.node_start[d]:self.node_start[d + 1]])
+                for d, g in enumerate(self.gids[:self.n_owned])}
+
+    @classmethod
+    def arrived(cls, old: GridStore, blocks, n_owned: int, grids: dict) -> GridStore:
+        """The store after a rebuild: the grids of the blocks held now (``grids`` by gid, as
+        :func:`~pdem.parallel.migrate.rebuild` returns them), in row order, bound to
+        ``blocks``."""
+        row_of = {int(g): r for r, g in enumerate(blocks.gid)}
+        gids = sorted(grids, key=lambda g: row_of[int(g)])
+        new = cls(old.gravity, gids, [grids[g] for g in gids],
+                  sum(row_of[int(g)] < n_owned for g in gids))
+        new.dt = old.dt
+        new.bind(blocks)
+        return new
 
     def set_damping(self, alpha: float) -> None:
         """The grids' local damping coefficient (``solve.damping``: local, or none)."""
@@ -141,7 +193,7 @@ class GridStore:
     def timestep(self, kn: float) -> float:
         """The zone term of eq. 88 with the joints' normal stiffness at the surface
         gridpoints (eq. 85: ``k_i += kn A_i``, ``A_i`` a third of its surface triangles'
-        area): the smallest over the grids."""
+        area): the smallest over the grids (inf without)."""
         dt = np.inf
         for b in self.bodies:
             k = b.stiffness()
@@ -153,17 +205,20 @@ class GridStore:
             dt = min(dt, critical_timestep(k, b.mass, b.damping))
         return float(dt)
 
-    def resolve(self, scene, resolved):
+    def resolve(self, scene, resolved, comm):
         """The model step: the rigid one or the grids' (eq. 88, with the largest joint normal
-        stiffness at the surface gridpoints, times ``GRID_FRAC``), the smaller; the grids'
-        local damping from ``solve.damping``. Not the scene's ``timestep.frac`` (0.1 by
-        default): that is the rigid estimate's margin, the Gershgorin step is a bound."""
+        stiffness at the surface gridpoints, times ``GRID_FRAC``; the smallest over the ranks'
+        build shares), the smaller; the grids' local damping from ``solve.damping``. Not the
+        scene's ``timestep.frac`` (0.1 by default): that is the rigid estimate's margin, the
+        Gershgorin step is a bound."""
         import dataclasses
+
+        from ..parallel.mpi import allgather
 
         self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
-        self.dt = GRID_FRAC * self.timestep(kn)
-        if self.dt < resolved.dt:
+        self.dt = min(allgather(comm, GRID_FRAC * self.timestep(kn)))
+        if self.dt < resolved.dt and comm.rank == 0:
             import logging
 
             logging.getLogger("pdem").info(
@@ -172,20 +227,44 @@ class GridStore:
         return dataclasses.replace(resolved, dt=min(resolved.dt, self.dt))
 
     # ------------------------------------------------------------------ in a model state
-    def bind(self, blocks, row_of) -> None:
-        """Rows of the zoned blocks in ``blocks`` (after a distribution) and the maps the
-        kernels use: block row -> zoned index, vertex row -> gridpoint."""
-        self.rows = np.array([row_of(g) for g in self.gids], np.int64)
+    def bind(self, blocks) -> None:
+        """Rows of the grids in ``blocks`` (after a distribution) and the maps the kernels
+        use: block row -> zoned index, vertex row -> gridpoint."""
+        row_of = {int(g): r for r, g in enumerate(blocks.gid)}
+        self.rows = np.array([row_of[g] for g in self.gids], np.int64)
         self.dindex = np.full(blocks.n, -1, np.int64)
         self.dindex[self.rows] = np.arange(len(self.rows))
         self.vnode_rows = self.vnode(blocks)
-        self.surf_flat = np.concatenate(self.surf).astype(np.int64)
+        self.surf_flat = np.concatenate(self.surf).astype(np.int64) if self.surf \
+            else np.zeros(0, np.int64)
         self.surf_start = np.concatenate([[0], np.cumsum([len(x) for x in self.surf])]
                                          ).astype(np.int64)
-        self.gnode = {}  # contact key -> the gridpoint of each of its sub-contacts
-        self.located = None  # the ContactStore the sub-contact weights were found for
+        self.located = None  # the ContactStore whose sc_grid columns sc_node/sc_w hold
         self.sc_node = np.zeros((0, 2, 3), np.int64)
         self.sc_w = np.zeros((0, 2, 3))
+
+    def plan_halo(self, halo) -> None:
+        """The per-step forward of the ghost grids' gridpoints (positions and velocities),
+        along the blocks' halo plan (``halo.send``/``halo.recv``: rows in gid order on both
+        sides)."""
+        from ..parallel.halo import RowHalo
+
+        def nodes_of(rows):
+            d = self.dindex[rows]
+            d = d[d >= 0]
+            return np.concatenate([np.arange(self.node_start[i], self.node_start[i + 1])
+                                   for i in d]) if len(d) else np.zeros(0, np.int64)
+
+        self.halo = RowHalo(halo.comm, {r: nodes_of(rows) for r, rows in halo.send.items()},
+                            {r: nodes_of(rows) for r, rows in halo.recv.items()}, 6)
+
+    def forward(self, b) -> None:
+        """The ghost grids' gridpoints from their owners, and their rows and pieces from
+        them (collective among halo neighbours; after the blocks' halo)."""
+        if self.halo is not None:
+            self.halo.forward((self.nodes, self.vel))
+        if self.n_owned < len(self.bodies):
+            self.sync(b, ghosts=True)
 
     def regrid(self, old, new, todo, b, tol):
         """Sub-contacts of the updated contacts of zoned blocks at their gridpoints
@@ -195,99 +274,53 @@ class GridStore:
         return regrid(self, old, new, todo, b, tol)
 
     def rigid_fixed(self, fixed: np.ndarray) -> np.ndarray:
-        """``fixed`` with the zoned rows set: the rigid integration leaves them alone."""
+        """``fixed`` (owned rows) with the zoned rows set: the rigid integration leaves
+        them alone."""
         out = fixed.copy()
-        out[self.rows[self.rows < len(out)]] = 1
+        out[self.rows[:self.n_owned]] = 1
         return out
 
-    def sync(self, b) -> None:
-        """Block rows and piece geometry from the gridpoints (after a grid step)."""
+    def sync(self, b, ghosts: bool = False) -> None:
+        """Block rows and piece geometry from the gridpoints: of the owned grids (after a
+        grid step) or of the ghosts (after their forward)."""
         from .contact import refresh_pieces
 
-        refresh_pieces(self.rows, self.node_start, self.surf_start, self.surf_flat, self.nodes,
-                       self.vel, self.gmass, b.x, b.v, b.dx, b.radius, b.piece_start,
-                       b.vert_start, b.verts_local, b.face_start, b.fvert_start, b.face_verts,
-                       b.normals_local, b.offsets_local, b.edge_start, b.edges, b.edir_start,
-                       b.edirs_local)
-        b.dtheta[self.rows] = 0.0
-        b.w[self.rows] = 0.0
-        b.L[self.rows] = 0.0
+        part = slice(self.n_owned, None) if ghosts else slice(0, self.n_owned)
+        rows = self.rows[part]
+        if not len(rows):
+            return
+        ends = slice(part.start, None if ghosts else self.n_owned + 1)
+        refresh_pieces(rows, self.node_start[ends], self.surf_start[ends], self.surf_flat,
+                       self.nodes, self.vel, self.gmass, b.x, b.v, b.dx, b.radius,
+                       b.piece_start, b.vert_start, b.verts_local, b.face_start, b.fvert_start,
+                       b.face_verts, b.normals_local, b.offsets_local, b.edge_start, b.edges,
+                       b.edir_start, b.edirs_local)
+        b.dtheta[rows] = 0.0
+        b.w[rows] = 0.0
+        b.L[rows] = 0.0
 
     def record(self, b, contacts):
-        """The contact kernel's :class:`~pdem.deformable.contact.Grid`, the sub-contacts
-        located afresh when the contact store changed (an update, a selection)."""
-        from .contact import Grid, locate
+        """The contact kernel's :class:`~pdem.deformable.contact.Grid`: the sub-contacts'
+        gridpoints (flat) and weights from their ``sc_grid`` columns, turned afresh when the
+        contact store changed."""
+        from .contact import Grid
 
         if self.located is not contacts:
-            n = len(contacts.sub["sc_area"])
+            g = contacts.sub["sc_grid"]
+            counts = np.diff(contacts.sc_start)
+            n = len(g)
             self.sc_node = np.zeros((n, 2, 3), np.int64)
             self.sc_w = np.zeros((n, 2, 3))
-            a = contacts.arrays
-            locate(a["ia"], a["ib"], a["ka"], a["kb"], contacts.sc_start, contacts.sub["sc_pa"],
-                   b.x, b.R, b.face_start, b.fvert_start, b.face_verts, self.nodes,
-                   self.vnode_rows, self.dindex, self.sc_node, self.sc_w)
+            for side, rows in enumerate((contacts.ia, contacts.ib)):
+                d = np.repeat(self.dindex[rows], counts)
+                zoned = d >= 0
+                base = np.where(zoned, self.node_start[np.maximum(d, 0)], 0)
+                self.sc_node[:, side] = np.where(zoned[:, None],
+                                                 g[:, _TRI[side]].astype(np.int64)
+                                                 + base[:, None], 0)
+                self.sc_w[:, side] = np.where(zoned[:, None], g[:, _W[side]], 0.0)
             self.located = contacts
         return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w)
-
-    # ------------------------------------------------------------------ checkpoints
-    def write(self, f, contacts) -> None:
-        """The grids' state into group ``grids`` of an open checkpoint file (serial): gridpoint
-        positions, velocities and contact forces, zone stresses and plastic bits, each
-        sub-contact's gridpoints and weights (for ``contacts``, checked by their keys on
-        reading) and the gridpoint of each gridpoint sub-contact by contact key."""
-        g = f.create_group("grids")
-        g.create_dataset("gid", data=np.asarray(self.gids, np.int64))
-        for k in ("nodes", "vel", "force"):
-            g.create_dataset(k, data=getattr(self, k))
-        g.create_dataset("stress", data=np.concatenate([b.stress for b in self.bodies]))
-        g.create_dataset("plastic", data=np.concatenate([b.plastic for b in self.bodies]))
-        located = self.located is contacts
-        g.create_dataset("sc_keys", data=contacts.keys() if located else np.zeros(0, np.int64))
-        g.create_dataset("sc_node", data=self.sc_node if located else np.zeros((0, 2, 3), np.int64))
-        g.create_dataset("sc_w", data=self.sc_w if located else np.zeros((0, 2, 3)))
-        keys = np.array(sorted(self.gnode), np.int64)
-        g.create_dataset("gnode_keys", data=keys)
-        g.create_dataset("gnode_count", data=np.array([len(self.gnode[int(k)]) for k in keys],
-                                                      np.int64))
-        g.create_dataset("gnode", data=np.concatenate([self.gnode[int(k)] for k in keys])
-                         if len(keys) else np.zeros(0, np.int64))
-
-    def read(self, path, state) -> None:
-        """Continue from the grids of a checkpoint written by :meth:`write` (after the blocks
-        and contacts are restored): the arrays, the zones' geometry, the rows and pieces."""
-        import h5py
-
-        from ..errors import UserError
-        from .zones import zone_geometry
-
-        with h5py.File(path, "r") as f:
-            if "grids" not in f or not np.array_equal(f["grids/gid"][()], self.gids) \
-                    or f["grids/nodes"].shape != self.nodes.shape:
-                raise UserError(f"checkpoint {path}: no grids of this scene's zoned blocks")
-            g = f["grids"]
-            for k in ("nodes", "vel", "force"):
-                getattr(self, k)[:] = g[k][()]
-            stress, plastic = g["stress"][()], g["plastic"][()]
-            sc_keys, sc_node, sc_w = g["sc_keys"][()], g["sc_node"][()], g["sc_w"][()]
-            keys, counts, flat = g["gnode_keys"][()], g["gnode_count"][()], g["gnode"][()]
-        z = 0
-        for b in self.bodies:
-            m = len(b.tets)
-            b.stress[:] = stress[z:z + m]
-            b.plastic[:] = plastic[z:z + m]
-            z += m
-            zone_geometry(b.nodes, b.tets, b.grad, b.vol)
-        starts = np.concatenate([[0], np.cumsum(counts)])
-        blocks = state.blocks
-        self.bind(blocks, state.owned_row)
-        self.gnode = {int(k): flat[starts[i]:starts[i + 1]] for i, k in enumerate(keys)}
-        c = state.contacts
-        if len(sc_keys) and np.array_equal(sc_keys, c.keys()) and len(sc_node) == c.n_sub:
-            self.sc_node, self.sc_w, self.located = sc_node, sc_w, c
-        x_saved = blocks.x[self.rows].copy()
-        self.sync(blocks)
-        blocks.x[self.rows] = x_saved  # the stored centroids (the same numbers, recomputed)
-        blocks.dx[self.rows] = 0.0
 
     def vnode(self, blocks) -> np.ndarray:
         """The gridpoint (flat index) of every vertex row of ``blocks``; -1 for rigid pieces."""
@@ -297,17 +330,103 @@ class GridStore:
             out[blocks.vert_start[k]:blocks.vert_start[k + 1]] = self.node_start[d] + self.surf[d]
         return out
 
-    def step(self, dt: float) -> None:
-        """One grid step of every zoned block: forces at t (contacts + gravity + zones)."""
-        for d, b in enumerate(self.bodies):
+    def step(self, dt: float) -> int:
+        """One grid step of every owned zoned block: forces at t (contacts + gravity +
+        zones). Returns the gid of the first block whose grid folded (a zone inverted),
+        -1 if none: the stepper's reduction makes every rank raise alike."""
+        for d in range(self.n_owned):
+            b = self.bodies[d]
             a, e = self.node_start[d], self.node_start[d + 1]
             applied = self.force[a:e] + gravity_forces(b.gravity_mass, self.gravity)
-            done = _cycle(b, applied, dt)
-            if done < 1:
-                from ..errors import SimulationError
+            if _cycle(b, applied, dt) < 1:
+                return self.gids[d]
+        return -1
 
-                raise SimulationError(f"zoned block {self.names[d]!r}: a zone inverted (the "
-                                      "grid folded: a load or speed too large for its zones)")
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint_rows(self, comm, parallel: bool):
+        """What :meth:`write` writes of this rank's owned grids (collective): the table of
+        every writing rank's grids (gid, gridpoint and zone counts) and this rank's arrays;
+        on one writer (``parallel`` False, several ranks) rank 0 gets every rank's arrays."""
+        from ..parallel.mpi import allgather, gather
+
+        own = range(self.n_owned)
+        mine = {"gid": np.array([self.gids[d] for d in own], np.int64),
+                "n_nodes": np.array([len(self.bodies[d].nodes) for d in own], np.int64),
+                "n_zones": np.array([len(self.bodies[d].tets) for d in own], np.int64)}
+        arrays = {k: [getattr(self, k)[self.node_start[d]:self.node_start[d + 1]] for d in own]
+                  for k in ("nodes", "vel", "force")}
+        arrays["stress"] = [self.bodies[d].stress for d in own]
+        arrays["plastic"] = [self.bodies[d].plastic for d in own]
+        if not parallel and comm.size > 1:  # one writer: every grid to it
+            parts = gather(comm, (mine, arrays))
+            if comm.rank != 0:
+                return None
+            mine = {k: np.concatenate([p[0][k] for p in parts]) for k in mine}
+            arrays = {k: [a for p in parts for a in p[1][k]] for k in arrays}
+            return [mine], mine, arrays
+        return (allgather(comm, mine) if parallel else [mine]), mine, arrays
+
+    @staticmethod
+    def write(f, rows, rank: int) -> None:
+        """The grids' state (:meth:`checkpoint_rows`) into group ``grids`` of an open
+        checkpoint file, in gid order over all ranks: gid, gridpoint and zone counts,
+        gridpoint positions, velocities and contact forces, zone stresses and plastic bits
+        (the sub-contacts' grid columns are in ``subcontacts/sc_grid``)."""
+        table, mine, arrays = rows
+        allt = {k: np.concatenate([t[k] for t in table]) for k in mine}
+        order = np.argsort(allt["gid"], kind="stable")
+        node_off = np.zeros(len(order) + 1, np.int64)
+        zone_off = np.zeros(len(order) + 1, np.int64)
+        np.cumsum(allt["n_nodes"][order], out=node_off[1:])
+        np.cumsum(allt["n_zones"][order], out=zone_off[1:])
+        where = {int(g): i for i, g in enumerate(allt["gid"][order])}
+        g = f.create_group("grids")
+        for k in ("gid", "n_nodes", "n_zones"):
+            d = g.create_dataset(k, (len(order),), dtype=np.int64)
+            if rank == 0:
+                d[:] = allt[k][order]
+        shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "stress": (6,), "plastic": ()}
+        for k, shape in shapes.items():
+            zones = k in ("stress", "plastic")
+            off = zone_off if zones else node_off
+            d = g.create_dataset(k, (int(off[-1]), *shape),
+                                 dtype=np.int32 if k == "plastic" else np.float64)
+            for gid, a in zip(mine["gid"], arrays[k], strict=True):
+                i = where[int(gid)]
+                d[off[i]:off[i + 1]] = a
+
+    def load(self, path) -> None:
+        """Continue the grids held here from a checkpoint written by :meth:`write` (before
+        the blocks are distributed): gridpoints, velocities, contact forces, stresses,
+        plastic bits, and the zones' geometry from the gridpoints. ValueError (agreed over
+        the ranks by the restore) if the file has no such grids."""
+        import h5py
+
+        from .zones import zone_geometry
+
+        with h5py.File(path, "r") as f:
+            if "grids" not in f or "n_nodes" not in f["grids"]:
+                raise ValueError("no grids of this scene's zoned blocks (a checkpoint of "
+                                 "another scene, or of a pdem before zoned blocks ran on "
+                                 "several ranks: run its scene again)")
+            g = f["grids"]
+            gid = g["gid"][()]
+            node_off = np.concatenate([[0], np.cumsum(g["n_nodes"][()])])
+            zone_off = np.concatenate([[0], np.cumsum(g["n_zones"][()])])
+            where = {int(x): i for i, x in enumerate(gid)}
+            for d, gg in enumerate(self.gids):
+                i = where.get(gg)
+                b = self.bodies[d]
+                if i is None or node_off[i + 1] - node_off[i] != len(b.nodes) \
+                        or zone_off[i + 1] - zone_off[i] != len(b.tets):
+                    raise ValueError(f"no grid for zoned block {self.names[d]!r} as this "
+                                     "scene zones it")
+                a, e = self.node_start[d], self.node_start[d + 1]
+                for k in ("nodes", "vel", "force"):
+                    getattr(self, k)[a:e] = g[k][node_off[i]:node_off[i + 1]]
+                b.stress[:] = g["stress"][zone_off[i]:zone_off[i + 1]]
+                b.plastic[:] = g["plastic"][zone_off[i]:zone_off[i + 1]]
+                zone_geometry(b.nodes, b.tets, b.grad, b.vol)
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:

@@ -27,7 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..jit import kernel
+from ..model import csr
 from ..model.contacts import ContactStore
+from .store import _GNODE, _TRI, _W
 
 
 @kernel
@@ -79,12 +81,29 @@ def _world_planes(b, k, r):
     return n, b.offsets_local[f0:f1] + n @ b.x[r]
 
 
+def carry_grid_columns(old: np.ndarray, old_start: np.ndarray, start: np.ndarray,
+                       todo: np.ndarray) -> np.ndarray:
+    """The ``sc_grid`` columns after a contact update (``start``: the updated store's
+    sub-contact starts, contact for contact with ``old_start``): the contacts not updated keep
+    their sub-contacts and so their columns; the updated ones' are void (-1 gridpoint) until
+    :func:`regrid` sets those of the zoned blocks' contacts."""
+    out = np.zeros((int(start[-1]), old.shape[1]))
+    out[:, _GNODE] = -1.0
+    kept = np.nonzero(todo == 0)[0]
+    src, _ = csr.take(old_start, kept)
+    dst, _ = csr.take(start, kept)
+    out[dst] = old[src]
+    return out
+
+
 def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol: float
            ) -> ContactStore:
     """``new`` (after a common-plane update of the contacts ``todo``) with the sub-contacts of
     every updated contact of a zoned block at its gridpoints (module doc); history from
-    ``old``'s sub-contacts at the same gridpoints (``grid.gnode``: the gridpoint of each
-    sub-contact by contact key)."""
+    ``old``'s sub-contacts at the same gridpoints (their ``sc_grid`` gridpoint), and the
+    triangles and weights of the new sub-contacts on each zoned side (``sc_grid``, found
+    once here: the weights then stay until the contact's next update, on every rank that
+    computes the contact)."""
     ia, ib, ka, kb = new.ia, new.ib, new.ka, new.kb
     dz = grid.dindex
     redo = (todo != 0) & ((dz[ia] >= 0) | (dz[ib] >= 0))
@@ -94,7 +113,7 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
     keys = new.keys()
     parts = {k: [] for k in new.sub}
     counts = np.diff(new.sc_start).copy()
-    gnode = dict(grid.gnode)
+    old_grid = old.sub["sc_grid"]
     cursor = 0
     for c in np.nonzero(redo)[0]:
         # the untouched contacts before c keep their sub-contacts
@@ -115,33 +134,53 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
         sel, area, un = gridpoint_candidates(
             verts, np.array([b.face_start[kd], b.face_start[kd + 1]]), b.fvert_start,
             b.face_verts, normals_d, v0, u[0], u[1], u[2], no, oo, tol)
-        nodes = grid.vnode_rows[v0 + sel]
+        nodes = grid.surf[dz[rd]][sel]  # block-local gridpoints
         m = len(sel)
         ra = b.R[ia[c]]
         sub = {"sc_pa": (verts[sel] - b.x[ia[c]]) @ ra, "sc_area": area, "sc_un": un,
                "sc_fn": np.zeros(m)}
-        for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist"):
+        for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist", "sc_grid"):
             a = new.sub[k]
             sub[k] = np.zeros((m,) + a.shape[1:], a.dtype)
-        key = int(keys[c])
-        prev = gnode.get(key)
-        j = int(np.searchsorted(old_keys, key))
-        if prev is not None and j < old.n and old_keys[j] == key \
-                and len(prev) == old.sc_start[j + 1] - old.sc_start[j]:
-            where = {int(g): old.sc_start[j] + i for i, g in enumerate(prev)}
+        sub["sc_grid"][:, _GNODE] = nodes
+        j = int(np.searchsorted(old_keys, keys[c]))
+        if j < old.n and old_keys[j] == keys[c]:
+            o0, o1 = old.sc_start[j], old.sc_start[j + 1]
+            where = {int(g): o0 + i for i, g in enumerate(old_grid[o0:o1, _GNODE]) if g >= 0}
             for i, g in enumerate(nodes):
                 s = where.get(int(g))
                 if s is not None:
                     for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist"):
                         sub[k][i] = old.sub[k][s]
-        gnode[key] = nodes
         for k in parts:
             parts[k].append(sub[k])
         counts[c] = m
     for k, a in new.sub.items():
         parts[k].append(a[new.sc_start[cursor]:])
-    start = np.zeros(len(counts) + 1, np.int64)
-    np.cumsum(counts, out=start[1:])
-    live = set(int(k) for k in keys)
-    grid.gnode = {k: v for k, v in gnode.items() if k in live}
-    return ContactStore(new.arrays, {k: np.concatenate(v) for k, v in parts.items()}, start)
+    out = ContactStore(new.arrays, {k: np.concatenate(v) for k, v in parts.items()},
+                       csr.starts(counts))
+    _locate(grid, out, redo, b)
+    return out
+
+
+def _locate(grid, c: ContactStore, redo: np.ndarray, b) -> None:
+    """The triangles and weights (``sc_grid``) of the sub-contacts of the contacts ``redo``
+    on their zoned sides, at the gridpoints now."""
+    from .contact import locate
+
+    n = c.n_sub
+    sc_node = np.zeros((n, 2, 3), np.int64)
+    sc_w = np.zeros((n, 2, 3))
+    locate(c.ia, c.ib, c.ka, c.kb, c.sc_start, c.sub["sc_pa"], b.x, b.R, b.face_start,
+           b.fvert_start, b.face_verts, grid.nodes, grid.vnode_rows, grid.dindex,
+           redo.astype(np.uint8), sc_node, sc_w)
+    counts = np.diff(c.sc_start)
+    rows = np.repeat(np.arange(c.n), counts)
+    done = redo[rows]
+    g = c.sub["sc_grid"]
+    for side, blk in enumerate((c.ia, c.ib)):
+        d = grid.dindex[blk[rows]]
+        zoned = done & (d >= 0)
+        base = grid.node_start[np.maximum(d, 0)]
+        g[zoned, _TRI[side]] = (sc_node[zoned, side] - base[zoned, None]).astype(float)
+        g[zoned, _W[side]] = sc_w[zoned, side]

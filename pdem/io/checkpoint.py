@@ -22,7 +22,16 @@ import numpy as np
 
 from ..model import csr
 from ..model.contacts import ContactStore
-from ..model.fields import BLOCK_BY_NAME, CHECKPOINT, CONTACT, CONTACT_ADDED, SUB, SUB_HIST, select
+from ..model.fields import (
+    BLOCK_BY_NAME,
+    CHECKPOINT,
+    CONTACT,
+    CONTACT_ADDED,
+    SUB,
+    SUB_GRID,
+    SUB_HIST,
+    select,
+)
 from ..parallel.mpi import allgather, barrier, gather
 
 FORMAT = "checkpoint"
@@ -103,11 +112,13 @@ def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = 
         tot = counts
         off_c = off_s = 0
         f = h5py.File(tmp, "w") if comm.rank == 0 else None
+    # zoned blocks: their grids' rows (collective: gathered to the one writer if needed)
+    grid_rows = None if state.grids is None else state.grids.checkpoint_rows(comm, parallel)
     if f is not None:
         try:
             _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s)
-            if state.grids is not None:  # zoned blocks (serial runs only)
-                state.grids.write(f, state.contacts)
+            if grid_rows is not None:
+                state.grids.write(f, grid_rows, comm.rank)
         except BaseException:
             # the previous checkpoint is untouched (it has another name); drop the partial temp
             # file. A parallel file is not closed here: closing is collective and the other
@@ -138,7 +149,9 @@ def _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s) -> None:
         d.attrs["units"] = BLOCK_BY_NAME[k].units
         for a, z in _runs(gid):
             d[gid[a]:gid[a] + (z - a)] = data[a:z]
-    groups = (("contacts", CONTACT_CK, 0, off_c), ("subcontacts", SUB_CK, 1, off_s))
+    # the zoned blocks' sub-contact columns, in scenes with zoned blocks only
+    grid = (SUB_GRID,) if "sc_grid" in contacts else ()
+    groups = (("contacts", CONTACT_CK, 0, off_c), ("subcontacts", SUB_CK + grid, 1, off_s))
     for group, fields, axis, off in groups:
         for fd in fields:
             shape = contacts[fd.name].shape[1:]
@@ -283,8 +296,8 @@ class CheckpointReader:
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed
             arrays.setdefault(fd.name, np.zeros((len(rows), *fd.shape), fd.dtype))
         sub_rows, start = csr.take(csr.starts(self.nsub), rows)
-        sub = {fd.name: _read_rows(f[f"subcontacts/{fd.name}"], sub_rows) for fd in SUB_CK
-               if f"subcontacts/{fd.name}" in f}
+        sub = {fd.name: _read_rows(f[f"subcontacts/{fd.name}"], sub_rows)
+               for fd in SUB_CK + (SUB_GRID,) if f"subcontacts/{fd.name}" in f}
         sub.setdefault("sc_hist", np.zeros((len(sub_rows), 0)))  # format 1: no law history
         return ContactStore(arrays, sub, start)
 

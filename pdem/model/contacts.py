@@ -50,9 +50,13 @@ class ContactStore:
             raise AttributeError(name) from None
 
     @staticmethod
-    def empty(hist_width: int = 0) -> ContactStore:
+    def empty(hist_width: int = 0, grid_width: int = 0) -> ContactStore:
+        """No contacts; ``grid_width``: the zoned blocks' sub-contact columns ``sc_grid``
+        (pdem.deformable.store.GRID_WIDTH; absent in scenes without zoned blocks)."""
         sub = allocate(SUB, 0)
         sub["sc_hist"] = np.zeros((0, hist_width))
+        if grid_width:
+            sub["sc_grid"] = np.zeros((0, grid_width))
         return ContactStore(allocate(CONTACT, 0), sub, np.zeros(1, np.int64))
 
     def keys(self) -> np.ndarray:
@@ -101,10 +105,13 @@ class ContactStore:
 
     @staticmethod
     def concatenate(stores: list[ContactStore], hist_width: int) -> ContactStore:
-        """The contacts of several stores one after the other (no sorting)."""
+        """The contacts of several stores one after the other (no sorting); all empty: an
+        empty store with the first's columns (a zoned scene's ``sc_grid``)."""
+        given = stores
         stores = [s for s in stores if s.n]
         if not stores:
-            return ContactStore.empty(hist_width)
+            return given[0].take(np.zeros(0, np.int64)) if given else \
+                ContactStore.empty(hist_width)
         arrays = {k: np.concatenate([s.arrays[k] for s in stores]) for k in stores[0].arrays}
         sub = {k: np.concatenate([s.sub[k] for s in stores]) for k in stores[0].sub}
         return ContactStore(arrays, sub, csr.starts(np.concatenate([np.diff(s.sc_start)

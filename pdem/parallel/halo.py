@@ -55,3 +55,43 @@ class Halo:
         MPI.Request.Waitall(reqs)
         for r, rows in self.recv.items():
             unpack(arrays, self.fields, rows, self.rbuf[r])
+
+
+class RowHalo:
+    """Per-step forward of rows of flat arrays of equal length (the zoned blocks' gridpoints,
+    pdem.deformable.store): ``send[r]`` indices of rows this rank's owned grids hold and rank
+    r ghosts, ``recv[r]`` the ghost rows rank r owns, in the same order on both sides (the
+    blocks' halo plan, gid order); ``width`` the columns of all arrays forwarded together."""
+
+    def __init__(self, comm, send: dict[int, np.ndarray], recv: dict[int, np.ndarray],
+                 width: int):
+        self.comm = comm
+        self.send = {r: idx for r, idx in send.items() if len(idx)}
+        self.recv = {r: idx for r, idx in recv.items() if len(idx)}
+        self.sbuf = {r: np.empty((len(idx), width)) for r, idx in self.send.items()}
+        self.rbuf = {r: np.empty((len(idx), width)) for r, idx in self.recv.items()}
+
+    @property
+    def bytes_per_step(self) -> int:
+        return sum(b.nbytes for b in self.sbuf.values())
+
+    def forward(self, arrays) -> None:
+        """Copy the owners' rows of ``arrays`` (each (n, k), the k summing to ``width``) into
+        the ghost rows (collective among neighbours)."""
+        from mpi4py import MPI
+
+        if not self.send and not self.recv:
+            return
+        reqs = [self.comm.Irecv(buf, source=r, tag=12) for r, buf in self.rbuf.items()]
+        for r, idx in self.send.items():
+            c = 0
+            for a in arrays:
+                self.sbuf[r][:, c:c + a.shape[1]] = a[idx]
+                c += a.shape[1]
+            reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=12))
+        MPI.Request.Waitall(reqs)
+        for r, idx in self.recv.items():
+            c = 0
+            for a in arrays:
+                a[idx] = self.rbuf[r][:, c:c + a.shape[1]]
+                c += a.shape[1]

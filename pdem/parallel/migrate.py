@@ -57,8 +57,8 @@ def rows_of(gids_held: np.ndarray, gids: np.ndarray) -> np.ndarray:
 
 def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.ndarray,
             state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO,
-            consume: bool = False):
-    """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo).
+            consume: bool = False, extras: dict | None = None):
+    """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo, extras).
 
     ``glob``: the per-block static fields of every block, by gid (fixed, radius);
     ``source``: a store holding the blocks ``owned_gids`` (the scene's store at start, this
@@ -68,7 +68,10 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields);
     ``consume``: ``source`` is not used after this call (the set-up's build share): its
     arrays are dropped as soon as its blocks are packed, not kept through the rebuild's
-    peak.
+    peak;
+    ``extras``: objects by gid that travel with their blocks, to the new owner and to the
+    ranks that ghost them (the zoned blocks' grids: pdem.deformable.store), for blocks of
+    ``owned_gids``; returned for the blocks held after (owned and ghosts), None without.
     """
     size, rank = comm.size, comm.rank
     owned_gids = np.asarray(owned_gids, np.int64)
@@ -80,6 +83,8 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     for r in range(size):
         go = dest == r
         msg = {"gid": owned_gids[go], **{k: state[k][go] for k in MIGRATE}}
+        if extras is not None:
+            msg["extras"] = {int(g): extras[int(g)] for g in owned_gids[go] if int(g) in extras}
         if r != rank:
             msg["store"] = pack(source, src_rows[go])
             if contacts.n:
@@ -89,8 +94,14 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     stays = pack(source, src_rows[dest == rank])
     if consume:
         source.clear()
+    held = None if extras is None else out[rank]["extras"]
+    out[rank] = {k: v for k, v in out[rank].items() if k != "extras"}
     got = alltoall(comm, out)
     del out
+    if held is not None:
+        for r, m in enumerate(got):
+            if r != rank:
+                held.update(m["extras"])
     gids = np.concatenate([m["gid"] for m in got])
     order = np.argsort(gids, kind="stable")
     gids = gids[order]
@@ -122,7 +133,13 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         hit = np.all(blo <= boxes[r, 3:], axis=1) & np.all(bhi >= boxes[r, :3], axis=1)
         out.append({"gid": gids[hit], **{k: new_state[k][hit] for k in MIGRATE},
                     "store": pack(mine_store, np.nonzero(hit)[0])})
+        if held is not None:
+            out[-1]["extras"] = {int(g): held[int(g)] for g in gids[hit] if int(g) in held}
     got = alltoall(comm, out)
+    if held is not None:
+        for m in got:
+            if m is not None:
+                held.update(m["extras"])
     ghost_parts = [(r, m) for r, m in enumerate(got) if m is not None and len(m["gid"])]
     g_gids = np.concatenate([m["gid"] for _, m in ghost_parts]) if ghost_parts else np.zeros(0, np.int64)
     g_from = np.concatenate([np.full(len(m["gid"]), r) for r, m in ghost_parts]) if ghost_parts \
@@ -173,4 +190,4 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         rows = np.nonzero((g_from == r) & ~fixed[g_gids])[0] + n_owned
         recv[int(r)] = rows
     blocks.u_mig[:] = 0.0
-    return blocks, n_owned, mine, Halo(comm, send, recv, halo_fields)
+    return blocks, n_owned, mine, Halo(comm, send, recv, halo_fields), held
