@@ -283,3 +283,74 @@ def test_paraview_reads_the_zones(out, tmp_path):
                                       f["zones/displacement"][i]), reader
                 assert np.array_equal(points["velocity"]["values"], f["zones/velocity"][i])
             assert r["render"]["drawn"] > 0.02 and r["render"]["coloured"] > 0.01, reader
+
+
+ZONED_SCENE = """
+name: zoned-output
+materials:
+  rock: {{density: 2000}}
+  soft: {{density: 2000, young: 1.0e8, poisson: 0.2, model: mohr_coulomb, cohesion: 2.0e3,
+         friction: 30, tension: 1.0e3}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 20}}}}
+blocks:
+  - {{name: floor, box: {{min: [-1, -1, -1], max: [2, 2, 0]}}, material: rock, fixed: true}}
+  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, 1]}}, material: soft, zones: {{size: 0.5}}}}
+  - {{name: cap, box: {{min: [0.2, 0.2, 1], max: [0.8, 0.8, 1.3]}}, material: rock}}
+solve: {{steps: 40, damping: local}}
+output: {{file: {out}, every_steps: 20}}
+"""
+
+
+@pytest.fixture(scope="module")
+def zoned_run(tmp_path_factory):
+    """A zoned column under a rigid cap, run 40 steps: the file and the final grids."""
+    from pdem.config import parse_scene
+    from pdem.simulation import Simulation
+
+    out = tmp_path_factory.mktemp("zoned-run") / "col.h5"
+    sim = Simulation(parse_scene(ZONED_SCENE.format(out=out)), COMM)
+    sim.run()
+    sim.close()
+    return out, sim.state.grids
+
+
+def test_run_writes_the_grids(zoned_run):
+    out, grids = zoned_run
+    (body,) = grids.bodies
+    with h5py.File(out, "r") as f:
+        assert f["step"][()].tolist() == [0, 20, 40]
+        z = f["zones"]
+        assert z["block"][()].tolist() == [1]  # the column's gid
+        assert np.array_equal(z["connectivity"][()], body.tets)
+        assert np.array_equal(z["initial_points"][()], body.nodes0)
+        assert np.array_equal(z["points"][-1], body.nodes)
+        assert np.array_equal(z["displacement"][-1], body.nodes - body.nodes0)
+        assert np.array_equal(z["velocity"][-1], body.vel)
+        assert np.array_equal(z["stress"][-1], body.stress)
+        assert np.array_equal(z["plastic"][-1], body.plastic)
+        assert np.array_equal(z["displacement"][0], np.zeros_like(body.nodes))
+        # gravity has begun to load the column: compression (tension positive) below
+        assert z["stress"][-1][:, 2].mean() < 0.0 and z["sigma1"][-1].min() < 0.0
+    grid = read_xdmf(zones_path(out.with_suffix(".xdmf")))["zones"]
+    assert len(grid) == 3 and grid[-1]["topology"].shape == (len(body.tets), 4)
+
+
+def test_info_and_export_know_the_zones(zoned_run, tmp_path):
+    import meshio
+
+    from pdem.io import summarise
+    from pdem.io.export import export
+
+    out, grids = zoned_run
+    (body,) = grids.bodies
+    text = summarise(out)
+    assert f"zones:       1 zoned blocks (col): {len(body.nodes)} gridpoints, " \
+           f"{len(body.tets)} zones" in text
+    written = export(out, "vtu", out=tmp_path / "x")
+    names = [Path(w).name for w in written]
+    assert names[-4:] == ["x-zones-000000.vtu", "x-zones-000001.vtu", "x-zones-000002.vtu",
+                          "x-zones.pvd"]
+    m = meshio.read(written[-2])
+    assert m.cells[0].type == "tetra" and np.array_equal(m.cells[0].data, body.tets)
+    assert np.array_equal(m.cell_data["stress"][0], body.stress)
+    assert np.array_equal(m.point_data["displacement"], body.nodes - body.nodes0)
