@@ -831,9 +831,9 @@ class OutputWriter:
                 if k == len(lay.gid) or lay.gid[k] != int(gid):
                     raise ValueError(f"write_snapshot: block {gid} is not a zoned block")
                 v = zone_values(body)
-                np_, nz = np.diff(lay.point_start)[k], np.diff(lay.zone_start)[k]
                 for name, w, *_ in POINT_SERIES + ZONE_SERIES:
-                    n = np_ if name in _POINT_NAMES else nz
+                    start = lay.point_start if name in _POINT_NAMES else lay.zone_start
+                    n = start[k + 1] - start[k]
                     if v[name].size != n * w:
                         raise ValueError(f"write_snapshot: zoned block {gid}: {name} has shape "
                                          f"{np.shape(v[name])}, need ({n}, {w})")
