@@ -103,7 +103,8 @@ def _march(args, comm, log, scene, state=None) -> int:
         _fail_during_run(comm, exc, sim)
         return 1
     stem = os.path.splitext(scene.output.file)[0]
-    log.info("wrote %s (+ %s.xdmf, %s-centroids.xdmf)", scene.output.file, stem, stem)
+    zoned = f", {stem}-zones.xdmf" if sim.state.grids is not None else ""  # zoned blocks
+    log.info("wrote %s (+ %s.xdmf, %s-centroids.xdmf%s)", scene.output.file, stem, stem, zoned)
     if summary["stopped"]:
         return _stopped(comm, summary, sim)
     return 0

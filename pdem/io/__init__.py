@@ -2,7 +2,7 @@
 
 from .info import summarise
 from .writer import FORMAT_VERSION, OutputWriter, quat_to_matrix
-from .xdmf import centroids_path, contacts_path, read_xdmf, subcontacts_path, write_xdmf
+from .xdmf import centroids_path, contacts_path, read_xdmf, subcontacts_path, write_xdmf, zones_path
 
 __all__ = [
     "FORMAT_VERSION",
@@ -14,4 +14,5 @@ __all__ = [
     "subcontacts_path",
     "summarise",
     "write_xdmf",
+    "zones_path",
 ]

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import UserError, writing
 from .xdmf import CELL_FIELDS
+from .zones import POINT_SERIES, ZONE_SERIES
 
 __all__ = ["FORMATS", "export"]
 
@@ -29,6 +30,9 @@ FORMATS = {"vtu": ".vtu", "vtk": ".vtk", "xdmf": ".xdmf", "gmsh": ".msh", "med":
 _COLLECTION = {"vtu": ".pvd", "vtk": ".vtk.series"}
 _STATIC = ("block_id", "group", "fixed")  # per-triangle arrays that do not change in time
 _SERIES = tuple(name for name, _, _ in CELL_FIELDS)
+# the zoned blocks' series (pdem.io.zones), as point and cell arrays of their tetrahedra
+_ZONE_POINT = tuple(s[0] for s in POINT_SERIES if s[0] != "points")
+_ZONE_CELL = tuple(s[0] for s in ZONE_SERIES)
 
 
 def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None,
@@ -37,8 +41,10 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike | None = No
 
     Files are ``<stem>-<i:06d><ext>`` (``i`` = snapshot index in the HDF5 file). ``out`` is a
     directory (existing, or ending with a separator) or a path stem; by default the files go
-    beside ``path`` with its stem. Returns the files written, last the collection that ParaView
-    opens as one time series (``<stem>.pvd`` for vtu, ``<stem>.vtk.series`` for vtk).
+    beside ``path`` with its stem. Returns the files written, each series followed by the
+    collection that ParaView opens as one time series (``<stem>.pvd`` for vtu,
+    ``<stem>.vtk.series`` for vtk). A file with zoned blocks gives a second series, their
+    tetrahedra, ``<stem>-zones-<i:06d><ext>`` (and ``<stem>-zones.pvd``, ...).
     Raises :class:`UserError` for a missing or non-pdem file, an unknown format, or an output
     without snapshots.
     """
@@ -58,27 +64,55 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike | None = No
     written = []
     with h5py.File(path, "r") as f:
         times = _check_output(f, path)
+        indices = range(0, len(times), every)
         cells = [("triangle", f["surface/connectivity"][()])]
         # format 1 files lack the viewer fields: export what the file has
         static = {k: [f[f"surface/{k}"][()]] for k in _STATIC if f"surface/{k}" in f}
         series = [k for k in _SERIES if f"surface/{k}" in f]
-        indices = range(0, len(times), every)
-        for i in indices:
+
+        def surface(i):
             cell_data = dict(static)
             cell_data.update({k: [f[f"surface/{k}"][i]] for k in series})
-            mesh = meshio.Mesh(f["surface/points"][i], cells, cell_data=cell_data)
-            name = directory / f"{stem}-{i:06d}{FORMATS[fmt]}"
-            with writing(name):
-                _write(meshio, name, mesh, fmt)
-            written.append(str(name))
-        if fmt in _COLLECTION:
-            coll = directory / f"{stem}{_COLLECTION[fmt]}"
-            # names relative to the collection, so the set of files can be moved together
-            entries = [(float(times[i]), Path(w).name) for i, w in zip(indices, written,
-                                                                       strict=True)]
-            with writing(coll):
-                (_write_pvd if fmt == "vtu" else _write_series)(coll, entries)
-            written.append(str(coll))
+            return meshio.Mesh(f["surface/points"][i], cells, cell_data=cell_data)
+        written += _series(meshio, surface, directory, stem, fmt, indices, times)
+        if "zones" in f:  # the zoned blocks' tetrahedra, a series of their own
+            z = f["zones"]
+            tets = [("tetra", z["connectivity"][()])]
+            n = min(len(times), z["points"].shape[0])
+
+            def zones(i):
+                cell = {k: z[k][i] for k in _ZONE_CELL}
+                cell["plastic"] = cell["plastic"].astype(np.int32)  # meshio's xdmf: no uint8
+                if fmt == "gmsh":  # 1, 3 or 9 components: the full tensor, row by row
+                    cell["stress"] = cell["stress"][:, [0, 3, 5, 3, 1, 4, 5, 4, 2]]
+                return meshio.Mesh(
+                    z["points"][i], tets,
+                    point_data={"block_id": z["point_block"][()],
+                                **{k: z[k][i] for k in _ZONE_POINT}},
+                    cell_data={"block_id": [z["zone_block"][()]],
+                               **{k: [v] for k, v in cell.items()}})
+            written += _series(meshio, zones, directory, f"{stem}-zones", fmt,
+                               [i for i in indices if i < n], times)
+    return written
+
+
+def _series(meshio, mesh_of, directory: Path, stem: str, fmt: str, indices, times) -> list[str]:
+    """Snapshots ``indices`` (``mesh_of(i)``) as ``<stem>-<i:06d><ext>``, then their collection
+    (vtu, vtk); the files written."""
+    written = []
+    for i in indices:
+        name = directory / f"{stem}-{i:06d}{FORMATS[fmt]}"
+        mesh = mesh_of(i)
+        with writing(name):
+            _write(meshio, name, mesh, fmt)
+        written.append(str(name))
+    if fmt in _COLLECTION:
+        coll = directory / f"{stem}{_COLLECTION[fmt]}"
+        # names relative to the collection, so the set of files can be moved together
+        entries = [(float(times[i]), Path(w).name) for i, w in zip(indices, written, strict=True)]
+        with writing(coll):
+            (_write_pvd if fmt == "vtu" else _write_series)(coll, entries)
+        written.append(str(coll))
     return written
 
 

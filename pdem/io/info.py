@@ -77,6 +77,7 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"surface:     {f['surface/points'].shape[1]} vertices, "
             f"{f['surface/connectivity'].shape[0]} triangles"
         )
+    lines += _zone_lines(f, names)
     if n_snap == 0:
         lines.append("snapshots:   0")
     else:
@@ -122,6 +123,26 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"speed (last snapshot): mean {_g(speed.mean())} m/s, "
             f"max {_g(speed.max())} m/s ({names[int(speed.argmax())]})"
         )
+    return lines
+
+
+def _zone_lines(f: h5py.File, names) -> list[str]:
+    """The zoned blocks' grid (zones/) and, in the last snapshot, their stresses and yield."""
+    z = f.get("zones")
+    if z is None:
+        return []
+    blocks = ", ".join(names[z["block"][:5]]) + (", ..." if len(z["block"]) > 5 else "")
+    lines = [f"zones:       {len(z['block'])} zoned blocks ({blocks}): "
+             f"{len(z['initial_points'])} gridpoints, {len(z['connectivity'])} zones"]
+    if z["stress"].shape[0] == 0:
+        return lines
+    s1, s3 = z["sigma1"][-1], z["sigma3"][-1]
+    bits = z["plastic"][-1]
+    disp = np.linalg.norm(z["displacement"][-1], axis=1)
+    lines.append(f"  last snapshot: sigma1 {_g(s1.min())} .. {_g(s1.max())} Pa, sigma3 "
+                 f"{_g(s3.min())} .. {_g(s3.max())} Pa (tension +); yielding now "
+                 f"{int(((bits & 3) > 0).sum())} zones, ever {int((bits > 0).sum())}; "
+                 f"gridpoint displacement max {_g(disp.max())} m")
     return lines
 
 

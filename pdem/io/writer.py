@@ -18,6 +18,7 @@ from ..dynamics.kinematics import rotation_matrices
 from ..model.fields import OUTPUT, row_width
 from . import joints
 from .xdmf import CELL_FIELDS, CONTACT_VIEWED, SUB_VIEWED, VIEWED_SERIES, view_path, write_xdmf
+from .zones import POINT_SERIES, ZONE_SERIES, ZONE_VIEWED, ZoneLayout, zone_layout, zone_values
 
 __all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
 
@@ -39,9 +40,10 @@ _OPTIONAL = ("removed", "stage_origin")
 # file itself as its source, and frees them only when the file closes: MPICH allows ~2048
 # communicators, i.e. ~220 snapshots of views. So the file is closed and reopened every this
 # many snapshots (collective; measured: 3000 views, no leak).
-_REOPEN_EVERY = 32  # 10 views per snapshot, 24 with contacts: 768 per open file at most
+_REOPEN_EVERY = 32  # 10 views per snapshot, 24 with contacts, 34 with zones: 1088 at most
 _CONTACT_CHUNK = 1024  # rows per chunk of the flat contact and sub-contact datasets
 _CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
+_POINT_NAMES = {s[0] for s in POINT_SERIES}  # zone output series per gridpoint (else per zone)
 
 
 def _cols(rows: np.ndarray, name: str) -> np.ndarray:
@@ -233,6 +235,12 @@ class OutputWriter:
         Store the joint state (``contacts/``, ``subcontacts/``, sidecars ``-contacts.xdmf``
         and ``-subcontacts.xdmf``): every snapshot then takes the contacts (see
         :meth:`write_snapshot`); ``joint_names`` go to the root attribute ``joint_names``.
+    zones
+        The zoned (deformable) blocks this rank owns, ``(gid, body)`` pairs (``body``: a
+        :class:`pdem.deformable.body.DeformableBody`, or anything with ``nodes0`` and ``tets``),
+        possibly none; ``None`` on every rank for a scene without zoned blocks. Their tetrahedral
+        grids go to ``zones/`` and the sidecar ``-zones.xdmf`` (:mod:`pdem.io.zones`); every
+        snapshot then takes the zoned blocks (see :meth:`write_snapshot`).
 
     Notes
     -----
@@ -262,6 +270,7 @@ class OutputWriter:
         block_parents: Sequence[str] | None = None,
         contacts: bool = False,
         joint_names: Sequence[str] | None = None,
+        zones: Sequence[tuple[int, Any]] | None = None,
     ) -> None:
         self.path = Path(path)
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
@@ -328,6 +337,7 @@ class OutputWriter:
         self._n_subs: list[int] = []
         self._bases = {"contacts": 0, "subcontacts": 0}  # rows written so far
         self._pool = 0  # length of xdmf/index (0, 1, 2, ...): the grids' Polyvertex ids
+        zone_static = self._init_zones(zones)  # collective: before the file is opened
 
         self._f: h5py.File | None = None
         self._closed = False
@@ -384,6 +394,8 @@ class OutputWriter:
         if self.contacts:
             f.attrs["joint_names"] = [str(j) for j in (joint_names or [])] or [""]
             self._create_contacts()
+        if self.zone_layout is not None:
+            self._create_zones(zone_static)
 
     # ------------------------------------------------------------------ low-level writes
     def _write(self, dset: h5py.Dataset, start: tuple[int, ...], data: np.ndarray | None):
@@ -476,7 +488,7 @@ class OutputWriter:
 
     def write_snapshot(self, step: int, time: float, gids: np.ndarray,
                        fields: dict[str, np.ndarray], contacts: dict | None = None,
-                       stage: int = 0) -> None:
+                       stage: int = 0, zones: Sequence[tuple[int, Any]] | None = None) -> None:
         """Append one snapshot (collective). Each rank passes the rows of the blocks it owns.
 
         ``gids`` (k,) in any order; ``fields`` maps every output name (``centroid``,
@@ -491,6 +503,10 @@ class OutputWriter:
         (k,), ``point`` (k, 3), ``normal`` (k, 3), ``n_sub`` (k,) and, for their sub-contacts
         in contact order, ``sub`` = dict of ``point`` (m, 3) world, ``area``, ``overlap``,
         ``normal_force``, ``shear_force`` (m, 3), ``shear_displacement`` (m, 3), ``state``.
+
+        ``zones`` (writers made with zoned blocks): the zoned blocks this rank owns, ``(gid,
+        body)`` pairs as at construction (``body`` with ``nodes``, ``nodes0``, ``vel``, ``stress``
+        (m, 6) and ``plastic``), each zoned block passed by exactly one rank.
         """
         self._check_open()
         msg = None
@@ -520,10 +536,16 @@ class OutputWriter:
                 crows, srows = self._pack_contacts(contacts)
             except ValueError as e:
                 msg = msg or str(e)
+        zone_items = None
+        if self.zone_layout is not None:
+            zmsg, zone_items = self._zone_snapshot(zones)
+            msg = msg or zmsg
         self._raise_if_any(msg)
         mine = self._assemble(gids, rows)
         if self.contacts:
             crows, srows = self._assemble_contacts(crows, srows)
+        if self.zone_layout is not None:
+            zone_items = self._gather_zones(zone_items)
         i = self.n_snap
         self.n_snap += 1
         self._times.append(float(time))
@@ -541,6 +563,8 @@ class OutputWriter:
             self._write_row(self._points, i, pts, self._vlo)
             if self.contacts:
                 self._write_contacts(i, crows, srows)
+            if self.zone_layout is not None:
+                self._write_zones(i, zone_items)
             self._write_fields(i, mine)
             self._f.flush()
         elif self.contacts:
@@ -635,6 +659,8 @@ class OutputWriter:
             self.n_tri, self.n_points, self.n_blocks,
             contacts=(self._n_contacts, self._n_subs) if self.contacts else None,
             extra_cells=self._extra_cells,
+            zones=None if self.zone_layout is None
+            else (self.zone_layout.n_points, self.zone_layout.n_zones),
         )
 
     # ------------------------------------------------------------------ contacts
@@ -756,6 +782,154 @@ class OutputWriter:
                 _add_range_view(f, f"/{group}/{name}", view_path(f"/{group}/{name}", i),
                                 hi - n, hi)
             _add_range_view(f, "/xdmf/index", view_path(f"/{group}/index", i), 0, n)
+
+    # ------------------------------------------------------------------ zoned blocks
+    def _init_zones(self, zones) -> list | None:
+        """The zoned blocks' layout from every rank's (gid, gridpoints, zones) (collective):
+        ``self.zone_layout``, ``None`` without zoned blocks. Returns what this rank writes of
+        the static grid: ``(gid, {initial_points, tets})`` by gid (rank 0 all of them in the
+        fallback)."""
+        msg, counts, static = None, np.zeros((0, 3), np.int64), []
+        try:
+            for gid, body in ([] if zones is None else zones):
+                tets = np.asarray(body.tets, np.int64)
+                x0 = np.asarray(body.nodes0, np.float64)
+                if x0.ndim != 2 or x0.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 \
+                        or (tets.size and (tets.min() < 0 or tets.max() >= len(x0))):
+                    raise ValueError(f"OutputWriter: zoned block {gid}: nodes0 {x0.shape}, "
+                                     f"tets {tets.shape} (need (n, 3) and (m, 4) ids < n)")
+                if not 0 <= int(gid) < self.n_blocks:
+                    raise ValueError(f"OutputWriter: zoned block gid {gid} outside "
+                                     f"[0, {self.n_blocks})")
+                static.append((int(gid), {"initial_points": x0, "tets": tets}))
+            counts = np.array([(g, len(v["initial_points"]), len(v["tets"])) for g, v in static],
+                              np.int64).reshape(-1, 3)
+        except (TypeError, ValueError, AttributeError) as e:
+            msg, counts, static = str(e), np.zeros((0, 3), np.int64), []
+        self._raise_if_any(msg)
+        layout = zone_layout(self.comm.allgather(counts))  # the same ValueError on every rank
+        self.zone_layout: ZoneLayout | None = layout if len(layout.gid) else None
+        if self.zone_layout is None:
+            return None
+        return self._zone_writers(static)
+
+    def _zone_writers(self, items: list) -> list:
+        """``(gid, values)`` items to the ranks that write them, sorted by gid: each its own
+        in parallel mode; in the fallback, all of them to rank 0."""
+        if not self.parallel and self.comm.size > 1:
+            every = self.comm.gather(items, root=0)
+            items = [it for part in every for it in part] if self.comm.rank == 0 else []
+        return sorted(items, key=lambda it: it[0])
+
+    def _zone_snapshot(self, zones) -> tuple[str | None, list]:
+        """This rank's zoned blocks' snapshot values, checked against the layout: (error, items)."""
+        lay = self.zone_layout
+        items = []
+        try:
+            for gid, body in ([] if zones is None else zones):
+                k = int(np.searchsorted(lay.gid, int(gid)))
+                if k == len(lay.gid) or lay.gid[k] != int(gid):
+                    raise ValueError(f"write_snapshot: block {gid} is not a zoned block")
+                v = zone_values(body)
+                for name, w, *_ in POINT_SERIES + ZONE_SERIES:
+                    start = lay.point_start if name in _POINT_NAMES else lay.zone_start
+                    n = start[k + 1] - start[k]
+                    if v[name].size != n * w:
+                        raise ValueError(f"write_snapshot: zoned block {gid}: {name} has shape "
+                                         f"{np.shape(v[name])}, need ({n}, {w})")
+                items.append((int(gid), v))
+        except (TypeError, ValueError, AttributeError) as e:
+            return str(e), []
+        return None, items
+
+    def _gather_zones(self, items: list) -> list:
+        """Check that every zoned block was passed by exactly one rank (``ValueError`` on every
+        rank otherwise), then send the items to their writers (collective)."""
+        got = np.sort(np.concatenate([np.asarray(g, np.int64) for g in
+                                      self.comm.allgather([gid for gid, _ in items])]))
+        if not np.array_equal(got, self.zone_layout.gid):
+            missing = np.setdiff1d(self.zone_layout.gid, got)[:5]
+            dup = got[1:][np.diff(got) == 0][:5] if len(got) > 1 else got[:0]
+            raise ValueError("write_snapshot: every zoned block must be passed by exactly one "
+                             f"rank (missing e.g. {missing.tolist()}, duplicated e.g. "
+                             f"{dup.tolist()})")
+        return self._zone_writers(items)
+
+    def _write_runs(self, dset: h5py.Dataset, lead: tuple[int, ...], starts, counts,
+                    data: np.ndarray | None) -> None:
+        """Rows ``starts[k] .. starts[k] + counts[k] - 1`` (ascending, disjoint) of ``dset``
+        after the leading indices ``lead`` (``(i,)``: snapshot ``i``), from ``data``, the runs'
+        rows one after the other: one write whose selection is the union of the runs
+        (collective in parallel mode; HDF5 walks a union in file order, so the runs' rows
+        follow in ``data`` as in the file)."""
+        if data is None or len(data) == 0:
+            self._write(dset, (0,) * len(dset.shape), None)
+            return
+        tail = dset.shape[len(lead) + 1:]
+        buf = np.ascontiguousarray(data, dtype=dset.dtype).reshape(-1, *tail)
+        fspace = dset.id.get_space()
+        fspace.select_none()
+        for s, c in zip(starts, counts, strict=True):
+            fspace.select_hyperslab((*lead, int(s), *(0,) * len(tail)),
+                                    (*(1,) * len(lead), int(c), *tail), op=h5s.SELECT_OR)
+        dset.id.write(h5s.create_simple(buf.shape), fspace, buf,
+                      mtype=h5t.py_create(dset.dtype), dxpl=self._dxpl)
+
+    def _create_zones(self, static: list) -> None:
+        """The group ``zones/``: static grid and empty series (IO ranks, collective)."""
+        f, lay = self._f, self.zone_layout
+        npt, nz = lay.n_points, lay.n_zones
+        g = f.create_group("zones")
+        g.attrs["doc"] = ("zoned (deformable) blocks as one tetrahedral grid, blocks by gid: block "
+                          "k's gridpoints are rows point_start[k] .. point_start[k+1]-1, its "
+                          "zones zone_start[k] .. zone_start[k+1]-1")
+        for name, data in (("block", lay.gid), ("point_start", lay.point_start),
+                           ("zone_start", lay.zone_start)):
+            self._write_static(g.create_dataset(name, (len(data),), np.int64), data)
+        g["block"].attrs["doc"] = "gids of the zoned blocks, ascending"
+        gids = np.array([gid for gid, _ in static], np.int64)
+        p0, pn, z0, zn = lay.runs(gids)
+
+        def cat(rows, tail=()):
+            return np.concatenate(rows) if rows else np.zeros((0, *tail))
+        conn = cat([v["tets"] + p for (_, v), p in zip(static, p0, strict=True)], (4,))
+        x0 = cat([v["initial_points"] for _, v in static], (3,))
+        for name, shape, dtype, data, per_point, units, doc in (
+                ("connectivity", (nz, 4), np.int64, conn, False, "",
+                 "the zones' 4 gridpoints, rows of the zones/points series"),
+                ("zone_block", (nz,), np.int64, np.repeat(gids, zn), False, "",
+                 "gid of each zone's block"),
+                ("point_block", (npt,), np.int64, np.repeat(gids, pn), True, "",
+                 "gid of each gridpoint's block"),
+                ("initial_points", (npt, 3), np.float64, x0, True, "m",
+                 "gridpoint positions at the start (reference of displacement)")):
+            d = g.create_dataset(name, shape, dtype)
+            self._write_runs(d, (), p0 if per_point else z0, pn if per_point else zn, data)
+            d.attrs["doc"] = doc
+            if units:
+                d.attrs["units"] = units
+        for series, n in ((POINT_SERIES, npt), (ZONE_SERIES, nz)):
+            for name, w, dtype, units, doc in series:
+                tail = (n, w) if w > 1 else (n,)
+                d = f.create_dataset(f"zones/{name}", (0, *tail), maxshape=(None, *tail),
+                                     chunks=(1, min(max(n, 1), _CHUNK_ROWS), *tail[1:]),
+                                     dtype=dtype)
+                d.attrs["units"] = units
+                d.attrs["doc"] = doc
+
+    def _write_zones(self, i: int, items: list) -> None:
+        """Snapshot ``i`` of the zone series and its ``/xdmf`` views (IO ranks, collective)."""
+        f = self._f
+        gids = np.array([gid for gid, _ in items], np.int64)
+        p0, pn, z0, zn = self.zone_layout.runs(gids)
+        for series, starts, counts in ((POINT_SERIES, p0, pn), (ZONE_SERIES, z0, zn)):
+            for name, *_ in series:
+                d = f[f"zones/{name}"]
+                d.resize(self.n_snap, axis=0)
+                data = np.concatenate([v[name] for _, v in items]) if items else None
+                self._write_runs(d, (i,), starts, counts, data)
+        for path in ZONE_VIEWED:
+            _add_view(f, path, i)
 
     # ------------------------------------------------------------------ histories
     def add_history(self, name: str, ncols: int, attrs: dict[str, Any] | None = None) -> None:

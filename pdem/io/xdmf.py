@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["write_xdmf", "read_xdmf", "centroids_path", "contacts_path", "subcontacts_path",
-           "CELL_FIELDS", "VIEWED_SERIES", "CONTACT_VIEWED", "SUB_VIEWED", "view_path"]
+           "zones_path", "CELL_FIELDS", "VIEWED_SERIES", "CONTACT_VIEWED", "SUB_VIEWED",
+           "view_path"]
 
 # Block quantities copied onto every triangle of the block's surface, as float32 series
 # ``surface/<name>`` (name, components, units). No XDMF construct that ParaView 5.11's readers
@@ -44,6 +45,19 @@ _CONTACT_ATTRS = (
 )
 _SUB_ATTRS = (("normal_force", 1, "Float", 8), ("shear_force", 3, "Float", 8),
               ("state", 1, "UChar", 1))
+# Attributes of the zoned blocks' tetrahedral grid (pdem.io.zones): (name, center, attribute
+# type, components, number type, precision), each snapshot's zones/<name> read through a view.
+# The stress is a "Matrix" of 6 columns, not a "Tensor6": ParaView 5.11's readers disagree on
+# Tensor6 (the Xdmf3 readers pass the 6 columns on, the legacy reader expands them to 9 taking
+# them as xx xy xz yy yz zz); a 6-column Matrix reaches ParaView as the same 6-component array
+# in all three, which ParaView takes as a symmetric tensor XX YY ZZ XY YZ XZ: pdem's order.
+_ZONE_ATTRS = (
+    ("displacement", "Node", "Vector", 3, "Float", 8), ("velocity", "Node", "Vector", 3, "Float", 8),
+    ("stress", "Cell", "Matrix", 6, "Float", 8), ("plastic", "Cell", "Scalar", 1, "UChar", 1),
+    ("mean_stress", "Cell", "Scalar", 1, "Float", 4), ("von_mises", "Cell", "Scalar", 1, "Float", 4),
+    ("sigma1", "Cell", "Scalar", 1, "Float", 4), ("sigma2", "Cell", "Scalar", 1, "Float", 4),
+    ("sigma3", "Cell", "Scalar", 1, "Float", 4),
+)
 CONTACT_VIEWED = ("point", *(a[0] for a in _CONTACT_ATTRS))
 SUB_VIEWED = ("point", *(a[0] for a in _SUB_ATTRS))
 
@@ -145,6 +159,39 @@ def _point_grid(group: str, attrs, i: int, t: float, h5: str, n: int) -> list[st
     ]
 
 
+def _zones_grid(i: int, t: float, h5: str, n_points: int, n_zones: int) -> list[str]:
+    """Snapshot ``i`` of the zoned blocks: one tetrahedral grid of all their zones."""
+    static = [f'<Attribute Name="block_id" AttributeType="Scalar" Center="{center}">'
+              f'{_hdf((n,), "Int", h5, f"/zones/{path}")}</Attribute>'
+              for center, n, path in (("Node", n_points, "point_block"),
+                                      ("Cell", n_zones, "zone_block"))]
+    # ParaView takes a point and a cell array of one name as two arrays; the cells' gid is the
+    # one a Threshold on a block wants, the points' is there for point filters (Glyph)
+    values = []
+    for name, center, kind, w, number, prec in _ZONE_ATTRS:
+        n = n_points if center == "Node" else n_zones
+        item = _hdf((n, w) if w > 1 else (n,), number, h5, view_path(f"/zones/{name}", i), prec)
+        values.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="{center}">'
+                      f'{item}</Attribute>')
+    return [
+        f'<Grid Name="zones_{i:06d}" GridType="Uniform">',
+        f'<Time Value="{t!r}"/>',
+        f'<Topology TopologyType="Tetrahedron" NumberOfElements="{n_zones}">'
+        f'{_hdf((n_zones, 4), "Int", h5, "/zones/connectivity")}</Topology>',
+        f'<Geometry GeometryType="XYZ">'
+        f'{_hdf((n_points, 3), "Float", h5, view_path("/zones/points", i))}</Geometry>',
+        *static,
+        *values,
+        "</Grid>",
+    ]
+
+
+def zones_path(xdmf_path: str | os.PathLike) -> Path:
+    """The zoned blocks' sidecar: ``run.xdmf`` -> ``run-zones.xdmf``."""
+    xdmf_path = Path(xdmf_path)
+    return xdmf_path.with_name(xdmf_path.stem + "-zones.xdmf")
+
+
 def contacts_path(xdmf_path: str | os.PathLike) -> Path:
     """The contacts' sidecar: ``run.xdmf`` -> ``run-contacts.xdmf``."""
     xdmf_path = Path(xdmf_path)
@@ -173,6 +220,7 @@ def write_xdmf(
     n_blocks: int,
     contacts: tuple[Sequence[int], Sequence[int]] | None = None,
     extra_cells: Sequence[tuple[str, str]] = (),
+    zones: tuple[int, int] | None = None,
 ) -> None:
     """Write the XDMF 3 description of a pdem output file (plain text, any one process).
 
@@ -191,6 +239,12 @@ def write_xdmf(
     the joint state; :func:`contacts_path` then gets ``contacts`` (the contacts at their
     common-plane points, with ``normal_force``, ``shear_force``, ``normal``, ``state``, ...)
     and :func:`subcontacts_path` ``subcontacts`` (sub-contact points and their forces).
+
+    ``zones``: ``(n_points, n_zones)`` of the zoned blocks' grid, for files with zoned blocks:
+    :func:`zones_path` then gets ``zones``, their tetrahedra (``Tetrahedron`` topology) with the
+    point arrays ``displacement``, ``velocity``, ``block_id`` and the cell arrays ``block_id``,
+    ``stress`` (6 components), ``plastic``, ``mean_stress``, ``von_mises``, ``sigma1`` ..
+    ``sigma3`` (:mod:`pdem.io.zones`).
     """
     times = [float(t) for t in times]
     if len(times) != n_snap:
@@ -209,6 +263,10 @@ def write_xdmf(
             grids = [line for i, t in enumerate(times)
                      for line in _point_grid(group, attrs, i, t, h5, int(counts[i]))]
             _write_collection(path, group, grids)
+    if zones is not None:
+        grids = [line for i, t in enumerate(times)
+                 for line in _zones_grid(i, t, h5, int(zones[0]), int(zones[1]))]
+        _write_collection(zones_path(xdmf_path), "zones", grids)
 
 
 def _write_collection(path: Path, name: str, grids: list[str]) -> None:

@@ -36,6 +36,16 @@ def body_surfaces(store, lo: int = 0, hi: int | None = None) -> BodyMesh:
                     face_block, store.face_verts[fv0:fv1] - vert_start[vert_of])
 
 
+def owned_zoned(grids) -> list | None:
+    """The zoned blocks this rank owns as ``(gid, body)`` pairs for the writer (None: a scene
+    without zoned blocks). With zoned blocks on several ranks (``GridStore.n_owned``) the first
+    ``n_owned`` bodies are the owned ones, the rest ghost copies that are not written."""
+    if grids is None:
+        return None
+    n = getattr(grids, "n_owned", len(grids.bodies))
+    return [(int(grids.gids[d]), grids.bodies[d]) for d in range(n)]
+
+
 def _mass_scaling_attrs(state) -> dict:
     """Root attributes of partial mass scaling: the step it sets and the inertia it added
     (pdem.config.resolve.mass_scaling_summary). Runs without stages only: a stage sets its
@@ -117,7 +127,8 @@ class Snapshots(Plugin):
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
             group_names=state.group_names, fixed=state.glob.fixed,
             attrs=attrs,
-            contacts=self.contacts, joint_names=state.joints.names)
+            contacts=self.contacts, joint_names=state.joints.names,
+            zones=owned_zoned(state.grids))
 
     def write(self):
         s = self.state
@@ -126,7 +137,8 @@ class Snapshots(Plugin):
             contacts = contact_rows(s, self.bonded) if self.contacts else None
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
-                                       contacts=contacts, stage=s.stage)
+                                       contacts=contacts, stage=s.stage,
+                                       zones=owned_zoned(s.grids))
             for callback in self.after_write:
                 callback()
 

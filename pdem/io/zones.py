@@ -1,0 +1,112 @@
+"""Zoned (deformable) blocks in the output file: group ``zones/`` and the sidecar ``-zones.xdmf``.
+
+A zoned block (``zones:`` in the scene, pdem.deformable) is written as an unstructured grid of
+tetrahedra beside the rigid blocks' surfaces: its gridpoints (positions, displacement, velocity)
+and its zones (stress, plastic state and a few stress invariants). All zoned blocks form one
+grid, numbered block by block in gid order (gridpoints and zones in each block's own order), so
+the file does not depend on how many ranks ran the model nor on which rank owned which block.
+
+Each rank passes the zoned blocks it owns; the counts of every zoned block are gathered once, at
+the start (the zoning does not change), and give each block its rows. In parallel mode each rank
+writes its own blocks' rows, one collective write per dataset whose selection is the union of
+its blocks' row ranges; in the fallback (h5py without MPI) the blocks are sent to rank 0, which
+writes them all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+__all__ = ["ZoneLayout", "zone_layout", "zone_values", "POINT_SERIES", "ZONE_SERIES",
+           "ZONE_VIEWED", "PLASTIC_BITS"]
+
+# Time series of the gridpoints and the zones: (name, components, dtype, units, doc). The exact
+# state is float64; the invariants are display values for the viewer (float32, like the
+# surfaces' viewer fields).
+POINT_SERIES = (
+    ("points", 3, np.float64, "m", "gridpoint positions, world frame"),
+    ("displacement", 3, np.float64, "m", "points - initial_points"),
+    ("velocity", 3, np.float64, "m/s", "gridpoint velocity"),
+)
+ZONE_SERIES = (
+    ("stress", 6, np.float64, "Pa",
+     "zone stress xx, yy, zz, xy, yz, zx; tension positive"),
+    ("plastic", 1, np.uint8, "1",
+     "plastic state bits: 1 shear now, 2 tension now, 4 shear past, 8 tension past"),
+    ("mean_stress", 1, np.float32, "Pa", "(xx + yy + zz) / 3; tension positive"),
+    ("von_mises", 1, np.float32, "Pa", "sqrt(3 J2), >= 0"),
+    ("sigma1", 1, np.float32, "Pa", "minor principal stress: the most compressive (smallest, "
+     "tension positive)"),
+    ("sigma2", 1, np.float32, "Pa", "intermediate principal stress"),
+    ("sigma3", 1, np.float32, "Pa", "major principal stress: the most tensile (largest)"),
+)
+ZONE_VIEWED = tuple(f"/zones/{s[0]}" for s in POINT_SERIES + ZONE_SERIES)
+# pdem.deformable.constitutive's bits (FLAC3D's convention)
+PLASTIC_BITS = ("shear-n", "tension-n", "shear-p", "tension-p")
+
+
+class ZoneLayout(NamedTuple):
+    """Where each zoned block's rows are: blocks by ascending gid; block ``k`` (gid
+    ``gid[k]``) has gridpoints ``point_start[k] .. point_start[k+1]-1`` and zones
+    ``zone_start[k] .. zone_start[k+1]-1``."""
+
+    gid: np.ndarray
+    point_start: np.ndarray
+    zone_start: np.ndarray
+
+    @property
+    def n_points(self) -> int:
+        return int(self.point_start[-1])
+
+    @property
+    def n_zones(self) -> int:
+        return int(self.zone_start[-1])
+
+    def runs(self, gids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For the blocks ``gids`` (ascending): their first gridpoint, gridpoint count, first
+        zone and zone count."""
+        k = np.searchsorted(self.gid, gids)
+        return (self.point_start[k], self.point_start[k + 1] - self.point_start[k],
+                self.zone_start[k], self.zone_start[k + 1] - self.zone_start[k])
+
+
+def zone_layout(counts: Sequence[np.ndarray]) -> ZoneLayout:
+    """The layout from every rank's ``(gid, n_points, n_zones)`` rows (``(k, 3)`` int64 arrays,
+    as gathered; any order). ``ValueError`` if a gid comes twice or a count is not positive."""
+    rows = np.concatenate([np.asarray(c, np.int64).reshape(-1, 3) for c in counts]) \
+        if len(counts) else np.zeros((0, 3), np.int64)
+    rows = rows[np.argsort(rows[:, 0], kind="stable")]
+    gid = rows[:, 0]
+    if len(gid) > 1 and (np.diff(gid) == 0).any():
+        dup = int(gid[1:][np.diff(gid) == 0][0])
+        raise ValueError(f"zoned block {dup} passed by two ranks (each must pass the ones it owns)")
+    if (rows[:, 1:] <= 0).any():
+        raise ValueError("a zoned block without gridpoints or zones")
+    start = np.zeros((len(rows) + 1, 2), np.int64)
+    np.cumsum(rows[:, 1:], axis=0, out=start[1:])
+    return ZoneLayout(gid, start[:, 0].copy(), start[:, 1].copy())
+
+
+def zone_values(body: Any) -> dict[str, np.ndarray]:
+    """Snapshot values of one zoned block (a :class:`pdem.deformable.body.DeformableBody` or any
+    object with ``nodes``, ``nodes0``, ``vel``, ``stress`` and ``plastic``), by series name.
+
+    Per zone and element-wise (the eigenvalues by one LAPACK call per zone), so a zone's values
+    do not depend on which rank computes them or with which other blocks.
+    """
+    x = np.asarray(body.nodes, np.float64)
+    s = np.asarray(body.stress, np.float64)
+    xx, yy, zz, xy, yz, zx = (s[:, j] for j in range(6))
+    mean = (xx + yy + zz) / 3.0
+    j2 = ((xx - yy) ** 2 + (yy - zz) ** 2 + (zz - xx) ** 2) / 6.0 + xy * xy + yz * yz + zx * zx
+    full = np.stack([np.stack([xx, xy, zx], -1), np.stack([xy, yy, yz], -1),
+                     np.stack([zx, yz, zz], -1)], -2)
+    principal = np.linalg.eigvalsh(full) if len(s) else np.zeros((0, 3))  # ascending
+    return {"points": x, "displacement": x - np.asarray(body.nodes0, np.float64),
+            "velocity": np.asarray(body.vel, np.float64), "stress": s,
+            "plastic": np.asarray(body.plastic), "mean_stress": mean,
+            "von_mises": np.sqrt(3.0 * j2), "sigma1": principal[:, 0],
+            "sigma2": principal[:, 1], "sigma3": principal[:, 2]}
