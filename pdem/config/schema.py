@@ -858,11 +858,8 @@ class Scene(Strict):
                                   f"({', '.join(zoned)})")
             sv = self.solve
             for key, bad in (("solve.inactive", sv.inactive is not None),
-                             ("solve.mass_scaling", sv.mass_scaling is not False),
                              ("solve.damping.mode", sv.damping.mode not in ("none", "local")),
-                             ("domain", self.domain is not None),
-                             # the unbalanced-force ratio counts rigid blocks only yet
-                             ("solve.ratio", sv.ratio is not None)):
+                             ("domain", self.domain is not None)):
                 if bad:
                     errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
                                   + ("; use none or local" if key == "solve.damping.mode" else ""))

@@ -58,6 +58,7 @@ class DeformableBody:
         self.nmd = bool(nmd)
         self.damping = float(damping)
         self.mass_scaling = bool(mass_scaling)
+        self.unbalanced = np.zeros(1)  # the last step's largest unbalanced gridpoint force
         self.update_mass()
         self.time = 0.0
 
@@ -95,7 +96,7 @@ class DeformableBody:
         applied = self.applied + gravity_forces(self.gravity_mass, self.gravity)
         done = cycle(n_steps, dt, self.nodes, self.vel, self.mass, applied, self.fixed,
                      self.fixed_vel, self.tets, self.grad, self.vol, self.stress, self.plastic,
-                     self.model, self.nmd, self.damping)
+                     self.model, self.nmd, self.damping, self.unbalanced)
         self.time += done * dt
         if done < n_steps:
             raise FloatingPointError(f"a zone inverted after {done} of {n_steps} steps")

@@ -107,8 +107,10 @@ def scaled_masses(stiffness: np.ndarray, dt: float = 1.0, frac: float = 0.9,
 
 @kernel
 def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
-          plastic, model, nmd, alpha):
+          plastic, model, nmd, alpha, unbalanced):
     """Advance ``n_steps`` steps in place (see module doc); return the steps done.
+    ``unbalanced (1,)``: set to the largest unbalanced gridpoint force (the norm over its
+    free degrees of freedom, before damping) of the last step, for ``solve.ratio``.
 
     ``mass (n,)`` inertial gridpoint masses; ``applied (n, 3)`` applied + gravity forces;
     ``fixed (n, 3) bool`` prescribed-velocity degrees of freedom with ``fixed_vel (n, 3)``;
@@ -126,22 +128,27 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     for step in range(n_steps):
         force[:] = applied
         add_zone_forces(tets, grad, vol, stress, force)
+        big = 0.0
         for n in range(n_nodes):
             c = dt / mass[n]
+            f2 = 0.0
             for i in range(3):
                 if fixed[n, i]:
                     vel[n, i] = fixed_vel[n, i]
                     continue
                 f = force[n, i]
+                f2 += f * f
                 v = vel[n, i]
                 if v > 0.0:
                     f -= alpha * abs(f)
                 elif v < 0.0:
                     f += alpha * abs(f)
                 vel[n, i] = v + f * c
+            big = max(big, f2)
             for i in range(3):
                 mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
                 nodes[n, i] += vel[n, i] * dt
+        unbalanced[0] = np.sqrt(big)
         # strain rates on the mid-step geometry: for a rigid rotation over the step the
         # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
         if zone_geometry(mid, tets, grad, vol) <= 0.0:

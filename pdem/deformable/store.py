@@ -21,7 +21,7 @@ import numpy as np
 from ..geometry.polyhedron import ConvexPolyhedron
 from .body import DeformableBody
 from .mesh import tetrahedralise
-from .motion import critical_timestep
+from .motion import critical_timestep, scaled_masses
 from .zones import gravity_forces
 
 
@@ -146,6 +146,10 @@ class GridStore:
         self.rows = np.zeros(len(self.bodies), np.int64)
         self.dt = np.inf
         self.halo = None
+        # solve.ratio's scale for the grids: the mean gridpoint weight of all zoned blocks
+        # (set by resolve), and the last step's largest unbalanced gridpoint force over it
+        self.ref_force = 1.0
+        self.ratio = 0.0
 
     @classmethod
     def build(cls, scene, specs, first_gid: int) -> GridStore:
@@ -181,7 +185,7 @@ class GridStore:
         gids = sorted(grids, key=lambda g: row_of[int(g)])
         new = cls(old.gravity, gids, [grids[g] for g in gids],
                   sum(row_of[int(g)] < n_owned for g in gids))
-        new.dt = old.dt
+        new.dt, new.ref_force = old.dt, old.ref_force
         new.bind(blocks)
         return new
 
@@ -190,20 +194,34 @@ class GridStore:
         for b in self.bodies:
             b.damping = float(alpha)
 
+    @staticmethod
+    def _stiffness(b, kn: float) -> np.ndarray:
+        """A grid's Gershgorin gridpoint stiffness with the joints' normal stiffness at its
+        surface gridpoints (eq. 85: ``k_i += kn A_i``, ``A_i`` a third of its surface
+        triangles' area)."""
+        k = b.stiffness()
+        tri = b.mesh.surface
+        x = b.nodes
+        area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]],
+                                             x[tri[:, 2]] - x[tri[:, 0]]), axis=1)
+        np.add.at(k, tri.ravel(), np.repeat(kn * area / 3.0, 3))
+        return k
+
     def timestep(self, kn: float) -> float:
-        """The zone term of eq. 88 with the joints' normal stiffness at the surface
-        gridpoints (eq. 85: ``k_i += kn A_i``, ``A_i`` a third of its surface triangles'
-        area): the smallest over the grids (inf without)."""
+        """The zone term of eq. 88 (:meth:`_stiffness`, the inertial masses): the smallest
+        over the grids (inf without)."""
         dt = np.inf
         for b in self.bodies:
-            k = b.stiffness()
-            tri = b.mesh.surface
-            x = b.nodes
-            area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]],
-                                                 x[tri[:, 2]] - x[tri[:, 0]]), axis=1)
-            np.add.at(k, tri.ravel(), np.repeat(kn * area / 3.0, 3))
-            dt = min(dt, critical_timestep(k, b.mass, b.damping))
+            dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.damping))
         return float(dt)
+
+    def scale_masses(self, kn: float, dt: float) -> None:
+        """Mass scaling (``solve.mass_scaling``): each gridpoint's inertial mass raised, where
+        it is too light, to make ``dt`` ``GRID_FRAC`` of its critical step (with the grid's
+        local damping); gravity keeps the true masses (``gravity_mass``)."""
+        for b in self.bodies:
+            need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.damping)
+            b.mass = np.maximum(b.gravity_mass, need)
 
     def resolve(self, scene, resolved, comm):
         """The model step: the rigid one or the grids' (eq. 88, with the largest joint normal
@@ -217,7 +235,14 @@ class GridStore:
 
         self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
+            self.scale_masses(kn, resolved.dt)
         self.dt = min(allgather(comm, GRID_FRAC * self.timestep(kn)))
+        if scene.solve.mass_scaling and self.dt >= resolved.dt * (1.0 - 1e-9):
+            self.dt = resolved.dt  # scaled for it (up to the round-off of the bound)
+        g = float(np.linalg.norm(self.gravity))
+        sums = np.sum(allgather(comm, (g * float(self.gmass.sum()), len(self.gmass))), axis=0)
+        self.ref_force = float(sums[0] / sums[1]) if sums[0] > 0 else 1.0
         if self.dt < resolved.dt and comm.rank == 0:
             import logging
 
@@ -333,13 +358,17 @@ class GridStore:
     def step(self, dt: float) -> int:
         """One grid step of every owned zoned block: forces at t (contacts + gravity +
         zones). Returns the gid of the first block whose grid folded (a zone inverted),
-        -1 if none: the stepper's reduction makes every rank raise alike."""
+        -1 if none: the stepper's reduction makes every rank raise alike. ``ratio``: the
+        largest unbalanced gridpoint force over the mean gridpoint weight (``solve.ratio``)."""
+        big = 0.0
         for d in range(self.n_owned):
             b = self.bodies[d]
             a, e = self.node_start[d], self.node_start[d + 1]
             applied = self.force[a:e] + gravity_forces(b.gravity_mass, self.gravity)
             if _cycle(b, applied, dt) < 1:
                 return self.gids[d]
+            big = max(big, float(b.unbalanced[0]))
+        self.ratio = big / self.ref_force
         return -1
 
     # ------------------------------------------------------------------ checkpoints
@@ -433,4 +462,4 @@ def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:
     from .motion import cycle
 
     return cycle(1, dt, b.nodes, b.vel, b.mass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
-                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping)
+                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping, b.unbalanced)

@@ -31,6 +31,8 @@ MPIEXEC = os.path.join(ROOT, ".venv", "bin", "mpiexec")
 
 # every block state the output file holds; all must match the 1-rank run bit for bit
 STATE = ("blocks/centroid", "blocks/orientation", "blocks/velocity", "blocks/angular_velocity")
+# and, in scenes with zoned blocks, every gridpoint and zone state
+ZONE_STATE = ("zones/points", "zones/velocity", "zones/stress", "zones/plastic")
 
 
 @contextlib.contextmanager
@@ -152,7 +154,7 @@ def cached_reference(scene, path: str, steps: int | None = None) -> np.ndarray:
 
 def read_states(path: str) -> dict[str, np.ndarray]:
     with h5py.File(path, "r") as f:
-        out = {k: f[k][()] for k in STATE}
+        out = {k: f[k][()] for k in STATE + ZONE_STATE if k in STATE or k in f}
         out["time"] = f["time"][()]
         out["step"] = f["step"][()] if "step" in f else None
         for name in f.get("histories", {}):

@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import compare_on_rank0, on_rank0, run, shared_dir, with_parallel
+from support import compare_on_rank0, run, shared_dir, with_parallel
 
 from pdem.config import parse_scene
 from pdem.io.checkpoint import open_checkpoint
@@ -74,23 +74,23 @@ def same_grids(a: dict, b: dict) -> list[str]:
     return bad
 
 
-@pytest.mark.parametrize("dims", ["auto", (1, 2, 1)])
-def test_zoned_row_is_bitwise_the_one_rank_run(tmp_path, dims):
+@pytest.mark.parametrize("split", ["auto", "y"])
+def test_zoned_row_is_bitwise_the_one_rank_run(tmp_path, split):
     comm = MPI.COMM_WORLD
+    if split == "y" and comm.size > 2:
+        pytest.skip("the y split is the 2-rank tier's (each run ~2 min oversubscribed)")
     d = shared_dir(comm, tmp_path)
     os.makedirs(d, exist_ok=True)
+    dims = [1, comm.size, 1] if split == "y" else "auto"
     scene = with_parallel(scene_text(f"{d}/row.h5"), dims, f"{d}/row.h5", every_steps=100)
     solver, _, after, report = run(scene, comm, probe=grids)
-    if dims == "auto":  # the blocks crossed the cuts: migrations, ghosts rebuilt
+    if split == "auto":  # the blocks crossed the cuts: migrations, ghosts rebuilt
         assert report["rebuilds"] > 2, report
         assert sum(1 for o in report["owned"] if o) > 1, report
+    # the zoned blocks collided: their grids strained
+    assert max(np.abs(s).max() for _, _, s, _ in after.values()) > 1e4
+    # block states and every gridpoint, velocity, zone stress and plastic bit of each snapshot
     compare_on_rank0(comm, f"{d}/row.h5", scene, f"{d}/ref.h5")
-    ref = on_rank0(comm, lambda: run(with_parallel(scene_text(f"{d}/ref2.h5"), (1, 1, 1),
-                                                   f"{d}/ref2.h5"), MPI.COMM_SELF,
-                                     probe=grids)[2])
-    assert not same_grids(after, ref), same_grids(after, ref)
-    # the zoned blocks collided (their grids strained), the weak one yielded somewhere
-    assert max(np.abs(s).max() for _, _, s, _ in ref.values()) > 1e4
 
 
 def test_zoned_checkpoint_continues_on_any_rank_count(tmp_path):

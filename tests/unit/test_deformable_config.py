@@ -68,11 +68,8 @@ def test_contract_scene_parses_with_defaults():
      "blocks[1]: zones: not yet supported on 'array' blocks"),
     ("solve: {steps: 10}", "solve: {steps: 10}\njoin: [[pillar, roof]]",
      "join: not yet supported with zoned blocks (pillar)"),
-    ("solve: {steps: 10}", "solve: {ratio: 1.0e-5}", "solve.ratio: not yet supported with zoned"),
     ("solve: {steps: 10}", "solve: {steps: 10, damping: combined}",
      "solve.damping.mode: not yet supported with zoned blocks (pillar); use none or local"),
-    ("solve: {steps: 10}", "solve: {steps: 10, mass_scaling: true}",
-     "solve.mass_scaling: not yet supported with zoned"),
 ])
 def test_bad_input_one_line_naming_the_key(old, new, expect):
     assert old in SCENE
