@@ -213,7 +213,7 @@ class Zones(Strict):
 
 
 # shapes a zoned block may have today (one convex piece); the others are refused with why
-ZONED_SHAPES = ("box", "polyhedron", "prism", "planes")
+ZONED_SHAPES = ("box", "polyhedron", "prism", "planes", "array", "random")
 
 
 class Block(Strict):
@@ -852,7 +852,7 @@ class Scene(Strict):
                                   "poisson (a zoned block needs its elasticity)")
         zoned = [b.name for b in self.blocks if b.zones is not None]
         if zoned:
-            for key in ("cuts", "join", "excavate", "stages", "insitu"):
+            for key in ("join", "excavate", "stages", "insitu"):
                 if getattr(self, key):
                     errors.append(f"{key}: not yet supported with zoned blocks "
                                   f"({', '.join(zoned)})")

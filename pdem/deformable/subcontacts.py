@@ -13,7 +13,9 @@ the surface area. That is done here, after the common-plane update:
   over ``O``'s faces (the distance outside ``O``'s nearest face plane, negative inside);
 - its area is ``sum_t max(0, n_t . u) A_t / 3`` over its surface triangles ``t``, ``u`` the
   direction from ``D`` to ``O`` (``n`` for D = A, ``-n`` for D = B): a flat contact face's
-  shares sum to its area; its overlap ``un = -d(g)``; its point the gridpoint itself;
+  shares sum to its area; its overlap ``un`` minus the same maximum over ``O``'s faces that
+  face ``D`` (normals within 60 degrees of ``-u``), so that a gridpoint on the rim of two
+  flush faces (on ``O``'s side planes) has the overlap across them; its point the gridpoint;
 - its joint history (shear force and displacement, dilation, state bits, law columns) is the
   previous sub-contact's at the same gridpoint of the same contact, if there was one: the
   gridpoints are material points, so this transfer is exact.
@@ -35,12 +37,13 @@ import numpy as np
 from ..jit import kernel
 from ..model import csr
 from ..model.contacts import ContactStore
+from .contact import _closest_on_triangle
 from .store import _GNODE, _TRI, _W
 
 
 @kernel
 def gridpoint_candidates(verts_d, face_d, fvert_d, face_verts, normals_d, nodes_row0, ux, uy,
-                         uz, normals_o, offsets_o, tol):
+                         uz, normals_o, offsets_o, tol, tris_o, tri_normals, tri_offsets):
     """For D's piece (vertex rows ``verts_d`` world, faces ``face_d`` range, world normals
     ``normals_d`` of those faces), the vertex offsets (from ``nodes_row0``) that are
     sub-contacts against O (world planes ``normals_o``, ``offsets_o``), their areas and
@@ -70,15 +73,63 @@ def gridpoint_candidates(verts_d, face_d, fvert_d, face_verts, normals_d, nodes_
     for i in range(nv):
         if area[i] <= 0.0:
             continue
-        d = -np.inf
-        for f in range(normals_o.shape[0]):
-            d = max(d, normals_o[f, 0] * verts_d[i, 0] + normals_o[f, 1] * verts_d[i, 1]
-                    + normals_o[f, 2] * verts_d[i, 2] - offsets_o[f])
+        d, dn = _outside(verts_d[i], normals_o, offsets_o, ux, uy, uz)
+        if tris_o.shape[0]:  # a zoned O: across its nearest facing surface triangle
+            dn = _triangle_outside(verts_d[i], tris_o, tri_normals, tri_offsets)
         if d <= tol:
             sel[m] = i
-            un[m] = -d
+            un[m] = -dn
             m += 1
     return sel[:m], area[sel[:m]], un[:m]
+
+
+@kernel
+def _triangle_outside(p, tris, normals, offsets):
+    """How far ``p`` lies outside the plane of the triangle (of ``tris``) nearest to it: the
+    overlap across a zoned block's deformed surface (the planes of its other triangles,
+    extended, are off by their tilt times the distance, as large as the overlaps)."""
+    best = np.inf
+    out = 0.0
+    for t in range(tris.shape[0]):
+        _, _, _, d2 = _closest_on_triangle(p[0], p[1], p[2], tris[t, 0], tris[t, 1],
+                                           tris[t, 2])
+        if d2 < best:
+            best = d2
+            out = normals[t, 0] * p[0] + normals[t, 1] * p[1] + normals[t, 2] * p[2] \
+                - offsets[t]
+    return out
+
+
+def facing_triangles(b, k, r, u):
+    """The surface triangles of zoned piece ``k`` (row ``r``, identity pose) facing ``-u``
+    (normals within 60 degrees): world vertices (m, 3, 3), normals, plane offsets."""
+    f0, f1 = b.face_start[k], b.face_start[k + 1]
+    n = b.normals_local[f0:f1]
+    f = np.nonzero(n @ u < -0.5)[0]
+    ids = b.face_verts[b.fvert_start[f0 + f][:, None] + np.arange(3)]
+    tris = b.verts_local[ids] + b.x[r]
+    return tris, n[f], b.offsets_local[f0 + f] + n[f] @ b.x[r]
+
+
+_NO_TRIANGLES = (np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0))
+
+
+@kernel
+def _outside(p, normals, offsets, ux, uy, uz):
+    """How far ``p`` lies outside a convex piece's face planes: over all of them (the touch
+    test) and over those facing ``p``'s side (normals within 60 degrees of ``-u``, ``u`` the
+    direction from ``p``'s block to the piece; all of them if none does): the overlap. A
+    gridpoint on the rim of two flush faces lies on the other block's side planes; its overlap
+    is the one across the faces, not 0 (measured: a zoned column cut in two closed its joint
+    3.4x the closed form before)."""
+    d = -np.inf
+    dn = -np.inf
+    for f in range(normals.shape[0]):
+        val = normals[f, 0] * p[0] + normals[f, 1] * p[1] + normals[f, 2] * p[2] - offsets[f]
+        d = max(d, val)
+        if normals[f, 0] * ux + normals[f, 1] * uy + normals[f, 2] * uz < -0.5:
+            dn = max(dn, val)
+    return d, (dn if dn > -np.inf else d)
 
 
 def _world_planes(b, k, r):
@@ -137,9 +188,10 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
         verts = b.verts_local[v0:v1] + b.x[rd]  # identity pose
         normals_d = b.normals_local[b.face_start[kd]:b.face_start[kd + 1]]
         no, oo = _world_planes(b, ko, ro)
+        tris = facing_triangles(b, ko, ro, u) if dz[ro] >= 0 else _NO_TRIANGLES
         sel, area, un = gridpoint_candidates(
             verts, np.array([b.face_start[kd], b.face_start[kd + 1]]), b.fvert_start,
-            b.face_verts, normals_d, v0, u[0], u[1], u[2], no, oo, tol)
+            b.face_verts, normals_d, v0, u[0], u[1], u[2], no, oo, tol, *tris)
         nodes = grid.surf[dz[rd]][sel]  # block-local gridpoints
         points = verts[sel]
         if len(sel) == 0:  # none of D's gridpoints meets O: O's corners into D (module doc)
@@ -180,18 +232,24 @@ def _corners_into(grid, b, ro, ko, rd, kd, u, tol):
     O's ``point_area`` (the smaller of the two blocks', as for rigid vertex sub-contacts)."""
     v0, v1 = b.vert_start[ko], b.vert_start[ko + 1]
     nd, od = _world_planes(b, kd, rd)
+    tris = facing_triangles(b, kd, rd, u)  # D's, facing O
     if grid.dindex[ro] >= 0:  # zoned O: its gridpoints, areas as D's above
         verts = b.verts_local[v0:v1] + b.x[ro]
         sel, area, un = gridpoint_candidates(
             verts, np.array([b.face_start[ko], b.face_start[ko + 1]]), b.fvert_start,
             b.face_verts, b.normals_local[b.face_start[ko]:b.face_start[ko + 1]], v0, u[0],
-            u[1], u[2], nd, od, tol)
+            u[1], u[2], nd, od, tol, *tris)
         return verts[sel], area, un, -2 - sel
     verts = b.verts_local[v0:v1] @ b.R[ro].T + b.x[ro]
-    d = (verts @ nd.T - od).max(axis=1)
+    d = np.empty(len(verts))
+    dn = np.empty(len(verts))
+    for i, p in enumerate(verts):
+        d[i], dn[i] = _outside(p, nd, od, u[0], u[1], u[2])
+        if len(tris[0]):
+            dn[i] = _triangle_outside(p, *tris)
     sel = np.nonzero(d <= tol)[0]
     area = np.full(len(sel), min(float(b.point_area[ro]), float(b.point_area[rd])))
-    return verts[sel], area, -d[sel], -2 - sel
+    return verts[sel], area, -dn[sel], -2 - sel
 
 
 def _locate(grid, c: ContactStore, redo: np.ndarray, b) -> None:
