@@ -21,32 +21,10 @@ from paraview.simple import (
     ResetCamera,
     SaveScreenshot,
     Show,
-    Xdmf3ReaderS,
-    Xdmf3ReaderT,
-    XDMFReader,
 )
+from pv_common import leaves, open_reader
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkIOImage import vtkPNGReader
-
-
-def open_reader(kind: str, path: str):
-    if kind == "S":
-        return Xdmf3ReaderS(FileName=[path])
-    if kind == "T":
-        return Xdmf3ReaderT(FileName=[path])
-    return XDMFReader(FileNames=[path])
-
-
-def leaves(data) -> list:
-    if not data.IsA("vtkCompositeDataSet"):
-        return [data]
-    found = []
-    it = data.NewIterator()
-    it.InitTraversal()
-    while not it.IsDoneWithTraversal():
-        found.append(it.GetCurrentDataObject())
-        it.GoToNextItem()
-    return found
 
 
 def arrays(data) -> dict:

@@ -20,20 +20,10 @@ from paraview.simple import (
     ResetCamera,
     SaveScreenshot,
     Show,
-    Xdmf3ReaderS,
-    Xdmf3ReaderT,
-    XDMFReader,
 )
+from pv_common import leaves, open_reader
 from vtkmodules.util.numpy_support import vtk_to_numpy
 from vtkmodules.vtkIOImage import vtkPNGReader
-
-
-def open_reader(kind: str, path: str):
-    if kind == "S":
-        return Xdmf3ReaderS(FileName=[path])
-    if kind == "T":
-        return Xdmf3ReaderT(FileName=[path])
-    return XDMFReader(FileNames=[path])
 
 
 def arrays(data) -> dict:
@@ -44,19 +34,6 @@ def arrays(data) -> dict:
         # component -1: the magnitude of a vector, the value of a scalar
         out[a.GetName()] = {"components": comps, "range": list(a.GetRange(-1 if comps > 1 else 0))}
     return out
-
-
-def leaves(data) -> list:
-    """The non-composite datasets of ``data``, depth first."""
-    if not data.IsA("vtkCompositeDataSet"):
-        return [data]
-    found = []
-    it = data.NewIterator()
-    it.InitTraversal()
-    while not it.IsDoneWithTraversal():
-        found.append(it.GetCurrentDataObject())
-        it.GoToNextItem()
-    return found
 
 
 def describe(reader, t: float) -> list[dict]:
