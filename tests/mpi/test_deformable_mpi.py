@@ -44,7 +44,7 @@ parallel: {{margin: 0.01}}
 output: {{file: {out}, every_steps: {every}, contacts: false}}
 {checkpoint}
 """
-STEPS = 600
+STEPS = 300
 
 
 def scene_text(out, steps=STEPS, every=100, checkpoint=""):
@@ -95,6 +95,8 @@ def test_zoned_row_is_bitwise_the_one_rank_run(tmp_path, split):
 
 def test_zoned_checkpoint_continues_on_any_rank_count(tmp_path):
     comm = MPI.COMM_WORLD
+    if comm.size > 3:
+        pytest.skip("the 2- and 3-rank tiers' (a 2-rank checkpoint on 2 and on 3 ranks)")
     d = shared_dir(comm, tmp_path)
     os.makedirs(d, exist_ok=True)
     half = STEPS // 2

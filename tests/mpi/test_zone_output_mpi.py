@@ -109,12 +109,16 @@ def test_interleaved_ownership(tmp_path):
 
 def test_zoned_blocks_on_one_rank(tmp_path):
     comm = MPI.COMM_WORLD
+    if comm.size > 2:
+        pytest.skip("the 2-rank tier's (the layout does not depend on the rank count)")
     last = comm.rank == comm.size - 1  # the last rank owns every zoned block, no rigid row
     rigid = [] if last else [g for g in range(N_BLOCKS) if g % (comm.size - 1) == comm.rank]
     check(tmp_path, rigid, ZONED if last else [])
 
 
 def test_gather_fallback(tmp_path):
+    if MPI.COMM_WORLD.size > 2:
+        pytest.skip("the 2-rank tier's (the gathered path does not depend on the rank count)")
     check(tmp_path, mine(range(N_BLOCKS)), mine(ZONED[::-1]), parallel=False)
 
 
