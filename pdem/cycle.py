@@ -9,7 +9,7 @@ that of the step-by-step path (and so of any rank count, whose steps exchange ha
 
 The loop does a step's first half (motion, bookkeeping, rotation matrices, contact forces)
 and then, if nothing needs Python, its second half: at a periodic contact update with no
-contact to update (every contact warm and moved less than ``refresh_tolerance``) it does what
+contact to update (pdem.contact.staleness: no contact new or stale) it does what
 the update would have done, which is only bookkeeping. Otherwise it returns after the first
 half and the stepper finishes that step in Python. Runs on several ranks never fuse: their
 halo and reductions run every step (docs/architecture.md).
@@ -17,7 +17,10 @@ halo and reductions run every step (docs/architecture.md).
 
 from __future__ import annotations
 
+import numpy as np
+
 from .contact.forces import contact_forces
+from .contact.staleness import stale_contacts
 from .dynamics import motion
 from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices
@@ -29,23 +32,21 @@ NEEDS_PYTHON = 1  # a search, a contact update with work, or a bad state
 
 
 @kernel
-def _noop_refresh(c_moved, c_warm, ia, ib, u_geo, refresh_tolerance):
+def _noop_refresh(x, q, R, radius, pairs, rel_x, rel_q, gap, c_moved, c_warm, sc_un, u_geo,
+                  refresh_tolerance, todo):
     """True if a periodic contact update would update no contact (pdem.stepper.refresh): then
-    apply its bookkeeping (accumulated motion per contact, ``u_geo`` reset)."""
-    for c in range(ia.shape[0]):
-        if c_warm[c] == 0:
-            return False
-        if c_moved[c] + (u_geo[ia[c]] + u_geo[ib[c]]) > refresh_tolerance:
-            return False
-    for c in range(ia.shape[0]):
-        c_moved[c] += u_geo[ia[c]] + u_geo[ib[c]]
+    its bookkeeping (each contact's relative motion in ``c_moved``, ``u_geo`` reset) is done."""
+    if stale_contacts(x, q, R, radius, pairs.ia, pairs.ib, rel_x, rel_q, gap, c_warm,
+                      pairs.sc_start, sc_un, refresh_tolerance, c_moved, todo) > 0:
+        return False
     u_geo[:] = 0.0
     return True
 
 
 @kernel
 def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u_geo, u_mig,
-                q, R, bodies, pairs, subs, joints, c_moved, c_warm, m_true, calm, still,
+                q, R, bodies, pairs, subs, joints, c_moved, c_warm, rel_x, rel_q, gap, radius_all,
+                m_true, calm, still,
                 speed, sleep_steps, force_frac, sc_fn, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
                 step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step):
@@ -53,10 +54,12 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
     last two from the last step's :func:`pdem.dynamics.motion.motion_bookkeeping`.
 
     ``m``: the owned rows' :data:`pdem.dynamics.motion.Motion` record (serial: every row);
-    ``q``, ``R``, ``u_acc``, ``u_geo``, ``bodies``: all rows. Stops after the step that reaches
-    ``stop_step`` or ``stop_time`` (a plugin's event, the end of the run) or whose unbalanced
-    ratio is at most ``ratio_target`` (negative: none), with the step's second half left to the
-    stepper, as for ``NEEDS_PYTHON``. ``stop_at_update``: every periodic update goes to Python
+    ``q``, ``R``, ``u_acc``, ``u_geo``, ``bodies``, ``radius_all``: all rows; ``rel_x``,
+    ``rel_q``, ``gap``: the contacts' columns the periodic check reads
+    (pdem.contact.staleness). Stops after the step that reaches ``stop_step`` or
+    ``stop_time`` (a plugin's event, the end of the run) or whose unbalanced ratio is at most
+    ``ratio_target`` (negative: none), with the step's second half left to the stepper, as for
+    ``NEEDS_PYTHON``. ``stop_at_update``: every periodic update goes to Python
     (the model domain is checked there). ``m_true``: the record with the true ``fixed`` flags
     when inactive blocks are held (``m``'s are ``still``; pdem.dynamics.inactive), else None.
     """
@@ -91,6 +94,8 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
             return n_steps, step, time, DONE, bad, u_mig_max
         # second half, when it is only bookkeeping
         if periodic:
-            if not _noop_refresh(c_moved, c_warm, pairs.ia, pairs.ib, u_geo, refresh_tolerance):
+            todo = np.empty(pairs.ia.shape[0], np.uint8)
+            if not _noop_refresh(bodies.x, q, R, radius_all, pairs, rel_x, rel_q, gap, c_moved,
+                                 c_warm, subs.un, u_geo, refresh_tolerance, todo):
                 return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
             sc_fn[:] = 0.0  # as a contact update leaves the force record (pdem.stepper)

@@ -24,6 +24,7 @@ from .contact.detect import Planes, refresh_contacts
 from .contact.forces import contact_energies, contact_forces
 from .contact.joint_sets import set_joints
 from .contact.rigid import Bodies
+from .contact.staleness import mark_fresh, stale_contacts
 from .cycle import fused_steps
 from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
@@ -146,18 +147,28 @@ class Stepper:
         s = self.s
         b = s.blocks
         c = s.contacts
-        if periodic:
+        if periodic and s.grids is not None:  # zoned blocks deform: their accumulated motion
             c.moved[:] += b.u_geo[c.ia] + b.u_geo[c.ib]
+        if periodic:
             b.u_geo[:] = 0.0
         if c.n == 0:
             return
-        todo = (c.warm == 0) | all_contacts
-        if periodic:
-            todo |= c.moved > s.resolved.refresh_tolerance
+        if periodic and s.grids is None:  # motion of B relative to A (pdem.contact.staleness)
+            todo = np.empty(c.n, np.uint8)
+            stale_contacts(b.x, b.q, b.R, b.radius, c.ia, c.ib, c.arrays["rel_x"],
+                           c.arrays["rel_q"], c.gap, c.warm, c.sc_start, c.sub["sc_un"],
+                           s.resolved.refresh_tolerance, c.moved, todo)
+            todo = todo.astype(bool) | all_contacts
+        else:
+            todo = (c.warm == 0) | all_contacts
+            if periodic:
+                todo |= c.moved > s.resolved.refresh_tolerance
         if not todo.any():  # nothing to update: what the update below would change
             c.sub["sc_fn"][:] = 0.0
             return
         c.moved[todo] = 0.0
+        mark_fresh(b.x, b.q, b.R, c.ia, c.ib, c.arrays["rel_x"], c.arrays["rel_q"],
+                   todo.astype(np.uint8))
         a = c.arrays
         planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
                         a["ctype"], a["warm"])
@@ -264,7 +275,8 @@ class Stepper:
                 motion_record(b, n, self.holds), s.gravity, s.dt, s.damping_args(),
                 s.scalar_inertia, self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n], b.q,
                 b.R, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args, c.moved,
-                c.warm, motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
+                c.warm, c.arrays["rel_x"], c.arrays["rel_q"], c.gap, b.radius,
+                motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
                 speed, sleep_steps, frac,
                 c.sub["sc_fn"], REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
                 r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,

@@ -118,14 +118,20 @@ CONTACT: tuple[Field, ...] = (
     Field("gap", (), F, "m", "common-plane gap", **_D),
     Field("ctype", (), I32, "1", "contact type code (Table 1)", **_D),
     Field("warm", (), U8, "1", "common plane known (warm start)", **_D),
-    Field("moved", (), F, "m", "motion of the two blocks since the last geometry update", **_D),
+    Field("moved", (), F, "m", "motion of B relative to A since the last geometry update, as "
+          "of the last periodic check (pdem.contact.staleness; zoned scenes: the two blocks' "
+          "accumulated motion)", **_D),
+    Field("rel_x", (3,), F, "m", "B's centroid in A's body frame at the last geometry update "
+          "(pdem.contact.staleness)", **_D),
+    Field("rel_q", (4,), F, "1", "B's orientation relative to A's (q_a* q_b) at the last "
+          "geometry update; zero: unknown", **_D),
     Field("held", (6,), F, "N, N m", "force on B and its moment about A's centroid, kept while "
           "both blocks are inactive (pdem.dynamics.inactive)", **_D),
     Field("frozen", (), U8, "1", "1: ``held`` is valid, the joint is not updated", **_D),
 )
 
 # contact fields a checkpoint may lack (written before they were added): they start from zero
-CONTACT_ADDED = ("held", "frozen")
+CONTACT_ADDED = ("held", "frozen", "rel_x", "rel_q")
 
 SUB: tuple[Field, ...] = (
     Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D),
