@@ -78,3 +78,10 @@ def initialise(state) -> None:
                 sub["sc_un"], sub["sc_dil"], sub["sc_fs"], sub["sc_us"], state.joints.kn,
                 state.joints.ks, c.joint, stress_tensor(ins.stress),
                 stress_tensor(ins.gradient), float(ins.reference_z))
+    # a joint pressed by the stress is closed by its elastic closure, not found apart: its gap
+    # is minus its largest closure (pdem.contact.staleness re-detects contacts found apart as
+    # soon as they press, which would throw the closure away)
+    pressed = np.diff(c.sc_start) > 0
+    if pressed.any():
+        closure = np.maximum.reduceat(sub["sc_un"] + sub["sc_dil"], c.sc_start[:-1][pressed])
+        c.gap[pressed] = np.minimum(c.gap[pressed], -np.maximum(closure, 0.0))

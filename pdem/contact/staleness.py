@@ -15,9 +15,12 @@ One event a small relative motion can matter for: two blocks found touching or a
 >= 0) have a plane that is one of several equally good ones when they are flush (the shared
 edge of diagonal neighbours in a stack lies in a horizontal and in a vertical face plane
 alike). The right one is known only once they press together, so a contact whose last update
-found gap >= 0 is re-detected as soon as one of its sub-contacts overlaps by more than
-``TOUCH_SHARE`` of the refresh tolerance (a 4³ stack settled with a stale horizontal plane on
-its diagonal edges carried 2.5 % of its weight through them; fidelity case ``settled``).
+found gap >= 0 is re-detected as soon as B has moved relative to A and one of its sub-contacts
+overlaps by more than ``TOUCH_SHARE`` of the refresh tolerance (a 4³ stack settled with a stale
+horizontal plane on its diagonal edges carried 2.5 % of its weight through them; fidelity case
+``settled``). Joints given the in-situ stress (pdem.insitu) start pressed by their elastic
+closure with no overlap in the geometry: their gap is set to minus that closure, so they are not
+taken for contacts found apart (tests/verification/test_insitu.py).
 
 Zoned blocks deform, and their pose says nothing of it: scenes with zoned blocks keep the
 two blocks' accumulated motion (``u_geo``, pdem.stepper).
@@ -71,8 +74,8 @@ def stale_contacts(x, q, R, radius, ia, ib, rel_x, rel_q, gap, warm, sc_start, s
 
     New contacts (``warm == 0``), those whose reference pose is unknown (a checkpoint written
     before it was kept: ``rel_q`` zero), those whose B moved more than ``tolerance`` (m) in A's
-    frame, and those found apart at their last update with a sub-contact now overlapping by
-    more than ``TOUCH_SHARE * tolerance``."""
+    frame, and those found apart at their last update (``gap >= 0``) that moved and have a
+    sub-contact now overlapping, both by more than ``TOUCH_SHARE * tolerance``."""
     touch = TOUCH_SHARE * tolerance
     n = 0
     for c in range(ia.shape[0]):
@@ -92,7 +95,7 @@ def stale_contacts(x, q, R, radius, ia, ib, rel_x, rel_q, gap, warm, sc_start, s
         m = math.sqrt(ex * ex + ey * ey + ez * ez) + 2.0 * math.asin(half) * radius[b]
         moved[c] = m
         stale = warm[c] == 0 or not known or m > tolerance
-        if not stale and gap[c] >= 0.0:
+        if not stale and gap[c] >= 0.0 and m > touch:
             for s in range(sc_start[c], sc_start[c + 1]):
                 if sc_un[s] > touch:
                     stale = True

@@ -115,7 +115,8 @@ CONTACT: tuple[Field, ...] = (
     Field("joint", (), I32, "1", "row in the joint table", **_D),
     Field("normal", (3,), F, "1", "common-plane unit normal, A -> B", **_D),
     Field("point", (3,), F, "m", "common-plane reference point", **_D),
-    Field("gap", (), F, "m", "common-plane gap", **_D),
+    Field("gap", (), F, "m", "common-plane gap at the last geometry update (< 0: overlap; a "
+          "joint loaded by the in-situ stress: minus its largest elastic closure)", **_D),
     Field("ctype", (), I32, "1", "contact type code (Table 1)", **_D),
     Field("warm", (), U8, "1", "common plane known (warm start)", **_D),
     Field("moved", (), F, "m", "motion of B relative to A since the last geometry update, as "
