@@ -51,6 +51,8 @@ class Simulation:
             for p in self.runner.plugins:
                 p.restore(checkpoint["attrs"])
         if release:
+            # the output writer has taken its share of the surfaces (it keeps its own copy)
+            self.state.writer_mesh = None
             self.state.release_scene_geometry()
 
     # the model, as scripts and tests read it
