@@ -134,7 +134,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     fs = np.empty((cap, 3))
     us = np.empty((cap, 3))
     dil = np.empty(cap)
-    state = np.empty(cap, np.int64)
+    state = np.empty(cap, old_state.dtype)  # the store's (uint8 bits)
     hist = np.empty((cap, old_hist.shape[1]))
     # world face normals and edge directions, once per piece (each is in many contacts)
     rows = np.zeros(vert_start.shape[0] - 1, np.uint8)

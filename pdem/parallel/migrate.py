@@ -171,12 +171,13 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         if np.any(pos >= len(sorted_gids)) or np.any(sorted_gids[np.minimum(pos, len(sorted_gids) - 1)]
                                                      != mine.arrays[g]):
             raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
-        mine.arrays[side] = row_of[pos]
+        mine.arrays[side] = row_of[pos].astype(mine.arrays[side].dtype)
     # the pieces in contact: the same piece ordinal within the block's local pieces
     for side, piece, pg in (("ia", "ka", "pga"), ("ib", "kb", "pgb")):
         first = blocks.piece_gid[blocks.piece_start[mine.arrays[side]]]  # the block's 1st piece
         ordinal = mine.arrays[pg] - first
-        mine.arrays[piece] = blocks.piece_start[mine.arrays[side]] + ordinal
+        mine.arrays[piece] = (blocks.piece_start[mine.arrays[side]] + ordinal).astype(
+            mine.arrays[piece].dtype)
 
     # 5. the per-step halo plan (free blocks only; fixed ghosts were sent once, above)
     send = {}
