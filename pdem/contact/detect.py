@@ -254,8 +254,16 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         tot += counts[c]
     new_start[nc] = tot
     if cap > tot + (tot >> 3) + 64:  # a contiguous copy (memcpy) rather than hold the slack
-        return keep, new_start, pa[:tot].copy(), area[:tot].copy(), un[:tot].copy(), \
-            fs[:tot].copy(), us[:tot].copy(), dil[:tot].copy(), state[:tot].copy(), \
-            hist[:tot].copy()
+        # one array at a time, each original freed once copied: the update's peak is the
+        # sub-contacts plus one copy, not twice the sub-contacts (the start's first update)
+        pa = pa[:tot].copy()
+        area = area[:tot].copy()
+        un = un[:tot].copy()
+        fs = fs[:tot].copy()
+        us = us[:tot].copy()
+        dil = dil[:tot].copy()
+        state = state[:tot].copy()
+        hist = hist[:tot].copy()
+        return keep, new_start, pa, area, un, fs, us, dil, state, hist
     return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], dil[:tot], \
         state[:tot], hist[:tot]
