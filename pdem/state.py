@@ -283,8 +283,10 @@ class ModelState:
         this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
         block: fixed, radius, ...); each rank's store holds its blocks' and ghosts' geometry,
         which migrates with them."""
-        if not self.needs_scene_geometry() and self.glob.has_geometry:
-            self.glob.drop_geometry()
+        if not self.needs_scene_geometry():
+            if self.glob.has_geometry:
+                self.glob.drop_geometry()
+            # the catalogue's envelopes (lo, hi: the resolve's) too, 48 bytes a scene block
             self.glob.keep_fields(CATALOGUE)
         return_freed_memory()
 
