@@ -31,6 +31,7 @@ class Simulation:
         self.state = ModelState.create(scene, comm, check_overlaps=checkpoint is None,
                                        whole=not release)
         self.state.keep_scene_geometry = not release
+        self.state.output_surfaces = output  # no output: no writer's share of the surfaces
         self.stepper = Stepper(self.state)
         self.stepper.stop = stop
         if checkpoint is None:

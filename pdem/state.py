@@ -143,6 +143,8 @@ class ModelState:
         # keep the whole scene's geometry after set-up (pdem check's report; Simulation)
         self.keep_scene_geometry = False
         self.writer_mesh = None  # the output writer's share of the surfaces (set-up)
+        # whether the run writes output: else the writer's surfaces are not taken (Simulation)
+        self.output_surfaces = True
         # the largest motion of a block in one step that cannot take it through another block
         # unseen (pdem.dynamics.motion.motion_bookkeeping)
         self.max_step = max_step_motion(resolved.ctol, thinnest)
@@ -273,7 +275,7 @@ class ModelState:
         from .io.writer import writer_range
         from .plugins.output import body_surfaces
 
-        if self.glob.has_geometry:  # else taken from the build share (_take_share)
+        if self.glob.has_geometry and self.output_surfaces:  # else from the build share
             self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
         if not self.keep_scene_geometry:
             self.release_scene_geometry()
@@ -315,7 +317,8 @@ class ModelState:
         s, self.share = self.share, None
         for k in CATALOGUE:
             getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
-        self.writer_mesh = body_surfaces(s)
+        if self.output_surfaces:
+            self.writer_mesh = body_surfaces(s)
         return s
 
     def redistribute(self):
