@@ -10,7 +10,7 @@ threshold grows with what is freed, up to 32 MB): the model's arrays (a few MB e
 between small objects, a freed one leaves a hole that trimming cannot give back, and set-up's
 temporaries stack on the kept arrays. :func:`map_large_blocks` fixes the threshold, so that an
 array of 128 KB or more (a per-block column of 5,000 rows) is its own mapping, returned to the
-system when freed (64,000 cubes on 2 ranks: 45 MB less kept and 65 MB less peak per rank,
+system when freed (64,000 cubes on 2 ranks: ~20 MB less kept and ~65 MB less peak per rank,
 bench/setup.py, and no slower).
 """
 
