@@ -31,6 +31,7 @@ class Simulation:
         self.state = ModelState.create(scene, comm, check_overlaps=checkpoint is None,
                                        whole=not release)
         self.state.keep_scene_geometry = not release
+        self.state.output_surfaces = output  # no output: no writer's share of the surfaces
         self.stepper = Stepper(self.state)
         self.stepper.stop = stop
         if checkpoint is None:
@@ -51,6 +52,8 @@ class Simulation:
             for p in self.runner.plugins:
                 p.restore(checkpoint["attrs"])
         if release:
+            # the output writer has taken its share of the surfaces (it keeps its own copy)
+            self.state.writer_mesh = None
             self.state.release_scene_geometry()
 
     # the model, as scripts and tests read it

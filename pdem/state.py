@@ -27,12 +27,12 @@ from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose, thinnest_width
 from .errors import UserError
 from .io.checkpoint import new_run_id
-from .memory import return_freed_memory
+from .memory import map_large_blocks, return_freed_memory
 from .model.blocks import BlockStore
 from .model.build import SpecTable, block_store, expand_blocks, geometry_columns
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
-from .model.fields import MIGRATE, halo_fields
+from .model.fields import MIGRATE, halo_fields, held_width
 from .parallel.decomposition import make_decomposition
 from .parallel.migrate import rebuild
 from .parallel.mpi import allgather, allgather_rows, broadcast
@@ -133,7 +133,9 @@ class ModelState:
         self.n_rebuilds = 0
         self.blocks = None
         self.n_owned = 0
-        self.contacts = ContactStore.empty(joints.hist_width)  # zoned: empty_contacts
+        # zoned: empty_contacts; ``held`` only with solve.inactive (pdem.model.fields)
+        self.contacts = ContactStore.empty(joints.hist_width,
+                                           held=held_width(scene.solve.inactive is not None))
         self.halo = None
         self.cells = None
         self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
@@ -141,6 +143,8 @@ class ModelState:
         # keep the whole scene's geometry after set-up (pdem check's report; Simulation)
         self.keep_scene_geometry = False
         self.writer_mesh = None  # the output writer's share of the surfaces (set-up)
+        # whether the run writes output: else the writer's surfaces are not taken (Simulation)
+        self.output_surfaces = True
         # the largest motion of a block in one step that cannot take it through another block
         # unseen (pdem.dynamics.motion.motion_bookkeeping)
         self.max_step = max_step_motion(resolved.ctol, thinnest)
@@ -161,6 +165,7 @@ class ModelState:
         catalogue) and the specs' geometric scalars; the blocks go to their owners at
         :meth:`distribute_initial`. ``whole`` (or a scene that reads every block's faces, see
         :func:`needs_whole_scene`): every rank builds every block, as ``pdem check`` does."""
+        map_large_blocks()  # arrays freed during set-up go back to the system (pdem.memory)
         # refuse a scene too large for the machine before its blocks exist (docs/limits.md);
         # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
         memory = min(allgather(comm, machine_memory()))
@@ -218,7 +223,8 @@ class ModelState:
         from .deformable.store import GRID_WIDTH
 
         return ContactStore.empty(self.joints.hist_width,
-                                  GRID_WIDTH if self.grids is not None else 0)
+                                  GRID_WIDTH if self.grids is not None else 0,
+                                  held_width(self.scene.solve.inactive is not None))
 
     def damping_args(self):
         """The damping kernel's constants now (alpha changes under adaptive damping)."""
@@ -269,7 +275,7 @@ class ModelState:
         from .io.writer import writer_range
         from .plugins.output import body_surfaces
 
-        if self.glob.has_geometry:  # else taken from the build share (_take_share)
+        if self.glob.has_geometry and self.output_surfaces:  # else from the build share
             self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
         if not self.keep_scene_geometry:
             self.release_scene_geometry()
@@ -279,8 +285,10 @@ class ModelState:
         this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
         block: fixed, radius, ...); each rank's store holds its blocks' and ghosts' geometry,
         which migrates with them."""
-        if not self.needs_scene_geometry() and self.glob.has_geometry:
-            self.glob.drop_geometry()
+        if not self.needs_scene_geometry():
+            if self.glob.has_geometry:
+                self.glob.drop_geometry()
+            # the catalogue's envelopes (lo, hi: the resolve's) too, 48 bytes a scene block
             self.glob.keep_fields(CATALOGUE)
         return_freed_memory()
 
@@ -309,7 +317,8 @@ class ModelState:
         s, self.share = self.share, None
         for k in CATALOGUE:
             getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
-        self.writer_mesh = body_surfaces(s)
+        if self.output_surfaces:
+            self.writer_mesh = body_surfaces(s)
         return s
 
     def redistribute(self):
@@ -383,7 +392,9 @@ class ModelState:
         mine[owned] = self.glob.fixed[owned] == 0
         if self.grids is not None:  # the grids held here (by the build) from the file
             self._checked(lambda: self.grids.load(path), path)
-        self.distribute(owned, block_rows(owned), contacts(mine), source=source,
+        # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
+        held = held_width(self.scene.solve.inactive is not None)
+        self.distribute(owned, block_rows(owned), contacts(mine).with_held(held), source=source,
                         consume=source is not self.glob)
         if self.grids is not None:  # zoned rows and pieces from the stored gridpoints
             b, rows = self.blocks, self.grids.rows

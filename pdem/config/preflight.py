@@ -155,11 +155,15 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
     """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry.
     ``memory``: the physical memory to plan for (default: this machine's); ``whole``: every
     rank builds every block's store (pdem.state.needs_whole_scene), else its share."""
+    from ..model.blocks import VERT_ROW
     from ..model.build import lazy_scene
-    from ..model.fields import BLOCK, CONTACT, SUB
+    from ..model.fields import BLOCK, CONTACT, HELD_WIDTH, SUB, held_width
 
     block_row = _row_bytes(BLOCK)
-    contact_row = _row_bytes(CONTACT) + SUBS_PER_CONTACT * _row_bytes(SUB)
+    # the declared rows (the contacts' ``held`` has columns only with solve.inactive)
+    contact_row = _row_bytes(CONTACT) + SUBS_PER_CONTACT * _row_bytes(SUB) \
+        - 8 * (HELD_WIDTH - held_width(scene.solve.inactive is not None))
+    vert_row = np.dtype(VERT_ROW).itemsize
     per_entry = []
     n_total = 0
     # Set-up (pdem.state.ModelState.create): every rank makes a spec of every block and keeps
@@ -173,9 +177,10 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
         n, v, f, e = _shape_size(b)
         per_entry.append((i, n))
         n_total += n
-        # vertices local + world, face normals/offsets/starts, face vertex lists (2E), edges,
-        # edge directions; plus the block row
-        geom = 8 * (6 * v + 6 * f + 2 * e + 2 * e + 3 * e + 4)
+        # vertices local + world, face normals/offsets/starts, edge directions (float64 and
+        # int64 starts); face vertex lists (2E) and edges (2E) of vertex rows; plus the
+        # block row
+        geom = 8 * (6 * v + 6 * f + 3 * e + 4) + vert_row * (2 * e + 2 * e)
         built_bytes += float(n) * (geom + block_row + PY_BYTES_PER_BLOCK)
         held_bytes += float(n) * (geom + block_row)
     shapes_everywhere = whole or not lazy_scene(scene)

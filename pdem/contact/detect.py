@@ -134,7 +134,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     fs = np.empty((cap, 3))
     us = np.empty((cap, 3))
     dil = np.empty(cap)
-    state = np.empty(cap, np.int64)
+    state = np.empty(cap, old_state.dtype)  # the store's (uint8 bits)
     hist = np.empty((cap, old_hist.shape[1]))
     # world face normals and edge directions, once per piece (each is in many contacts)
     rows = np.zeros(vert_start.shape[0] - 1, np.uint8)
@@ -254,8 +254,16 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         tot += counts[c]
     new_start[nc] = tot
     if cap > tot + (tot >> 3) + 64:  # a contiguous copy (memcpy) rather than hold the slack
-        return keep, new_start, pa[:tot].copy(), area[:tot].copy(), un[:tot].copy(), \
-            fs[:tot].copy(), us[:tot].copy(), dil[:tot].copy(), state[:tot].copy(), \
-            hist[:tot].copy()
+        # one array at a time, each original freed once copied: the update's peak is the
+        # sub-contacts plus one copy, not twice the sub-contacts (the start's first update)
+        pa = pa[:tot].copy()
+        area = area[:tot].copy()
+        un = un[:tot].copy()
+        fs = fs[:tot].copy()
+        us = us[:tot].copy()
+        dil = dil[:tot].copy()
+        state = state[:tot].copy()
+        hist = hist[:tot].copy()
+        return keep, new_start, pa, area, un, fs, us, dil, state, hist
     return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], dil[:tot], \
         state[:tot], hist[:tot]

@@ -71,12 +71,14 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
     ``still`` (blocks): 1 for fixed or held inactive blocks (pdem.dynamics.inactive), all 0
     without ``solve.inactive``. A contact between two still blocks keeps the force it had when
     they became still (``pairs.held``, valid while ``pairs.frozen``) instead of updating its
-    joint: neither block moves, so the joint would see no motion.
+    joint: neither block moves, so the joint would see no motion. Without ``solve.inactive``
+    ``pairs.held`` has no columns (pdem.model.fields.held_width) and is never read or written.
     """
+    holds = pairs.held.shape[1] != 0
     for c in range(pairs.ia.shape[0]):
         a = pairs.ia[c]
         b = pairs.ib[c]
-        both_still = still[a] != 0 and still[b] != 0
+        both_still = holds and still[a] != 0 and still[b] != 0
         if both_still and pairs.frozen[c]:
             h = pairs.held
             apply_pair(bodies, a, b, pair_motion(bodies, a, b),

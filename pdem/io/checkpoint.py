@@ -37,8 +37,10 @@ from ..parallel.mpi import allgather, barrier, gather
 FORMAT = "checkpoint"
 # 2: contact rows (ia, ib) no longer stored, joint-law history columns (subcontacts/sc_hist),
 # the resolved scene values and the plugins' restart state as attributes. 3: contacts name
-# their convex pieces (pga, pgb: joined blocks). 1 and 2 still read.
-FORMAT_VERSION = 3
+# their convex pieces (pga, pgb: joined blocks). 4: narrower integers (sub-contact state bits
+# uint8, contact types int8) and ``held`` with no columns in scenes without solve.inactive.
+# 1 to 3 still read (their integers cast to the fields' dtypes, ``held`` fitted to the scene).
+FORMAT_VERSION = 4
 CONTACT_CK = select(CONTACT, checkpoint=True)
 SUB_CK = select(SUB, checkpoint=True) + (SUB_HIST,)
 
@@ -285,18 +287,31 @@ class CheckpointReader:
                              f"0..{self.n_blocks - 1}")
         return a
 
+    def _declared(self, name: str, fd, a: np.ndarray) -> np.ndarray:
+        """``a`` in field ``fd``'s dtype (older files: int64 state bits and contact types);
+        a value the dtype cannot hold is refused (a damaged file)."""
+        if a.dtype == fd.dtype:
+            return a
+        out = a.astype(fd.dtype)
+        if not np.array_equal(out, a):
+            raise ValueError(f"{self.path}: {name} holds values outside {np.dtype(fd.dtype)}")
+        return out
+
     def contacts(self, rows: np.ndarray) -> ContactStore:
-        """Contacts ``rows`` (sorted) with their sub-contacts."""
+        """Contacts ``rows`` (sorted) with their sub-contacts, in the fields' dtypes (``held``
+        as stored: the restart fits it to the scene, ContactStore.with_held)."""
         f = self.f
-        arrays = {fd.name: _read_rows(f[f"contacts/{fd.name}"], rows) for fd in CONTACT_CK
-                  if f"contacts/{fd.name}" in f}
+        arrays = {fd.name: self._declared(f"contacts/{fd.name}", fd,
+                                          _read_rows(f[f"contacts/{fd.name}"], rows))
+                  for fd in CONTACT_CK if f"contacts/{fd.name}" in f}
         for piece, block in (("pga", "ga"), ("pgb", "gb")):
             if piece not in arrays:  # format <= 2: every block one piece
                 arrays[piece] = arrays[block].copy()
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed
             arrays.setdefault(fd.name, np.zeros((len(rows), *fd.shape), fd.dtype))
         sub_rows, start = csr.take(csr.starts(self.nsub), rows)
-        sub = {fd.name: _read_rows(f[f"subcontacts/{fd.name}"], sub_rows)
+        sub = {fd.name: self._declared(f"subcontacts/{fd.name}", fd,
+                                       _read_rows(f[f"subcontacts/{fd.name}"], sub_rows))
                for fd in SUB_CK + (SUB_GRID,) if f"subcontacts/{fd.name}" in f}
         sub.setdefault("sc_hist", np.zeros((len(sub_rows), 0)))  # format 1: no law history
         return ContactStore(arrays, sub, start)

@@ -43,6 +43,10 @@ GEOMETRY = {
     "edirs_local": "unique edge directions (body frame), for the fast common plane",
 }
 
+# the dtype of the vertex rows inside faces and edges (``face_verts``, ``edges``): a rank
+# holds far fewer than 2**31 vertices (int32: 8 bytes a vertex id less, ~220 a cube)
+VERT_ROW = np.int32
+
 # What the contact-geometry kernels read of the shapes (a record, not 10 positionals).
 Shapes = namedtuple("Shapes", "piece_block piece_x vert_start verts_world face_start "
                               "normals_local edir_start edirs_local point_area")
@@ -118,13 +122,10 @@ _CSR = (("piece_start", (), "piece"), ("vert_start", ("verts_local",), "vert"),
         ("edir_start", ("edirs_local",), "edir"))
 
 
-def take_rows(src: BlockStore, rows: np.ndarray, owned: np.ndarray) -> BlockStore:
-    """A store holding rows ``rows`` of ``src`` (any store: the scene's, where row == gid, or
-    a rank's), in that order; per-block fields copied, scratch geometry zeroed (callers
-    refresh it from the pose, pdem.dynamics.kinematics.refresh_pose)."""
-    rows = np.asarray(rows, np.int64)
-    per_block = {f.name: getattr(src, f.name)[rows].copy() for f in BLOCK}
-    per_block["owned"] = np.asarray(owned, np.uint8)
+def _rows(src: BlockStore, rows: np.ndarray, names, scratch: bool):
+    """Per-block fields ``names`` and the geometry of rows ``rows`` of ``src``, in that order
+    (fancy indexing: copies); the scratch geometry zeroed, or left out (``scratch`` False)."""
+    per_block = {name: getattr(src, name)[rows] for name in names}
     pidx, piece_start = csr.take(src.piece_start, rows)
     vidx, vert_start = csr.take(src.vert_start, pidx)
     fidx, face_start = csr.take(src.face_start, pidx)
@@ -132,20 +133,18 @@ def take_rows(src: BlockStore, rows: np.ndarray, owned: np.ndarray) -> BlockStor
     eidx, edge_start = csr.take(src.edge_start, pidx)
     didx, edir_start = csr.take(src.edir_start, pidx)
     # vertex ids inside faces and edges are rows of src's vertices: renumber to the new rows
-    vmap = np.full(len(src.verts_local), -1, np.int64)
+    vmap = np.full(len(src.verts_local), -1, VERT_ROW)
     vmap[vidx] = np.arange(len(vidx))
     n_pieces, n_verts = len(pidx), len(vidx)
-    return BlockStore(per_block, dict(
+    geometry = dict(
         piece_start=piece_start,
         piece_block=np.repeat(np.arange(len(rows)), np.diff(piece_start)),
         piece_gid=src.piece_gid[pidx],
         piece_center=src.piece_center[pidx],
-        piece_x=np.zeros((n_pieces, 3)),
-        piece_lo=np.zeros((n_pieces, 3)),
-        piece_hi=np.zeros((n_pieces, 3)),
+        piece_x=None, piece_lo=None, piece_hi=None,
         vert_start=vert_start,
         verts_local=src.verts_local[vidx],
-        verts_world=np.zeros((n_verts, 3)),
+        verts_world=None,
         face_start=face_start,
         fvert_start=fvert_start,
         face_tag=src.face_tag[fidx],
@@ -156,16 +155,42 @@ def take_rows(src: BlockStore, rows: np.ndarray, owned: np.ndarray) -> BlockStor
         edges=vmap[src.edges[eidx]],
         edir_start=edir_start,
         edirs_local=src.edirs_local[didx],
-    ))
+    )
+    del vmap
+    for k, n in (("piece_x", n_pieces), ("piece_lo", n_pieces), ("piece_hi", n_pieces),
+                 ("verts_world", n_verts)):
+        if scratch:
+            geometry[k] = np.zeros((n, 3))
+        else:
+            del geometry[k]
+    return per_block, geometry
+
+
+def take_rows(src: BlockStore, rows: np.ndarray, owned: np.ndarray) -> BlockStore:
+    """A store holding rows ``rows`` of ``src`` (any store: the scene's, where row == gid, or
+    a rank's), in that order; per-block fields copied, scratch geometry zeroed (callers
+    refresh it from the pose, pdem.dynamics.kinematics.refresh_pose)."""
+    rows = np.asarray(rows, np.int64)
+    per_block, geometry = _rows(src, rows, [f.name for f in BLOCK], scratch=True)
+    per_block["owned"] = np.asarray(owned, np.uint8)
+    return BlockStore(per_block, geometry)
 
 
 def pack(src: BlockStore, rows: np.ndarray) -> dict[str, np.ndarray]:
     """Rows ``rows`` of ``src`` as a message: the static per-block fields and the body-frame
     geometry, what a rank needs to hold a block it did not have (pdem.parallel.migrate).
-    The dynamic fields travel separately (MIGRATE), scratch is rebuilt where it arrives."""
-    part = take_rows(src, rows, np.zeros(len(rows), np.uint8))
-    msg = {f.name: getattr(part, f.name) for f in BLOCK if f.static}
-    msg.update({k: v for k, v in part.geometry().items() if k not in SCRATCH_GEOMETRY})
+    The dynamic fields travel separately (MIGRATE), scratch is rebuilt where it arrives.
+    Only what the message holds is copied (a rebuild's peak: no whole store of the rows)."""
+    per_block, geometry = _rows(src, np.asarray(rows, np.int64),
+                                [f.name for f in BLOCK if f.static], scratch=False)
+    return {**per_block, **geometry}
+
+
+def whole_message(src: BlockStore) -> dict[str, np.ndarray]:
+    """Every row of ``src`` as a :func:`pack` message, without copying: its arrays are
+    ``src``'s own (the caller drops ``src`` after; what ``pack(src, arange(n))`` gives)."""
+    msg = {f.name: getattr(src, f.name) for f in BLOCK if f.static}
+    msg.update({k: v for k, v in src.geometry().items() if k not in SCRATCH_GEOMETRY})
     return msg
 
 

@@ -21,7 +21,7 @@ from ..geometry import (
     prism,
 )
 from ..registry import Registry
-from .blocks import BlockStore
+from .blocks import VERT_ROW, BlockStore
 from .fields import BLOCK, allocate
 
 
@@ -594,11 +594,11 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
         face_start=face_start.copy(),
         face_tag=face_tag,
         fvert_start=fvert_start,
-        face_verts=face_verts.astype(np.int64),
+        face_verts=face_verts.astype(VERT_ROW),
         normals_local=normals_local,
         offsets_local=offsets_local,
         edge_start=edge_start.copy(),
-        edges=edges.astype(np.int64),
+        edges=edges.astype(VERT_ROW),
         edir_start=edir_start,
         edirs_local=edirs,
     )

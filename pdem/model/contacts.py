@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import csr
-from .fields import CONTACT, SUB, allocate
+from .fields import CONTACT, HELD_WIDTH, SUB, allocate
 
 # What the force kernel reads and writes of the contacts and sub-contacts.
 Pairs = namedtuple("Pairs", "ia ib joint normal sc_start held frozen")
@@ -49,15 +49,34 @@ class ContactStore:
         except KeyError:
             raise AttributeError(name) from None
 
+    @property
+    def held_width(self) -> int:
+        return self.arrays["held"].shape[1]
+
     @staticmethod
-    def empty(hist_width: int = 0, grid_width: int = 0) -> ContactStore:
+    def empty(hist_width: int = 0, grid_width: int = 0, held: int = HELD_WIDTH) -> ContactStore:
         """No contacts; ``grid_width``: the zoned blocks' sub-contact columns ``sc_grid``
-        (pdem.deformable.store.GRID_WIDTH; absent in scenes without zoned blocks)."""
+        (pdem.deformable.store.GRID_WIDTH; absent in scenes without zoned blocks); ``held``:
+        the columns of ``held`` (pdem.model.fields.held_width: 0 without solve.inactive).
+        Contacts added to a store take its columns and dtypes."""
         sub = allocate(SUB, 0)
         sub["sc_hist"] = np.zeros((0, hist_width))
         if grid_width:
             sub["sc_grid"] = np.zeros((0, grid_width))
-        return ContactStore(allocate(CONTACT, 0), sub, np.zeros(1, np.int64))
+        arrays = allocate(CONTACT, 0)
+        arrays["held"] = np.zeros((0, held))
+        return ContactStore(arrays, sub, np.zeros(1, np.int64))
+
+    def with_held(self, width: int) -> ContactStore:
+        """This store with ``held`` of ``width`` columns (a checkpoint's contacts in a scene
+        with or without solve.inactive); a changed width voids every held force (``frozen``
+        0: the next step updates the joints)."""
+        if self.held_width == width:
+            return self
+        arrays = dict(self.arrays)
+        arrays["held"] = np.zeros((self.n, width))
+        arrays["frozen"] = np.zeros(self.n, arrays["frozen"].dtype)
+        return ContactStore(arrays, self.sub, self.sc_start)
 
     def keys(self) -> np.ndarray:
         return self.arrays["pga"] * csr.KEY_SHIFT + self.arrays["pgb"]
@@ -88,9 +107,10 @@ class ContactStore:
         m = len(fields["ia"])
         if m == 0:
             return self
-        new = allocate(tuple(f for f in CONTACT if f.name not in fields), m)
-        new.update({f.name: np.asarray(fields[f.name], f.dtype) for f in CONTACT
-                    if f.name in fields})
+        # the store's columns and dtypes (``held`` has none without solve.inactive)
+        have = self.arrays
+        new = {f.name: np.asarray(fields[f.name], have[f.name].dtype) if f.name in fields
+               else np.zeros((m, *have[f.name].shape[1:]), have[f.name].dtype) for f in CONTACT}
         if self.n == 0:  # the start's search: no copies of a store as large as the model's
             merged = ContactStore(new, self.sub, np.zeros(m + 1, np.int64))
             keys = merged.keys()

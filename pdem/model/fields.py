@@ -40,7 +40,7 @@ class Field:
         return int(np.prod(self.shape, dtype=np.int64))
 
 
-F, I64, I32, U8 = np.float64, np.int64, np.int32, np.uint8
+F, F32, I64, I32, I8, U8 = np.float64, np.float32, np.int64, np.int32, np.int8, np.uint8
 _S = {"static": True}
 _D = {"migrate": True, "checkpoint": True}
 
@@ -103,10 +103,11 @@ BLOCK: tuple[Field, ...] = (
 )
 
 CONTACT: tuple[Field, ...] = (
-    Field("ia", (), I64, "1", "row of block A in the block store (local)"),
-    Field("ib", (), I64, "1", "row of block B in the block store (local)"),
-    Field("ka", (), I64, "1", "row of A's convex piece in the store's piece geometry (local)"),
-    Field("kb", (), I64, "1", "row of B's convex piece (local)"),
+    # local rows: a rank holds far fewer than 2**31 blocks and pieces (int32 halves them)
+    Field("ia", (), I32, "1", "row of block A in the block store (local)"),
+    Field("ib", (), I32, "1", "row of block B in the block store (local)"),
+    Field("ka", (), I32, "1", "row of A's convex piece in the store's piece geometry (local)"),
+    Field("kb", (), I32, "1", "row of B's convex piece (local)"),
     Field("ga", (), I64, "1", "gid of A", **_D),
     Field("gb", (), I64, "1", "gid of B", **_D),
     Field("pga", (), I64, "1", "global id of A's convex piece (pga < pgb); equals ga for a "
@@ -117,22 +118,32 @@ CONTACT: tuple[Field, ...] = (
     Field("point", (3,), F, "m", "common-plane reference point", **_D),
     Field("gap", (), F, "m", "common-plane gap at the last geometry update (< 0: overlap; a "
           "joint loaded by the in-situ stress: minus its largest elastic closure)", **_D),
-    Field("ctype", (), I32, "1", "contact type code (Table 1)", **_D),
+    Field("ctype", (), I8, "1", "contact type code (Table 1: 0..6)", **_D),
     Field("warm", (), U8, "1", "common plane known (warm start)", **_D),
     Field("moved", (), F, "m", "motion of B relative to A since the last geometry update, as "
           "of the last periodic check (pdem.contact.staleness; zoned scenes: the two blocks' "
           "accumulated motion)", **_D),
-    Field("rel_x", (3,), F, "m", "B's centroid in A's body frame at the last geometry update "
+    # float32: a reference for a tolerance of ~1e-4 CTOL needs ~1e-7 of a block, not 1e-16
+    Field("rel_x", (3,), F32, "m", "B's centroid in A's body frame at the last geometry update "
           "(pdem.contact.staleness)", **_D),
-    Field("rel_q", (4,), F, "1", "B's orientation relative to A's (q_a* q_b) at the last "
+    Field("rel_q", (4,), F32, "1", "B's orientation relative to A's (q_a* q_b) at the last "
           "geometry update; zero: unknown", **_D),
     Field("held", (6,), F, "N, N m", "force on B and its moment about A's centroid, kept while "
-          "both blocks are inactive (pdem.dynamics.inactive)", **_D),
+          "both blocks are inactive (pdem.dynamics.inactive); width 0 in a scene without "
+          "solve.inactive (HELD_WIDTH: no contact is ever held there)", **_D),
     Field("frozen", (), U8, "1", "1: ``held`` is valid, the joint is not updated", **_D),
 )
 
 # contact fields a checkpoint may lack (written before they were added): they start from zero
 CONTACT_ADDED = ("held", "frozen", "rel_x", "rel_q")
+# the columns of ``held`` with solve.inactive; without it the store's ``held`` is (n, 0) and
+# the force kernel never treats a contact as held (pdem.contact.forces.contact_forces)
+HELD_WIDTH = 6
+
+
+def held_width(inactive: bool) -> int:
+    """Columns of the contacts' ``held`` in a scene with (or without) solve.inactive."""
+    return HELD_WIDTH if inactive else 0
 
 SUB: tuple[Field, ...] = (
     Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D),
@@ -142,7 +153,7 @@ SUB: tuple[Field, ...] = (
     Field("sc_fs", (3,), F, "N", "shear force on B", **_D),
     Field("sc_us", (3,), F, "m", "total shear displacement", **_D),
     Field("sc_dil", (), F, "m", "accumulated dilation", **_D),
-    Field("sc_state", (), I64, "1", "state bits (SLIPPING, FAILED, OPEN)", **_D),
+    Field("sc_state", (), U8, "1", "state bits (SLIPPING 1, FAILED 2, OPEN 4)", **_D),
 )
 
 # Joint laws may keep history of their own: ``sc_hist`` has one column per history field of

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.blocks import BlockStore, pack, take_rows, unpack
+from ..model.blocks import BlockStore, pack, take_rows, unpack, whole_message
 from ..model.contacts import ContactStore
 from ..model.fields import HALO, MIGRATE
 from .halo import Halo
@@ -108,8 +108,11 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     new_state = {k: np.concatenate([m[k] for m in got])[order] for k in MIGRATE}
     arrived = unpack([stays if r == rank else m["store"] for r, m in enumerate(got)],
                      np.zeros(len(gids), np.uint8))
+    del stays  # the messages are in ``arrived`` now: not kept through its copy below
+    for m in got:
+        m.pop("store", None)
     mine_store = take_rows(arrived, order, np.ones(len(gids), np.uint8))
-    del arrived, stays
+    del arrived
     parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
     del got
     merged = _merge_contacts(parts)
@@ -153,9 +156,16 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     all_gids = np.concatenate([gids, g_gids])
     owned = np.concatenate([np.ones(len(gids), np.uint8), np.zeros(len(g_gids), np.uint8)])
     n_owned = len(gids)
-    both = unpack([pack(mine_store, np.arange(n_owned))] + [m["store"] for _, m in ghost_parts],
-                  owned)
+    # each copy of the owned blocks is dropped once the next is made (the rebuild's peak)
+    mine_msg = whole_message(mine_store)
     del mine_store
+    both = unpack([mine_msg] + [m["store"] for _, m in ghost_parts], owned)
+    del mine_msg, got
+    for _, m in ghost_parts:
+        m.pop("store")
+    for m in out:
+        if m is not None:
+            m.pop("store")
     blocks = take_rows(both, np.concatenate([np.arange(n_owned), n_owned + g_order]), owned)
     del both
     for k in MIGRATE:
@@ -171,12 +181,13 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         if np.any(pos >= len(sorted_gids)) or np.any(sorted_gids[np.minimum(pos, len(sorted_gids) - 1)]
                                                      != mine.arrays[g]):
             raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
-        mine.arrays[side] = row_of[pos]
+        mine.arrays[side] = row_of[pos].astype(mine.arrays[side].dtype)
     # the pieces in contact: the same piece ordinal within the block's local pieces
     for side, piece, pg in (("ia", "ka", "pga"), ("ib", "kb", "pgb")):
         first = blocks.piece_gid[blocks.piece_start[mine.arrays[side]]]  # the block's 1st piece
         ordinal = mine.arrays[pg] - first
-        mine.arrays[piece] = blocks.piece_start[mine.arrays[side]] + ordinal
+        mine.arrays[piece] = (blocks.piece_start[mine.arrays[side]] + ordinal).astype(
+            mine.arrays[piece].dtype)
 
     # 5. the per-step halo plan (free blocks only; fixed ghosts were sent once, above)
     send = {}

@@ -89,7 +89,7 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     pa = sel.sc_pa
     point = b.x[ia] + (R[:, :, 0] * pa[:, 0:1] + R[:, :, 1] * pa[:, 1:2]
                        + R[:, :, 2] * pa[:, 2:3])
-    bits = sel.sc_state.copy()
+    bits = sel.sc_state.astype(np.int64)  # the output's int64 (the store's uint8)
     joint = np.repeat(sel.joint, nsub)
     bits[~bonded[joint]] &= ~FAILED
     return {

@@ -7,6 +7,7 @@ import os
 
 import h5py
 import numpy as np
+import pytest
 from mpi4py import MPI
 
 from pdem.config import parse_scene
@@ -99,3 +100,61 @@ def test_exact_sum_does_not_depend_on_how_rows_are_split():
 
     np.testing.assert_array_equal(whole, [math.fsum(v[:, k]) for k in range(3)])
     assert exact_sum(MPI.COMM_SELF, np.zeros((0, 3))).tolist() == [0.0, 0.0, 0.0]
+
+
+def _as_format_3(path):
+    """Rewrite a checkpoint in the layout of format 3: int64 sub-contact state bits, int32
+    contact types, ``held`` of 6 columns (zeros: no solve.inactive)."""
+    with h5py.File(path, "a") as f:
+        for name, dtype in (("subcontacts/sc_state", np.int64), ("contacts/ctype", np.int32)):
+            data = f[name][()].astype(dtype)
+            del f[name]
+            f.create_dataset(name, data=data)
+        n = len(f["contacts/nsub"])
+        del f["contacts/held"]
+        f.create_dataset("contacts/held", data=np.zeros((n, 6)))
+        f.attrs["format_version"] = 3
+
+
+def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_restart(tmp_path):
+    """``held`` has columns only with solve.inactive (48 bytes a contact otherwise), the state
+    bits are uint8, and a checkpoint of format 3 (int64 bits, int32 types, 6 held columns)
+    restarts bitwise; a state value that uint8 cannot hold is refused."""
+    from pdem.io.checkpoint import FORMAT_VERSION
+
+    text = SCENE.replace("CK", os.path.join(tmp_path, "ck"))
+    sim = Simulation(parse_scene(text.replace("OUT", os.path.join(tmp_path, "a.h5"))),
+                     MPI.COMM_SELF)
+    sim.run()
+    sim.close()
+    c = sim.contacts
+    assert c.n and c.held.shape == (c.n, 0) and c.sc_state.dtype == np.uint8
+    assert c.ia.dtype == np.int32 and c.ctype.dtype == np.int8
+    path = os.path.join(tmp_path, sorted(p for p in os.listdir(tmp_path) if p.startswith("ck-"))[0])
+    assert read_checkpoint(path)["attrs"]["format_version"] == FORMAT_VERSION
+    _as_format_3(path)
+    ck = read_checkpoint(path)
+    assert ck["contacts"].sc_state.dtype == np.uint8 and ck["contacts"].held.shape[1] == 6
+    scene = parse_scene(ck["attrs"]["scene"])
+    scene = scene.model_copy(update={"output": scene.output.model_copy(
+        update={"file": os.path.join(tmp_path, "b.h5")}), "checkpoint": None})
+    again = Simulation(scene, MPI.COMM_SELF, checkpoint=ck)
+    assert again.contacts.held.shape[1] == 0
+    again.run()
+    again.close()
+    for k in ("x", "q", "v", "w", "work"):
+        assert np.array_equal(getattr(again.blocks, k), getattr(sim.blocks, k)), k
+    for k in ("sc_fs", "sc_us", "sc_un", "sc_state"):
+        assert np.array_equal(again.contacts.sub[k], sim.contacts.sub[k]), k
+    assert len(ck["contacts"].sc_state)  # the cube rests on sub-contacts at the checkpoint
+    with h5py.File(path, "a") as f:
+        f["subcontacts/sc_state"][0] = 300
+    with pytest.raises(ValueError, match="outside uint8"):
+        read_checkpoint(path)
+    # with solve.inactive the contacts hold 6 columns (force and moment)
+    held = parse_scene(SCENE.replace("CK", os.path.join(tmp_path, "ck2")).replace(
+        "OUT", os.path.join(tmp_path, "c.h5")).replace(
+        "solve: {time: 0.06}", "solve: {time: 0.06, inactive: {speed: 1.0e-4}}"))
+    sim = Simulation(held, MPI.COMM_SELF, output=False)
+    sim.run(steps=2)
+    assert sim.contacts.n and sim.contacts.held.shape == (sim.contacts.n, 6)
