@@ -70,8 +70,8 @@ def _gap_above(va, vb, m0, m1, m2, ia, ib, wa, wb, best):
         if d > maxa:
             maxa = d
             ka = i
-            if ubb - maxa <= best:
-                return False, 0.0, 0.0, ka, jb
+    if ubb - maxa <= best:
+        return False, 0.0, 0.0, ka, jb
     minb = _INF
     kb = 0
     for j in range(vb.shape[0]):
@@ -79,8 +79,8 @@ def _gap_above(va, vb, m0, m1, m2, ia, ib, wa, wb, best):
         if d < minb:
             minb = d
             kb = j
-            if minb - maxa <= best:
-                return False, 0.0, 0.0, ka, kb
+    if minb - maxa <= best:
+        return False, 0.0, 0.0, ka, kb
     return True, maxa, minb, ka, kb
 
 
