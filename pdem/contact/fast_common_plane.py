@@ -85,18 +85,39 @@ def _gap_above(va, vb, m0, m1, m2, ia, ib, wa, wb, best):
 
 
 @inline_kernel
-def _consider(va, vb, m0, m1, m2, st):
-    """Evaluate unit-normalised candidate ``m`` against the state ``st`` = (n0, n1, n2, best
-    gap, max_A, min_B, ia, ib, wa, wb); returns (improved, new state).
+def _consider(va, vb, m0, m1, m2, st, margin):
+    """Evaluate candidate ``m`` (any length, normalised here) against the state ``st`` =
+    (n0, n1, n2, best gap, max_A, min_B, ia, ib, wa, wb); returns (improved, new state).
 
     ``(ia, ib)`` are the best normal's support vertices, ``(wa, wb)`` the witness of the last
     rejection: consecutive candidates are alike (the same vertex pair projected off each edge
     direction), so it often rejects the next one after two dot products. Whether a candidate
     improves, and the new best, do not depend on these hints (:func:`_gap_above`).
+
+    Pre-test before the normalisation (three divisions in the latency chain of every
+    candidate; most are rejected by one of the two pairs): a pair with
+    ``m.V_b - m.V_a <= |m| (best - margin)`` for the unnormalised ``m`` proves that the full
+    test on the normalised ``m`` rejects the candidate. The two computations differ by
+    rounding only, bounded by a few tens of ``2^-53 size`` (``size`` the largest
+    ``|x| + |y| + |z|`` of a vertex; ``|best| <= 2 size``), and ``margin = 1e-12 size`` exceeds
+    that by more than two orders of magnitude; whatever the pre-test lets through takes the
+    full test. So the result is the same bits as without it (tested against the plain
+    algorithm in tests/unit/test_common_plane.py).
     """
     s = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
     if not (s > 0.0):
         return False, st
+    if s > 1e-100:  # (far from underflow, where the rounding bound holds)
+        thr = s * (st[3] - margin)
+        ia, ib, wa, wb = st[6], st[7], st[8], st[9]
+        g = (vb[ib, 0] * m0 + vb[ib, 1] * m1 + vb[ib, 2] * m2) - \
+            (va[ia, 0] * m0 + va[ia, 1] * m1 + va[ia, 2] * m2)
+        if g <= thr:
+            return False, st
+        g = (vb[wb, 0] * m0 + vb[wb, 1] * m1 + vb[wb, 2] * m2) - \
+            (va[wa, 0] * m0 + va[wa, 1] * m1 + va[wa, 2] * m2)
+        if g <= thr:
+            return False, st
     m0 /= s
     m1 /= s
     m2 /= s
@@ -129,12 +150,18 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
     state = (n0, n1, n2, mnb - mxa, mxa, mnb, ka, kb, ka, kb)
     iters = 1
     early = state[3] > ctol
+    size = 0.0  # the largest |x| + |y| + |z| of a vertex: the rounding scale (see _consider)
+    for i in range(va.shape[0]):
+        size = max(size, abs(va[i, 0]) + abs(va[i, 1]) + abs(va[i, 2]))
+    for j in range(vb.shape[0]):
+        size = max(size, abs(vb[j, 0]) + abs(vb[j, 1]) + abs(vb[j, 2]))
+    margin = 1e-12 * size
 
     # face normals of A (B beyond A's face) and of B (reversed)
     if not early:
         for f in range(fa_normals.shape[0]):
             _, state = _consider(va, vb, fa_normals[f, 0], fa_normals[f, 1], fa_normals[f, 2],
-                                 state)
+                                 state, margin)
             iters += 1
             if state[3] > ctol:
                 early = True
@@ -142,7 +169,7 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
     if not early:
         for f in range(fb_normals.shape[0]):
             _, state = _consider(va, vb, -fb_normals[f, 0], -fb_normals[f, 1], -fb_normals[f, 2],
-                                 state)
+                                 state, margin)
             iters += 1
             if state[3] > ctol:
                 early = True
@@ -160,8 +187,8 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                 mm = m0 * m0 + m1 * m1 + m2 * m2
                 if mm <= 1e-24 * aa * (b0 * b0 + b1 * b1 + b2 * b2):
                     continue  # parallel edges: no plane defined
-                _, state = _consider(va, vb, m0, m1, m2, state)
-                _, state = _consider(va, vb, -m0, -m1, -m2, state)
+                _, state = _consider(va, vb, m0, m1, m2, state, margin)
+                _, state = _consider(va, vb, -m0, -m1, -m2, state, margin)
                 iters += 2
                 if state[3] > ctol:
                     early = True
@@ -204,7 +231,7 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                     d0 = vb[j, 0] - va[i, 0]
                     d1 = vb[j, 1] - va[i, 1]
                     d2 = vb[j, 2] - va[i, 2]
-                    ok, state = _consider(va, vb, d0, d1, d2, state)  # type a
+                    ok, state = _consider(va, vb, d0, d1, d2, state, margin)  # type a
                     if ok:
                         improved = True
                     iters += 1
@@ -219,7 +246,7 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                             continue
                         t = (d0 * e0 + d1 * e1 + d2 * e2) / ee
                         ok, state = _consider(va, vb, d0 - t * e0, d1 - t * e1, d2 - t * e2,
-                                              state)
+                                              state, margin)
                         if ok:
                             improved = True
                         iters += 1
