@@ -19,7 +19,7 @@ from collections import namedtuple
 import numpy as np
 
 from ..dynamics.kinematics import world_vectors
-from ..jit import kernel
+from ..jit import inline_kernel, kernel
 from .algorithms import find_plane, uses_face_normals
 from .common_plane import type_code
 from .laws import FAILED
@@ -30,7 +30,7 @@ from .subcontacts import POLYGON, contact_region
 Planes = namedtuple("Planes", "ia ib ka kb normal point gap ctype warm")
 
 
-@kernel
+@inline_kernel
 def _plane(a, b, shapes, normals_world, edirs_world, n_in, p_in, warm, alg):
     """Common plane of convex pieces a and b, world face normals and edge directions
     precomputed."""
@@ -51,7 +51,7 @@ def _grow(a, size):
     return out
 
 
-@kernel
+@inline_kernel
 def _spring_sums(area, un, dil, fs):
     """(sum A (un + dil)^2 over compressed sub-contacts, sum |fs|^2 / A): a contact's normal
     and shear spring energies times 2 kn and 2 ks."""
@@ -67,7 +67,7 @@ def _spring_sums(area, un, dil, fs):
     return en, es
 
 
-@kernel
+@inline_kernel
 def carry_spring_energy(old_area, old_un, old_dil, old_fs, area, un, dil, fs):
     """Scale one refreshed contact's new sub-contacts so that the geometry update neither
     stores nor releases spring energy (issue 16).
