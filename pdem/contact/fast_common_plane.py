@@ -20,9 +20,11 @@ Return values follow :mod:`pdem.contact.common_plane` exactly (``n`` from A to B
 positive when separated, ``p`` per eqs. (8)/(9)), so the two are interchangeable.
 
 Cost: ``(fA + fB + 2 eA eB) (vA + vB)`` dot products at worst; candidates that cannot beat
-the best so far are rejected after two dot products (the best plane's support vertices give
-an upper bound of the gap for any normal). Pass *unique* edge directions (one per set of
-parallel edges; a box has three) to keep ``eA eB`` small.
+the best so far are mostly rejected after two or four dot products (any vertex pair gives an
+upper bound of the gap for any normal: the best plane's support vertices and the last
+rejection's witness are tried first, on the candidate before its normalisation, see
+:func:`_consider`). The planes are the same bits as with plain support scans. Pass *unique*
+edge directions (one per set of parallel edges; a box has three) to keep ``eA eB`` small.
 """
 
 from __future__ import annotations
@@ -102,7 +104,7 @@ def _consider(va, vb, m0, m1, m2, st, margin):
     ``|x| + |y| + |z|`` of a vertex; ``|best| <= 2 size``), and ``margin = 1e-12 size`` exceeds
     that by more than two orders of magnitude; whatever the pre-test lets through takes the
     full test. So the result is the same bits as without it (tested against the plain
-    algorithm in tests/unit/test_common_plane.py).
+    algorithm in tests/unit/test_fcp_bits.py).
     """
     s = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
     if not (s > 0.0):
