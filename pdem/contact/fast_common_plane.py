@@ -20,9 +20,11 @@ Return values follow :mod:`pdem.contact.common_plane` exactly (``n`` from A to B
 positive when separated, ``p`` per eqs. (8)/(9)), so the two are interchangeable.
 
 Cost: ``(fA + fB + 2 eA eB) (vA + vB)`` dot products at worst; candidates that cannot beat
-the best so far are rejected after two dot products (the best plane's support vertices give
-an upper bound of the gap for any normal). Pass *unique* edge directions (one per set of
-parallel edges; a box has three) to keep ``eA eB`` small.
+the best so far are mostly rejected after two or four dot products (any vertex pair gives an
+upper bound of the gap for any normal: the best plane's support vertices and the last
+rejection's witness are tried first, on the candidate before its normalisation, see
+:func:`_consider`). The planes are the same bits as with plain support scans. Pass *unique*
+edge directions (one per set of parallel edges; a box has three) to keep ``eA eB`` small.
 """
 
 from __future__ import annotations
@@ -32,38 +34,99 @@ import math
 import numpy as np
 
 from pdem.contact.common_plane import finish_plane, initial_plane, support_gap
-from pdem.jit import kernel
+from pdem.jit import inline_kernel, kernel
 
 _INF = np.inf
 _MAX_TIES = 4
 _MAX_ROUNDS = 32
 
 
-@kernel
-def _consider(va, vb, m0, m1, m2, state):
-    """Evaluate unit-normalised candidate ``m``; update ``state`` if it improves the gap.
+@inline_kernel
+def _gap_above(va, vb, m0, m1, m2, ia, ib, wa, wb, best):
+    """:func:`support_gap` with a second rejection witness, the pair ``(wa, wb)``.
 
-    ``state`` (8,) float array: n0, n1, n2, best gap, max_A, min_B, ia, ib.
+    Returns ``(ok, max_A m.V, min_B m.V, argmax_A, argmin_B)``; on failure the last two are a
+    witness pair (a vertex pair whose separation along ``m`` is ``<= best``). ``ok`` and, when
+    ``ok``, every other value are the same bits as :func:`support_gap`'s, whatever the hints:
+    any vertex pair bounds the computed gap from above (rounding is monotone, and each dot
+    product is the same expression as in the full scan), so a pair that proves the gap
+    ``<= best`` decides ``ok``, and a gap above ``best`` is only returned after full scans,
+    which keep the lowest index of each extreme.
+    """
+    ubb = vb[ib, 0] * m0 + vb[ib, 1] * m1 + vb[ib, 2] * m2
+    uba = va[ia, 0] * m0 + va[ia, 1] * m1 + va[ia, 2] * m2
+    if ubb - uba <= best:
+        return False, 0.0, 0.0, ia, ib
+    wbb = vb[wb, 0] * m0 + vb[wb, 1] * m1 + vb[wb, 2] * m2
+    wba = va[wa, 0] * m0 + va[wa, 1] * m1 + va[wa, 2] * m2
+    if wbb - wba <= best:
+        return False, 0.0, 0.0, wa, wb
+    jb = ib
+    if wbb < ubb:  # the lower of the two B values bounds min_B best
+        ubb = wbb
+        jb = wb
+    maxa = -_INF
+    ka = 0
+    for i in range(va.shape[0]):
+        d = va[i, 0] * m0 + va[i, 1] * m1 + va[i, 2] * m2
+        if d > maxa:
+            maxa = d
+            ka = i
+    if ubb - maxa <= best:
+        return False, 0.0, 0.0, ka, jb
+    minb = _INF
+    kb = 0
+    for j in range(vb.shape[0]):
+        d = vb[j, 0] * m0 + vb[j, 1] * m1 + vb[j, 2] * m2
+        if d < minb:
+            minb = d
+            kb = j
+    if minb - maxa <= best:
+        return False, 0.0, 0.0, ka, kb
+    return True, maxa, minb, ka, kb
+
+
+@inline_kernel
+def _consider(va, vb, m0, m1, m2, st, margin):
+    """Evaluate candidate ``m`` (any length, normalised here) against the state ``st`` =
+    (n0, n1, n2, best gap, max_A, min_B, ia, ib, wa, wb); returns (improved, new state).
+
+    ``(ia, ib)`` are the best normal's support vertices, ``(wa, wb)`` the witness of the last
+    rejection: consecutive candidates are alike (the same vertex pair projected off each edge
+    direction), so it often rejects the next one after two dot products. Whether a candidate
+    improves, and the new best, do not depend on these hints (:func:`_gap_above`).
+
+    Pre-test before the normalisation (three divisions in the latency chain of every
+    candidate; most are rejected by one of the two pairs): a pair with
+    ``m.V_b - m.V_a <= |m| (best - margin)`` for the unnormalised ``m`` proves that the full
+    test on the normalised ``m`` rejects the candidate. The two computations differ by
+    rounding only, bounded by a few tens of ``2^-53 size`` (``size`` the largest
+    ``|x| + |y| + |z|`` of a vertex; ``|best| <= 2 size``), and ``margin = 1e-12 size`` exceeds
+    that by more than two orders of magnitude; whatever the pre-test lets through takes the
+    full test. So the result is the same bits as without it (tested against the plain
+    algorithm in tests/unit/test_fcp_bits.py).
     """
     s = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
     if not (s > 0.0):
-        return False
+        return False, st
+    if s > 1e-100:  # (far from underflow, where the rounding bound holds)
+        thr = s * (st[3] - margin)
+        ia, ib, wa, wb = st[6], st[7], st[8], st[9]
+        g = (vb[ib, 0] * m0 + vb[ib, 1] * m1 + vb[ib, 2] * m2) - \
+            (va[ia, 0] * m0 + va[ia, 1] * m1 + va[ia, 2] * m2)
+        if g <= thr:
+            return False, st
+        g = (vb[wb, 0] * m0 + vb[wb, 1] * m1 + vb[wb, 2] * m2) - \
+            (va[wa, 0] * m0 + va[wa, 1] * m1 + va[wa, 2] * m2)
+        if g <= thr:
+            return False, st
     m0 /= s
     m1 /= s
     m2 /= s
-    ia = int(state[6])
-    ib = int(state[7])
-    ok, mxa, mnb, ka, kb = support_gap(va, vb, m0, m1, m2, ia, ib, state[3])
+    ok, mxa, mnb, ka, kb = _gap_above(va, vb, m0, m1, m2, st[6], st[7], st[8], st[9], st[3])
     if ok:
-        state[0] = m0
-        state[1] = m1
-        state[2] = m2
-        state[3] = mnb - mxa
-        state[4] = mxa
-        state[5] = mnb
-        state[6] = ka
-        state[7] = kb
-    return ok
+        return True, (m0, m1, m2, mnb - mxa, mxa, mnb, ka, kb, st[8], st[9])
+    return False, (st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7], ka, kb)
 
 
 @kernel
@@ -83,31 +146,32 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
     Returns ``(n, p, gap, d_a, d_b, iters)`` like ``common_plane``; ``iters`` is the number
     of candidate normals examined.
     """
-    state = np.empty(8)
     n0, n1, n2, c = initial_plane(ca, cb, n_in, p_in, warm)
     ok, mxa, mnb, ka, kb = support_gap(va, vb, n0, n1, n2, 0, 0, -_INF)
-    state[0] = n0
-    state[1] = n1
-    state[2] = n2
-    state[3] = mnb - mxa
-    state[4] = mxa
-    state[5] = mnb
-    state[6] = ka
-    state[7] = kb
+    # (n0, n1, n2, best gap, max_A, min_B, ia, ib, wa, wb): see _consider
+    state = (n0, n1, n2, mnb - mxa, mxa, mnb, ka, kb, ka, kb)
     iters = 1
     early = state[3] > ctol
+    size = 0.0  # the largest |x| + |y| + |z| of a vertex: the rounding scale (see _consider)
+    for i in range(va.shape[0]):
+        size = max(size, abs(va[i, 0]) + abs(va[i, 1]) + abs(va[i, 2]))
+    for j in range(vb.shape[0]):
+        size = max(size, abs(vb[j, 0]) + abs(vb[j, 1]) + abs(vb[j, 2]))
+    margin = 1e-12 * size
 
     # face normals of A (B beyond A's face) and of B (reversed)
     if not early:
         for f in range(fa_normals.shape[0]):
-            _consider(va, vb, fa_normals[f, 0], fa_normals[f, 1], fa_normals[f, 2], state)
+            _, state = _consider(va, vb, fa_normals[f, 0], fa_normals[f, 1], fa_normals[f, 2],
+                                 state, margin)
             iters += 1
             if state[3] > ctol:
                 early = True
                 break
     if not early:
         for f in range(fb_normals.shape[0]):
-            _consider(va, vb, -fb_normals[f, 0], -fb_normals[f, 1], -fb_normals[f, 2], state)
+            _, state = _consider(va, vb, -fb_normals[f, 0], -fb_normals[f, 1], -fb_normals[f, 2],
+                                 state, margin)
             iters += 1
             if state[3] > ctol:
                 early = True
@@ -125,8 +189,8 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                 mm = m0 * m0 + m1 * m1 + m2 * m2
                 if mm <= 1e-24 * aa * (b0 * b0 + b1 * b1 + b2 * b2):
                     continue  # parallel edges: no plane defined
-                _consider(va, vb, m0, m1, m2, state)
-                _consider(va, vb, -m0, -m1, -m2, state)
+                _, state = _consider(va, vb, m0, m1, m2, state, margin)
+                _, state = _consider(va, vb, -m0, -m1, -m2, state, margin)
                 iters += 2
                 if state[3] > ctol:
                     early = True
@@ -169,7 +233,8 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                     d0 = vb[j, 0] - va[i, 0]
                     d1 = vb[j, 1] - va[i, 1]
                     d2 = vb[j, 2] - va[i, 2]
-                    if _consider(va, vb, d0, d1, d2, state):  # type a
+                    ok, state = _consider(va, vb, d0, d1, d2, state, margin)  # type a
+                    if ok:
                         improved = True
                     iters += 1
                     for e in range(ea.shape[0] + eb.shape[0]):  # type d
@@ -182,7 +247,9 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                         if ee <= 0.0:
                             continue
                         t = (d0 * e0 + d1 * e1 + d2 * e2) / ee
-                        if _consider(va, vb, d0 - t * e0, d1 - t * e1, d2 - t * e2, state):
+                        ok, state = _consider(va, vb, d0 - t * e0, d1 - t * e1, d2 - t * e2,
+                                              state, margin)
+                        if ok:
                             improved = True
                         iters += 1
                     if state[3] > ctol:
@@ -193,6 +260,6 @@ def fast_common_plane(va, vb, ca, cb, fa_normals, fb_normals, ea, eb, n_in, p_in
                 break
 
     n, p, gap, da, db = finish_plane(
-        va, vb, state[0], state[1], state[2], c, state[4], state[5], int(state[6]), int(state[7])
+        va, vb, state[0], state[1], state[2], c, state[4], state[5], state[6], state[7]
     )
     return n, p, gap, da, db, iters
