@@ -11,7 +11,9 @@ between small objects, a freed one leaves a hole that trimming cannot give back,
 temporaries stack on the kept arrays. :func:`map_large_blocks` fixes the threshold, so that an
 array of 128 KB or more (a per-block column of 5,000 rows) is its own mapping, returned to the
 system when freed (64,000 cubes on 2 ranks: ~20 MB less kept and ~65 MB less peak per rank,
-bench/setup.py, and no slower).
+bench/setup.py). Once the model is set up, :func:`reuse_large_blocks` gives large blocks back to
+the heap: the step allocates and frees the same arrays over and over, and fresh mappings would
+be faulted in at every contact update.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ import functools
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 # blocks of this size or more are mapped on their own (arrays), smaller ones from the heap
 LARGE_BLOCK = 128 * 1024
+# while stepping, blocks up to this size come from the heap (glibc's largest dynamic threshold)
+STEP_BLOCK = 32 * 1024 * 1024
 
 
 @functools.cache
@@ -41,16 +45,28 @@ def _trim():
     return libc.malloc_trim if libc is not None and hasattr(libc, "malloc_trim") else None
 
 
-@functools.cache
-def map_large_blocks() -> bool:
-    """Allocations of :data:`LARGE_BLOCK` bytes or more get their own mapping from now on (and
-    the heap is trimmed above 4 of them): freed, they go back to the system at once. Set once
-    per process (at the model's set-up); False where glibc's ``mallopt`` is missing."""
+def _mallopt(mmap_threshold: int, trim_threshold: int) -> bool:
     libc = _libc()
     if libc is None or not hasattr(libc, "mallopt"):
         return False
-    return bool(libc.mallopt(_M_MMAP_THRESHOLD, LARGE_BLOCK)) and \
-        bool(libc.mallopt(_M_TRIM_THRESHOLD, 4 * LARGE_BLOCK))
+    return bool(libc.mallopt(_M_MMAP_THRESHOLD, mmap_threshold)) and \
+        bool(libc.mallopt(_M_TRIM_THRESHOLD, trim_threshold))
+
+
+def map_large_blocks() -> bool:
+    """Allocations of :data:`LARGE_BLOCK` bytes or more get their own mapping from now on (and
+    the heap is trimmed above 4 of them): freed, they go back to the system at once. For the
+    model's set-up; False where glibc's ``mallopt`` is missing."""
+    return _mallopt(LARGE_BLOCK, 4 * LARGE_BLOCK)
+
+
+def reuse_large_blocks() -> bool:
+    """Once the model is set up: blocks up to :data:`STEP_BLOCK` come from the heap again and
+    up to twice that of freed heap is kept. A contact update builds its sub-contact arrays
+    afresh (a few MB each): mapped, each was faulted in page by page at every update, which
+    made the 20³ cube stack step 1.27x slower (bench/cube_stack.py); from the heap they reuse
+    the pages the last update freed."""
+    return _mallopt(STEP_BLOCK, 2 * STEP_BLOCK)
 
 
 def return_freed_memory() -> None:

@@ -10,6 +10,7 @@ This is the public entry point for scripts and tests::
 from __future__ import annotations
 
 from .io.paths import check_writable
+from .memory import reuse_large_blocks
 from .plugins import default_plugins
 from .run import Run
 from .state import ModelState
@@ -55,6 +56,7 @@ class Simulation:
             # the output writer has taken its share of the surfaces (it keeps its own copy)
             self.state.writer_mesh = None
             self.state.release_scene_geometry()
+        reuse_large_blocks()  # set up: the step's arrays come from the heap (pdem.memory)
 
     # the model, as scripts and tests read it
     @property
