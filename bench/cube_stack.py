@@ -8,7 +8,9 @@ Measured (2026-11-23, 2 shared cores under load, alternating with the tree befor
 ``PYTHONPATH=. .venv/bin/python bench/cube_stack.py 20 300`` 4.0e5 -> 4.3e5 block-steps/s
 (1.07-1.09x on CPU time); the step is contact forces ~57%, contact updates ~40%, motion ~5%
 (docs/validation.md, Benchmarks). 2026-11-25, the contact update 1.4x cheaper per contact
-(same bits): 3.7-3.8e5 -> 4.2-4.3e5 block-steps/s on CPU time (machine under load 3-4).
+(same bits): 3.7-3.8e5 -> 4.2-4.3e5 block-steps/s on CPU time (machine under load 3-4);
+with contacts re-detected by the motion of B relative to A (pdem.contact.staleness) too:
+7.0-7.1e5 against 3.9-4.1e5 for the tree before both (quiet machine, alternating, 2026-11-25).
 """
 
 from __future__ import annotations
