@@ -927,7 +927,8 @@ CHOOSE: dict[str, str] = {
                            "energy budget or a period",
     "contact.detect_every": "10; larger for slow, sliding or settling models (cheaper, no error "
                             "seen here); small when blocks spin fast",
-    "contact.refresh_tolerance": "the default; larger for big models that mostly rest",
+    "contact.refresh_tolerance": "the default; up to 0.1 for big models that mostly rest "
+                                 "(0.3 and above leave the settled stack's tolerance)",
     "contact.ctol": "auto; never far above it (energy balance)",
     "contact.point_area": "0.1 when blocks pivot or rock on edges or vertices (toppling, "
                           "rocking); the default makes such pivots soft",
