@@ -174,19 +174,6 @@ def test_a_pair_gliding_together_is_never_redetected(monkeypatch):
     assert _updates(sliding, 400, monkeypatch) > 0
 
 
-SLIDER = """
-name: slider
-materials: {rock: {density: 2000.0}}
-joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 20.0}}
-gravity: [5.0, 0.0, -9.81]
-blocks:
-  - {name: floor, box: {min: [-2, -2, -1], max: [6, 2, 0]}, material: rock, fixed: true}
-  - {name: cube, box: {min: [-0.5, -0.5, 0.0], max: [0.5, 0.5, 1.0]}, material: rock}
-solve: {time: 0.04}
-checkpoint: {every: 0.02, file: CK}
-"""
-
-
 def test_a_checkpoint_without_the_reference_pose_restarts(tmp_path):
     """A checkpoint written before contacts kept their reference pose (no contacts/rel_x,
     rel_q) continues: its contacts are re-detected at the first periodic update, and the
@@ -194,10 +181,11 @@ def test_a_checkpoint_without_the_reference_pose_restarts(tmp_path):
     import os
 
     import h5py
+    from test_state import SCENE  # the sliding cube, a checkpoint at 0.03 s of 0.06 s
 
     from pdem.io.checkpoint import read_checkpoint
 
-    text = SLIDER.replace("CK", os.path.join(tmp_path, "ck"))
+    text = SCENE.replace("CK", os.path.join(tmp_path, "ck"))
     straight = Simulation(parse_scene(text), MPI.COMM_SELF, output=False)
     straight.run()
     path = os.path.join(tmp_path, sorted(p for p in os.listdir(tmp_path)
