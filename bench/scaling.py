@@ -17,9 +17,9 @@ grid ``choose_dims`` would pick and, from the geometry of the bricks, how many b
 would own, how many ghosts it would hold (the rule of pdem.parallel.migrate: a block whose box
 ``centroid +- (radius + ctol/2)`` reaches into the rank's interest box -- the box around its
 owned free blocks, padded the same way, grown by the margin), and the halo bytes per step
-(18 float64 per ghosted free block, pdem.parallel.halo.ROW), for the 10^4-cube stack and a
-10^6-cube one (n = 100). The cube lattice is a tensor product, so every count factorises into
-per-axis counts and 512 ranks x 10^6 blocks is instant.
+(17 float64 per ghosted free block in a rigid scene, pdem.model.fields.halo_fields), for the
+10^4-cube stack and a 10^6-cube one (n = 100). The cube lattice is a tensor product, so every
+count factorises into per-axis counts and 512 ranks x 10^6 blocks is instant.
 
 Not a test: timings on shared machines are noisy.
 """
@@ -43,7 +43,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # float64 per ghosted free block per step (the declared halo fields of a scene without
 # solve.inactive)
-ROW_BYTES = row_width(halo_fields(False)) * 8
+ROW_BYTES = row_width(halo_fields(False, zoned=False)) * 8
 CUBE_RADIUS = math.sqrt(3.0) / 2.0  # unit cube: centroid to vertex
 CTOL = 0.02  # ctol "auto" = 2 % of the smallest block's equivalent size (1 m)
 GRAVITY = np.array([0.0, 0.0, -9.81])

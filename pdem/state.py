@@ -242,7 +242,8 @@ class ModelState:
             self.blocks, self.n_owned, self.contacts, self.halo, held = rebuild(
                 self.comm, self.decomp, self.glob, self.blocks if source is None else source,
                 owned_gids, state, contacts, 0.5 * r.ctol, r.margin,
-                halo_fields(self.scene.solve.inactive is not None), consume,
+                halo_fields(self.scene.solve.inactive is not None,
+                            any(x.zones is not None for x in self.scene.blocks)), consume,
                 None if grids is None else grids.payload())
             b = self.blocks
             if grids is not None:  # zoned blocks' grids came with them (owned and ghosts)

@@ -208,9 +208,13 @@ CHECKPOINT = names(BLOCK, checkpoint=True)
 HALO = select(BLOCK, halo=True)
 # halo fields only a feature reads: a scene without it does not send them (pdem.parallel.halo)
 HALO_INACTIVE = ("still",)  # solve.inactive (pdem.dynamics.inactive)
+# zoned blocks: their contacts' motion since the last update (pdem.stepper.refresh) sums the
+# path of both blocks; rigid scenes measure B relative to A (pdem.contact.staleness)
+HALO_ZONED = ("u_geo",)
 
 
-def halo_fields(inactive: bool) -> tuple[Field, ...]:
+def halo_fields(inactive: bool, zoned: bool = True) -> tuple[Field, ...]:
     """The halo row of a scene: every halo field, less those of features it does not use."""
-    return HALO if inactive else tuple(f for f in HALO if f.name not in HALO_INACTIVE)
+    skip = (() if inactive else HALO_INACTIVE) + (() if zoned else HALO_ZONED)
+    return tuple(f for f in HALO if f.name not in skip)
 OUTPUT = tuple(f for f in BLOCK if f.output)

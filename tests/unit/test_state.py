@@ -27,6 +27,9 @@ def test_declared_travel_sets_are_consistent():
     # a scene pays only for the halo of the features it uses: without solve.inactive the
     # hold flag is not sent
     assert F.row_width(F.halo_fields(False)) == 18 and F.halo_fields(True) == F.HALO
+    # nor the path since the last update, which only zoned blocks' contacts read
+    assert F.row_width(F.halo_fields(False, zoned=False)) == 17
+    assert "u_geo" not in {f.name for f in F.halo_fields(True, zoned=False)}
     assert {"x", "q", "v", "w", "dtheta"} <= {f.name for f in F.HALO}
     assert {f.output for f in F.OUTPUT} == {"centroid", "orientation", "velocity",
                                             "angular_velocity", "removed", "stage_origin"}
