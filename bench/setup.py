@@ -9,7 +9,12 @@ the set-up itself, not the kernels' load from the cache (about 0.5 s more on a c
     .venv/bin/python bench/setup.py --ranks 2       # the same under mpiexec -n 2
     .venv/bin/python bench/setup.py --n 20 40 100   # N = 8e3, 6.4e4 and 1e6 (memory: ~GB)
 
-Prints per phase the seconds (slowest rank) and the peak resident memory per rank (MB). Run it
+Prints per phase the seconds (slowest rank) and the memory per rank (MB, the largest over the
+ranks): resident (RSS: its peak, from getrusage, and after set-up) and proportional (PSS:
+shared pages split among the processes sharing them; the peak sampled every 10 ms by a thread,
+so a spike shorter than that can be missed). Ranks on one node share the libraries' pages
+(numba's LLVM is ~66 MB of every rank's RSS): the node holds the sum of the ranks' PSS, so PSS
+is a rank's share of the node's memory, and RSS counts the shared pages once per rank. Run it
 against another tree with PYTHONPATH=that/tree to compare before and after a change. Issue
 11's target: 64,000 blocks to the first step within 10 s on 2 ranks, <= 400 MB per rank.
 Not a test: timings on shared machines are noisy.
@@ -23,10 +28,11 @@ import os
 import resource
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
-from pdem.memory import resident_mb
+from pdem.memory import proportional_mb, resident_mb
 
 STEPS = 20  # steps timed after set-up (block-steps/s of the whole run)
 PHASES = ("parse", "preflight", "expand_blocks", "block_store", "resolve", "check_derived",
@@ -41,6 +47,27 @@ def _timed(times, key, fn):
         finally:
             times[key] = times.get(key, 0.0) + time.perf_counter() - t0
     return wrapper
+
+
+class PeakSampler:
+    """The largest PSS seen, sampled every ``period`` seconds by a thread (the kernels release
+    the GIL: the thread runs during them too)."""
+
+    def __init__(self, period: float = 0.01):
+        self.peak = proportional_mb()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(period,), daemon=True)
+        self._thread.start()
+
+    def _run(self, period: float) -> None:
+        while not self._stop.wait(period):
+            self.peak = max(self.peak, proportional_mb())
+
+    def stop(self) -> float:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, proportional_mb())
+        return self.peak
 
 
 def child(n: int) -> None:
@@ -65,6 +92,7 @@ def child(n: int) -> None:
     st.ModelState.check_initial_overlaps = _timed(times, "overlaps", orig_overlaps)
     Stepper.start = _timed(times, "start", orig_start)
     comm.Barrier()
+    sampler = PeakSampler()
     t0 = time.perf_counter()
     text = cube_stack_scene(n, "fast")
     if os.environ.get("PDEM_BENCH_MEMORY"):  # --memory: the pre-flight's limit per rank
@@ -78,16 +106,21 @@ def child(n: int) -> None:
     times["total"] = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     now = resident_mb()  # what the run keeps once set up
+    comm.Barrier()  # every rank set up: the shared pages are shared
+    pss_now = proportional_mb()
+    pss_peak = sampler.stop()
     sim.run(steps=1)  # the second step leaves the start's one-off work behind
     t2 = time.perf_counter()
     sim.run(steps=STEPS)
     rate = (sim.state.glob.n - 1) * STEPS / (time.perf_counter() - t2)
-    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1, now, rate), root=0)
+    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1, now, rate, pss_now, pss_peak),
+                       root=0)
     if comm.rank == 0:
         out = {k: max(r[0].get(k, 0.0) for r in rows) for k in (*PHASES, "total")}
         out.update(n=n, cubes=rows[0][3], ranks=comm.size, peak_mb=max(r[1] for r in rows),
                    base_mb=max(r[2] for r in rows), steady_mb=max(r[4] for r in rows),
-                   rate=min(r[5] for r in rows))
+                   rate=min(r[5] for r in rows), pss_mb=max(r[6] for r in rows),
+                   pss_peak_mb=max(r[7] for r in rows))
         print("RESULT " + json.dumps(out), flush=True)
 
 
@@ -121,7 +154,8 @@ def main() -> None:
     if not results:
         return
     print(f"set-up to the first step, cube stack, {args.ranks} rank(s); seconds (slowest rank), "
-          "peak resident MB per rank (after loading the kernels: base)")
+          "MB per rank: resident (peak, after loading the kernels: base, after set-up) and "
+          "proportional (PSS: shared pages split among the ranks)")
     head = f"{'phase':>14}" + "".join(f"{r['cubes']:>12,}" for r in results)
     print(head)
     for k in (*PHASES, "total"):
@@ -131,6 +165,8 @@ def main() -> None:
     print(f"{'KB per block':>14}" + "".join(
         f"{1024.0 * (r['peak_mb'] - r['base_mb']) / r['cubes']:>12.1f}" for r in results))
     print(f"{'after set-up MB':>14}" + "".join(f"{r['steady_mb']:>12.0f}" for r in results))
+    print(f"{'PSS peak MB':>14}" + "".join(f"{r['pss_peak_mb']:>12.0f}" for r in results))
+    print(f"{'PSS after MB':>14}" + "".join(f"{r['pss_mb']:>12.0f}" for r in results))
     print(f"{'block-steps/s':>14}" + "".join(f"{r['rate']:>12.3g}" for r in results)
           + f"   (per rank: / {args.ranks}; {STEPS} steps after the first two)")
 

@@ -47,7 +47,7 @@ def _noop_refresh(x, q, R, radius, pairs, rel_x, rel_q, gap, c_moved, c_warm, sc
 def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u_geo, u_mig,
                 q, R, bodies, pairs, subs, joints, c_moved, c_warm, rel_x, rel_q, gap, radius_all,
                 m_true, calm, still,
-                speed, sleep_steps, force_frac, sc_fn, remap_at,
+                speed, sleep_steps, force_frac, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
                 step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step):
     """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max)``, the
@@ -98,4 +98,3 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
             if not _noop_refresh(bodies.x, q, R, radius_all, pairs, rel_x, rel_q, gap, c_moved,
                                  c_warm, subs.un, u_geo, refresh_tolerance, todo):
                 return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
-            sc_fn[:] = 0.0  # as a contact update leaves the force record (pdem.stepper)

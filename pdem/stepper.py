@@ -163,8 +163,7 @@ class Stepper:
             todo = (c.warm == 0) | all_contacts
             if periodic:
                 todo |= c.moved > s.resolved.refresh_tolerance
-        if not todo.any():  # nothing to update: what the update below would change
-            c.sub["sc_fn"][:] = 0.0
+        if not todo.any():  # nothing to update
             return
         c.moved[todo] = 0.0
         mark_fresh(b.x, b.q, b.R, c.ia, c.ib, c.arrays["rel_x"], c.arrays["rel_q"],
@@ -184,9 +183,8 @@ class Stepper:
             set_joints(new & keep, c.ia, c.ib, c.ka, c.kb, c.normal, b.x, b.R, b.face_start,
                        b.normals_local, b.offsets_local, b.face_tag, s.joints.cut_joint,
                        s.ctol, c.joint)
-        # normal forces of refreshed sub-contacts are recomputed by the next force update
-        sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fn": np.zeros(len(area)),
-               "sc_fs": fs, "sc_us": us, "sc_dil": dil, "sc_state": state, "sc_hist": hist}
+        sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fs": fs, "sc_us": us,
+               "sc_dil": dil, "sc_state": state, "sc_hist": hist}
         if s.grids is not None:  # the kept sub-contacts keep their gridpoints
             from .deformable.subcontacts import carry_grid_columns
 
@@ -278,7 +276,7 @@ class Stepper:
                 c.warm, c.arrays["rel_x"], c.arrays["rel_q"], c.gap, b.radius,
                 motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
                 speed, sleep_steps, frac,
-                c.sub["sc_fn"], REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
+                REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
                 r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,
                 s.step, s.time, max_steps, NO_STEP if stop_step is None else stop_step,
                 math.inf if stop_time is None else stop_time,

@@ -118,7 +118,6 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
             fn, dil, st, fx, fy, fz = apply_law(
                 joints.laws, slot, j, s, subs.hist, un, dil0, fx, fy, fz, dsx, dsy, dsz,
                 area, ux, uy, uz, st0)
-            subs.fn[s] = fn
             subs.dil[s] = dil
             subs.state[s] = st
             subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2] = fx, fy, fz
@@ -166,9 +165,8 @@ def stored_energy(bodies, pairs, subs, joints, out):
 @kernel
 def normal_forces(pairs, subs, joints, out):
     """``out[s]``: sub-contact s's normal force by its law in its stored state (overlap,
-    dilation, state bits), as the force step computes it. ``subs.fn`` is the force step's own
-    record, which a contact geometry update leaves stale (it renews the sub-contacts and
-    nothing reads ``fn`` before the next step); the output reports this one."""
+    dilation, state bits), as the force step computes it (sub-contacts keep no force
+    column)."""
     for c in range(pairs.ia.shape[0]):
         jrow = pairs.joint[c]
         slot = joints.slot[jrow]

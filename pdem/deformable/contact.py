@@ -159,7 +159,6 @@ def _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny, nz):
     st0 = subs.state[s]
     fn, dil, st, fx, fy, fz = apply_law(joints.laws, slot, j, s, subs.hist, un, dil0, fx, fy, fz,
                                         dsx, dsy, dsz, area, ux, uy, uz, st0)
-    subs.fn[s] = fn
     subs.dil[s] = dil
     subs.state[s] = st
     subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2] = fx, fy, fz

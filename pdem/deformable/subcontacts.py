@@ -198,8 +198,7 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
             points, area, un, nodes = _corners_into(grid, b, ro, ko, rd, kd, -u, tol)
         m = len(points)
         ra = b.R[ia[c]]
-        sub = {"sc_pa": (points - b.x[ia[c]]) @ ra, "sc_area": area, "sc_un": un,
-               "sc_fn": np.zeros(m)}
+        sub = {"sc_pa": (points - b.x[ia[c]]) @ ra, "sc_area": area, "sc_un": un}
         for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist", "sc_grid"):
             a = new.sub[k]
             sub[k] = np.zeros((m,) + a.shape[1:], a.dtype)

@@ -39,8 +39,11 @@ FORMAT = "checkpoint"
 # the resolved scene values and the plugins' restart state as attributes. 3: contacts name
 # their convex pieces (pga, pgb: joined blocks). 4: narrower integers (sub-contact state bits
 # uint8, contact types int8) and ``held`` with no columns in scenes without solve.inactive.
-# 1 to 3 still read (their integers cast to the fields' dtypes, ``held`` fitted to the scene).
-FORMAT_VERSION = 4
+# 5: no sub-contact normal force (``sc_fn``: the law gives it from the stored state), int32
+# contact gids (``ga gb pga pgb``).
+# 1 to 4 still read (their integers cast to the fields' dtypes, ``held`` fitted to the scene,
+# a stored ``sc_fn`` ignored).
+FORMAT_VERSION = 5
 CONTACT_CK = select(CONTACT, checkpoint=True)
 SUB_CK = select(SUB, checkpoint=True) + (SUB_HIST,)
 

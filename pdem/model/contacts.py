@@ -19,7 +19,9 @@ from .fields import CONTACT, HELD_WIDTH, SUB, allocate
 
 # What the force kernel reads and writes of the contacts and sub-contacts.
 Pairs = namedtuple("Pairs", "ia ib joint normal sc_start held frozen")
-Subs = namedtuple("Subs", "pa area un fn fs us dil state hist")
+# No normal force: the law gives it from the stored state (:meth:`ContactStore.normal_forces`),
+# so a sub-contact does not keep a column only the force step would write.
+Subs = namedtuple("Subs", "pa area un fs us dil state hist")
 
 
 @dataclass
@@ -79,7 +81,7 @@ class ContactStore:
         return ContactStore(arrays, self.sub, self.sc_start)
 
     def keys(self) -> np.ndarray:
-        return self.arrays["pga"] * csr.KEY_SHIFT + self.arrays["pgb"]
+        return self.arrays["pga"].astype(np.int64) * csr.KEY_SHIFT + self.arrays["pgb"]
 
     def pairs(self) -> Pairs:
         a = self.arrays
@@ -88,8 +90,18 @@ class ContactStore:
 
     def subs(self) -> Subs:
         s = self.sub
-        return Subs(s["sc_pa"], s["sc_area"], s["sc_un"], s["sc_fn"], s["sc_fs"], s["sc_us"],
-                    s["sc_dil"], s["sc_state"], s["sc_hist"])
+        return Subs(s["sc_pa"], s["sc_area"], s["sc_un"], s["sc_fs"], s["sc_us"], s["sc_dil"],
+                    s["sc_state"], s["sc_hist"])
+
+    def normal_forces(self, joints) -> np.ndarray:
+        """Each sub-contact's normal force by its joint law in its stored state (overlap,
+        dilation, state bits), as the force step computed it; ``joints``: the scene's
+        ``Joints.kernel_args``."""
+        from ..contact.forces import normal_forces
+
+        fn = np.zeros(self.n_sub)
+        normal_forces(self.pairs(), self.subs(), joints, fn)
+        return fn
 
     def take(self, idx: np.ndarray) -> ContactStore:
         """Contacts ``idx`` (in that order), their sub-contacts carried along."""

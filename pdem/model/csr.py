@@ -10,7 +10,7 @@ KEY_SHIFT = 1 << 31
 
 def pair_key(ga: np.ndarray, gb: np.ndarray) -> np.ndarray:
     """Canonical key of unordered pairs: (min gid, max gid) packed in one int64."""
-    return np.minimum(ga, gb) * KEY_SHIFT + np.maximum(ga, gb)
+    return np.minimum(ga, gb).astype(np.int64) * KEY_SHIFT + np.maximum(ga, gb)
 
 
 def starts(counts: np.ndarray) -> np.ndarray:

@@ -108,11 +108,13 @@ CONTACT: tuple[Field, ...] = (
     Field("ib", (), I32, "1", "row of block B in the block store (local)"),
     Field("ka", (), I32, "1", "row of A's convex piece in the store's piece geometry (local)"),
     Field("kb", (), I32, "1", "row of B's convex piece (local)"),
-    Field("ga", (), I64, "1", "gid of A", **_D),
-    Field("gb", (), I64, "1", "gid of B", **_D),
-    Field("pga", (), I64, "1", "global id of A's convex piece (pga < pgb); equals ga for a "
+    # global ids: below csr.KEY_SHIFT = 2**31 (contact keys), so int32 holds them; key
+    # arithmetic casts to int64 (csr.pair_key, ContactStore.keys)
+    Field("ga", (), I32, "1", "gid of A", **_D),
+    Field("gb", (), I32, "1", "gid of B", **_D),
+    Field("pga", (), I32, "1", "global id of A's convex piece (pga < pgb); equals ga for a "
           "block of one piece", **_D),
-    Field("pgb", (), I64, "1", "global id of B's convex piece", **_D),
+    Field("pgb", (), I32, "1", "global id of B's convex piece", **_D),
     Field("joint", (), I32, "1", "row in the joint table", **_D),
     Field("normal", (3,), F, "1", "common-plane unit normal, A -> B", **_D),
     Field("point", (3,), F, "m", "common-plane reference point", **_D),
@@ -149,7 +151,6 @@ SUB: tuple[Field, ...] = (
     Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D),
     Field("sc_area", (), F, "m2", "area carried", **_D),
     Field("sc_un", (), F, "m", "overlap, + closing", **_D),
-    Field("sc_fn", (), F, "N", "normal force", **_D),
     Field("sc_fs", (3,), F, "N", "shear force on B", **_D),
     Field("sc_us", (3,), F, "m", "total shear displacement", **_D),
     Field("sc_dil", (), F, "m", "accumulated dilation", **_D),

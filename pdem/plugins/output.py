@@ -9,7 +9,6 @@ import numpy as np
 from .. import __version__
 from ..config.resolve import mass_scaling_summary
 from ..config.schema import MassScaling
-from ..contact.forces import normal_forces
 from ..contact.laws import FAILED
 from ..errors import writing
 from ..io.checkpoint import written_contacts
@@ -80,9 +79,7 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
     sel = c.take(keep)
     nsub = np.diff(sel.sc_start)
-    fn = np.zeros(c.n_sub)
-    normal_forces(c.pairs(), c.subs(), state.joints.kernel_args, fn)
-    fn = fn[csr.take(c.sc_start, keep)[0]]
+    fn = c.normal_forces(state.joints.kernel_args)[csr.take(c.sc_start, keep)[0]]
     b = state.blocks
     ia = np.repeat(sel.ia, nsub)
     R = quat_to_matrix(b.q[ia])
@@ -93,7 +90,9 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     joint = np.repeat(sel.joint, nsub)
     bits[~bonded[joint]] &= ~FAILED
     return {
-        "piece": np.stack([sel.pga, sel.pgb], axis=1), "block": np.stack([sel.ga, sel.gb], 1),
+        # the output's int64 (the store's int32)
+        "piece": np.stack([sel.pga, sel.pgb], axis=1).astype(np.int64),
+        "block": np.stack([sel.ga, sel.gb], 1).astype(np.int64),
         "joint": sel.joint, "point": sel.point, "normal": sel.normal, "n_sub": nsub,
         "sub": {"point": point, "area": sel.sc_area, "overlap": sel.sc_un,
                 "normal_force": fn, "shear_force": sel.sc_fs,

@@ -295,7 +295,7 @@ def test_direct_shear_model_peak_residual_and_energy():
             if {int(pairs.ia[c]), int(pairs.ib[c])} == {0, specimen}:
                 s = slice(pairs.sc_start[c], pairs.sc_start[c + 1])
                 fs += subs.fs[s].sum(axis=0)
-                # (sc_fn is recomputed by the next step after a contact update: use closure)
+                # the law's normal force from the stored closure
                 fn += KJ * (subs.area[s] * np.maximum(subs.un[s] + subs.dil[s], 0.0)).sum()
         us.append(sim.blocks.x[specimen, 0] - x0[0])
         shear.append(abs(fs[0]))

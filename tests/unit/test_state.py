@@ -107,7 +107,8 @@ def test_exact_sum_does_not_depend_on_how_rows_are_split():
 
 def _as_format_3(path):
     """Rewrite a checkpoint in the layout of format 3: int64 sub-contact state bits, int32
-    contact types, ``held`` of 6 columns (zeros: no solve.inactive)."""
+    contact types, ``held`` of 6 columns (zeros: no solve.inactive), a normal force column
+    ``sc_fn`` (formats 1-4; nonsense values: a restart must not read it)."""
     with h5py.File(path, "a") as f:
         for name, dtype in (("subcontacts/sc_state", np.int64), ("contacts/ctype", np.int32)):
             data = f[name][()].astype(dtype)
@@ -116,6 +117,7 @@ def _as_format_3(path):
         n = len(f["contacts/nsub"])
         del f["contacts/held"]
         f.create_dataset("contacts/held", data=np.zeros((n, 6)))
+        f.create_dataset("subcontacts/sc_fn", data=np.full(len(f["subcontacts/sc_un"]), -1e9))
         f.attrs["format_version"] = 3
 
 

@@ -174,7 +174,7 @@ def test_contacts_between_rigid_blocks_use_the_rigid_arithmetic():
             grid = Grid(np.full(b.n, -1, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
                         np.zeros((c.n_sub, 2, 3), np.int64), np.zeros((c.n_sub, 2, 3)))
             contact_forces_grid(s.dt, bodies, pairs, subs, s.joints.kernel_args, grid)
-        results.append(copy.deepcopy((bodies.force, bodies.moment, bodies.work, subs.fn, subs.fs)))
+        results.append(copy.deepcopy((bodies.force, bodies.moment, bodies.work, subs.un, subs.fs)))
     for x, y in zip(*results, strict=True):
         assert np.array_equal(x, y)
     assert np.abs(results[0][0]).max() > 0.0

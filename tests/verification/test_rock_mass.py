@@ -59,6 +59,7 @@ def joint_normal_forces(sim) -> dict[str, float]:
     contact with the piece below both planes along the line of intersection, uses the
     default joint (its common plane may turn to either plane's)."""
     c = sim.contacts
+    fn = c.normal_forces(sim.state.joints.kernel_args)
     names = sim.state.joints.names
     na, nb = dip_normal(*WEDGE_SETS[0]), dip_normal(*WEDGE_SETS[1])
     out: dict[str, float] = {}
@@ -66,7 +67,7 @@ def joint_normal_forces(sim) -> dict[str, float]:
         name = names[c.joint[k]]
         if name != "default":
             assert abs(c.normal[k] @ (na if name == "jA" else nb)) > 1 - 1e-9, (name, c.normal[k])
-        out[name] = out.get(name, 0.0) + float(c.sc_fn[c.sc_start[k]:c.sc_start[k + 1]].sum())
+        out[name] = out.get(name, 0.0) + float(fn[c.sc_start[k]:c.sc_start[k + 1]].sum())
     return out
 
 
