@@ -118,8 +118,11 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
             fn, dil, st, fx, fy, fz = apply_law(
                 joints.laws, slot, j, s, subs.hist, un, dil0, fx, fy, fz, dsx, dsy, dsz,
                 area, ux, uy, uz, st0)
-            subs.dil[s] = dil
-            subs.state[s] = st
+            # stored only when changed: a sticking joint's lines of these stay clean
+            if dil != dil0:
+                subs.dil[s] = dil
+            if st != st0:
+                subs.state[s] = st
             subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2] = fx, fy, fz
             # Energy budget: the work done on the joint over the step (trapezoid) less the
             # change of its stored energy is what it dissipated. For an elastic step of linear

@@ -44,6 +44,18 @@ def table(joints: list[Params]) -> Table:
 
 
 @inline_kernel
+def below_limit(fx, fy, fz, fs_max):
+    """Whether ``sqrt(fx² + fy² + fz²) > fs_max`` is surely false, decided on the squares: a
+    sticking sub-contact (most of them, at rest) skips the square root. Where the squares are
+    within 4e-15 of each other, or outside the normal range, this says no and the caller
+    compares the rounded root as before: the decision, and so every bit, is the root's (the
+    square's rounding is 2^-53 relative, the root's half that)."""
+    m2 = fx * fx + fy * fy + fz * fz
+    tt = fs_max * fs_max
+    return tt > 1e-290 and m2 < tt * (1.0 - 4e-15)
+
+
+@inline_kernel
 def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state):
     """Update one sub-contact's normal and shear force (eqs. 24-27, 34-43).
 
@@ -84,7 +96,7 @@ def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, sta
             state |= FAILED
         return 0.0, dil, state | OPEN, 0.0, 0.0, 0.0
     fs_max = c_area + max(fn, 0.0) * tan_phi  # eq. 35, 37
-    fs_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fs_mag = fs_max if below_limit(fx, fy, fz, fs_max) else math.sqrt(fx * fx + fy * fy + fz * fz)
     if fs_mag > fs_max:  # eq. 39
         scale = fs_max / fs_mag
         fx *= scale
@@ -159,7 +171,7 @@ def friction_update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy
     if fn < -0.0:
         return 0.0, dil, state | OPEN, 0.0, 0.0, 0.0
     fs_max = 0.0 + max(fn, 0.0) * p.tan_phi[j]  # as update's c_area + ..., to the zero's sign
-    fs_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fs_mag = fs_max if below_limit(fx, fy, fz, fs_max) else math.sqrt(fx * fx + fy * fy + fz * fz)
     if fs_mag > fs_max:
         scale = fs_max / fs_mag
         fx *= scale
