@@ -102,6 +102,17 @@ def carry_spring_energy(old_area, old_un, old_dil, old_fs, area, un, dil, fs):
 
 
 @kernel
+def _copy_rows(dst, d0, src, s0, s1):
+    """``dst[d0:d0 + s1 - s0] = src[s0:s1]`` for C-ordered arrays of equal row width, as one
+    slice of the flat arrays (numba copies that 2x faster than an indexed loop, 6x faster than
+    a loop per row and column)."""
+    w = 1
+    for k in range(1, src.ndim):
+        w *= src.shape[k]
+    dst.reshape(-1)[d0 * w:(d0 + s1 - s0) * w] = src.reshape(-1)[s0 * w:s1 * w]
+
+
+@kernel
 def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_frac, alg):
     """Re-detect contacts; returns (keep, new_start, pa, area, un, fs, us, dil, state, hist).
 
@@ -112,6 +123,14 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     within which a vertex counts as touching the common plane. Contacts with ``todo[c] == 0``
     keep their plane and sub-contacts unchanged (only new contacts need detecting between the
     periodic geometry updates). ``alg``: the common-plane algorithm (:mod:`.algorithms`).
+
+    Two passes: the contacts to update write their new sub-contacts into side arrays (a few
+    thousand rows at a periodic update); then the outputs are allocated at their exact size and
+    filled from the side arrays and, for each run of untouched contacts, with one contiguous
+    copy of their old rows. (One pass into arrays grown on demand re-copied everything when a
+    refreshed face contact went from 4 sub-contacts to 8 and then trimmed the slack: ~40 ns per
+    untouched sub-contact, 9 of the 13 ms of an update of the 20³ cube stack.) When every
+    contact is updated (the first update) the side arrays are the outputs.
     """
     c_ia, c_ib, c_normal, c_point = planes.ia, planes.ib, planes.normal, planes.point
     c_ka, c_kb = planes.ka, planes.kb
@@ -120,19 +139,19 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     old_us, old_dil, old_state, old_hist = old.us, old.dil, old.state, old.hist
     vert_start, verts_world, point_area = shapes.vert_start, shapes.verts_world, shapes.point_area
     nc = c_ia.shape[0]
-    # output capacity: the old sub-contacts, a few for each new contact (none before) and a
-    # little slack, grown on demand (trimmed at the end: the stepper keeps these arrays when no
-    # contact is deleted). A refreshed contact mostly keeps its number of sub-contacts: a
-    # generous capacity (8 more per refreshed contact, 3.5x the sub-contacts of the cube stack)
-    # cost ~0.3 us per contact in first-touch page faults and the trimming copy.
+    # side capacity: the updated contacts' old sub-contacts, a few for each new contact (none
+    # before) and a little slack, grown on demand
     n_todo = 0
     n_new = 0
+    cap = 64
     for c in range(nc):
         if todo[c] != 0:
             n_todo += 1
-            if old_start[c + 1] == old_start[c]:
+            k = old_start[c + 1] - old_start[c]
+            cap += k + (k >> 1)
+            if k == 0:
                 n_new += 1
-    cap = old_start[nc] + 4 * n_new + (n_todo >> 3) + 64
+    cap += 4 * n_new
     keep = np.zeros(nc, np.uint8)
     counts = np.zeros(nc, np.int64)
     pa = np.empty((cap, 3))
@@ -159,28 +178,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         b = c_ib[c]
         if todo[c] == 0:
             keep[c] = 1
-            k = old_start[c + 1] - old_start[c]
-            if pos + k > cap:
-                cap = cap + (cap >> 2) + k
-                pa, fs, us = _grow(pa, cap), _grow(fs, cap), _grow(us, cap)
-                area, un, dil, state = _grow(area, cap), _grow(un, cap), _grow(dil, cap), \
-                    _grow(state, cap)
-                hist = _grow(hist, cap)
-            for i in range(k):
-                o = old_start[c] + i
-                s = pos + i
-                for m in range(3):
-                    pa[s, m] = old_pa[o, m]
-                    fs[s, m] = old_fs[o, m]
-                    us[s, m] = old_us[o, m]
-                area[s] = old_area[o]
-                un[s] = old_un[o]
-                dil[s] = old_dil[o]
-                state[s] = old_state[o]
-                for m in range(hist.shape[1]):
-                    hist[s, m] = old_hist[o, m]
-            counts[c] = k
-            pos += k
+            counts[c] = old_start[c + 1] - old_start[c]
             continue
         ka = c_ka[c]
         kb = c_kb[c]
@@ -254,23 +252,65 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         counts[c] = k
         pos += k
     new_start = np.zeros(nc + 1, np.int64)
-    # sub-contacts were written sequentially (deleted contacts have empty ranges)
     tot = 0
     for c in range(nc):
         new_start[c] = tot
         tot += counts[c]
     new_start[nc] = tot
-    if cap > tot + (tot >> 3) + 64:  # a contiguous copy (memcpy) rather than hold the slack
-        # one array at a time, each original freed once copied: the update's peak is the
-        # sub-contacts plus one copy, not twice the sub-contacts (the start's first update)
-        pa = pa[:tot].copy()
-        area = area[:tot].copy()
-        un = un[:tot].copy()
-        fs = fs[:tot].copy()
-        us = us[:tot].copy()
-        dil = dil[:tot].copy()
-        state = state[:tot].copy()
-        hist = hist[:tot].copy()
-        return keep, new_start, pa, area, un, fs, us, dil, state, hist
-    return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], dil[:tot], \
-        state[:tot], hist[:tot]
+    if n_todo == nc:  # every contact updated: the side arrays, in contact order, are the result
+        if cap > tot + (tot >> 3) + 64:  # a contiguous copy (memcpy) rather than hold the slack
+            # one array at a time, each original freed once copied: the update's peak is the
+            # sub-contacts plus one copy, not twice the sub-contacts (the start's first update)
+            pa = pa[:tot].copy()
+            area = area[:tot].copy()
+            un = un[:tot].copy()
+            fs = fs[:tot].copy()
+            us = us[:tot].copy()
+            dil = dil[:tot].copy()
+            state = state[:tot].copy()
+            hist = hist[:tot].copy()
+            return keep, new_start, pa, area, un, fs, us, dil, state, hist
+        return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], \
+            dil[:tot], state[:tot], hist[:tot]
+    out_pa = np.empty((tot, 3))
+    out_area = np.empty(tot)
+    out_un = np.empty(tot)
+    out_fs = np.empty((tot, 3))
+    out_us = np.empty((tot, 3))
+    out_dil = np.empty(tot)
+    out_state = np.empty(tot, old_state.dtype)
+    out_hist = np.empty((tot, old_hist.shape[1]))
+    side = 0
+    c = 0
+    while c < nc:
+        if todo[c] != 0:  # updated (or deleted: no rows): from the side arrays
+            k = counts[c]
+            d0 = new_start[c]
+            _copy_rows(out_pa, d0, pa, side, side + k)
+            _copy_rows(out_area, d0, area, side, side + k)
+            _copy_rows(out_un, d0, un, side, side + k)
+            _copy_rows(out_fs, d0, fs, side, side + k)
+            _copy_rows(out_us, d0, us, side, side + k)
+            _copy_rows(out_dil, d0, dil, side, side + k)
+            _copy_rows(out_state, d0, state, side, side + k)
+            _copy_rows(out_hist, d0, hist, side, side + k)
+            side += k
+            c += 1
+            continue
+        c1 = c + 1  # a run of untouched contacts: their old rows, contiguous, in one copy
+        while c1 < nc and todo[c1] == 0:
+            c1 += 1
+        o0 = old_start[c]
+        o1 = old_start[c1]
+        d0 = new_start[c]
+        _copy_rows(out_pa, d0, old_pa, o0, o1)
+        _copy_rows(out_area, d0, old_area, o0, o1)
+        _copy_rows(out_un, d0, old_un, o0, o1)
+        _copy_rows(out_fs, d0, old_fs, o0, o1)
+        _copy_rows(out_us, d0, old_us, o0, o1)
+        _copy_rows(out_dil, d0, old_dil, o0, o1)
+        _copy_rows(out_state, d0, old_state, o0, o1)
+        _copy_rows(out_hist, d0, old_hist, o0, o1)
+        c = c1
+    return keep, new_start, out_pa, out_area, out_un, out_fs, out_us, out_dil, out_state, \
+        out_hist
