@@ -74,3 +74,61 @@ def test_crossing_edges_meet_at_one_point():
     assert kind == POINT and tuple(counts) == (2, 2)
     np.testing.assert_allclose(world(pts, e1, e2)[0, :2], [0, 0], atol=1e-12)
     assert ovl[0] == pytest.approx(1e-5, rel=1e-9)
+
+
+def _moment(pts, area, ovl):
+    """Sum of area x overlap (the normal force over kn) and its first moments about the
+    origin: what a joint's sub-contacts push with, and where."""
+    w = area * ovl
+    return np.array([w.sum(), (w * pts[:, 0]).sum(), (w * pts[:, 1]).sum()])
+
+
+def test_sliver_overlap_keeps_one_sub_contact_per_end():
+    """Diagonal neighbours of a settling stack: B's bottom face overlaps A's top face over a
+    strip 1 m long and 5 um wide. Its four corners are two pairs 5 um apart (closer than the
+    touch tolerance): two sub-contacts, one at each end, carrying the strip's area and the
+    same force and moment to within the pairs' spacing."""
+    w = 5e-6
+    va = box_verts([0, 0, -1], [1, 1, 0])
+    vb = box_verts([1 - w, 0, -2e-4], [2 - w, 1, 1 - 2e-4])
+    pts, ovl, area, kind, e1, e2, counts = contact_region(va, vb, N, P, 1e-2)
+    assert kind == POLYGON and tuple(counts) == (4, 4) and len(pts) == 2
+    assert area.sum() == pytest.approx(w * 1.0, rel=1e-9)
+    np.testing.assert_allclose(area, 0.5 * w, rtol=1e-9)
+    xy = world(pts, e1, e2)[:, :2]
+    np.testing.assert_allclose(sorted(xy[:, 1]), [0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(xy[:, 0], 1 - w / 2, atol=1e-12)
+    np.testing.assert_allclose(ovl, 2e-4, rtol=1e-9)
+    # the unmerged corners (a touch tolerance below the spacing) push the same
+    p4, o4, a4, _, f1, f2, _ = contact_region(va, vb, N, P, 1e-6)
+    assert len(p4) == 4
+    np.testing.assert_allclose(_moment(world(pts, e1, e2), area, ovl),
+                               _moment(world(p4, f1, f2), a4, o4), rtol=1e-9, atol=1e-18)
+
+
+def test_turned_face_keeps_corners_that_are_apart():
+    """A unit cube turned 0.5 mrad about the normal on an equal face below: the overlap is an
+    octagon whose corners lie near the squares' corners and edge midpoints, 0.5 m apart: none
+    merges, at any turn (the touch tolerance is 1 cm)."""
+    for angle in (5e-4, 0.1):
+        c, s = np.cos(angle), np.sin(angle)
+        R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        va = box_verts([-0.5, -0.5, -1], [0.5, 0.5, 0])
+        vb = box_verts([-0.5, -0.5, 0], [0.5, 0.5, 1]) @ R.T
+        vb[:, 2] -= 1e-4
+        pts, ovl, area, kind, e1, e2, _ = contact_region(va, vb, N, P, 1e-2)
+        assert kind == POLYGON and len(pts) == 8, (angle, len(pts))
+        p8, _, a8, _, _, _, _ = contact_region(va, vb, N, P, 1e-9)
+        np.testing.assert_array_equal(pts, p8)
+        np.testing.assert_array_equal(area, a8)
+
+
+def test_tiny_region_is_one_sub_contact():
+    """A region whose corners all lie within the touch tolerance of the next (a 1 mm square
+    overlap of two corners) is one sub-contact at its centroid with its area."""
+    va = box_verts([0, 0, -1], [1, 1, 0])
+    vb = box_verts([1 - 1e-3, 1 - 1e-3, -1e-4], [2, 2, 1])
+    pts, ovl, area, kind, e1, e2, _ = contact_region(va, vb, N, P, 1e-2)
+    assert kind == POLYGON and len(pts) == 1
+    assert area[0] == pytest.approx(1e-6, rel=1e-9)
+    np.testing.assert_allclose(world(pts, e1, e2)[0, :2], [1 - 5e-4, 1 - 5e-4], atol=1e-12)
