@@ -53,11 +53,21 @@ def _mallopt(mmap_threshold: int, trim_threshold: int) -> bool:
         bool(libc.mallopt(_M_TRIM_THRESHOLD, trim_threshold))
 
 
+_mapped = [False]  # whether map_large_blocks is in force (set-up)
+
+
 def map_large_blocks() -> bool:
     """Allocations of :data:`LARGE_BLOCK` bytes or more get their own mapping from now on (and
     the heap is trimmed above 4 of them): freed, they go back to the system at once. For the
     model's set-up; False where glibc's ``mallopt`` is missing."""
-    return _mallopt(LARGE_BLOCK, 4 * LARGE_BLOCK)
+    _mapped[0] = _mallopt(LARGE_BLOCK, 4 * LARGE_BLOCK)
+    return _mapped[0]
+
+
+def large_blocks_mapped() -> bool:
+    """True while every large array is its own mapping (:func:`map_large_blocks`): pages of
+    an array never written are never resident, so an over-allocated array costs no memory."""
+    return _mapped[0]
 
 
 def reuse_large_blocks() -> bool:
@@ -66,6 +76,7 @@ def reuse_large_blocks() -> bool:
     afresh (a few MB each): mapped, each was faulted in page by page at every update, which
     made the 20³ cube stack step 1.27x slower (bench/cube_stack.py); from the heap they reuse
     the pages the last update freed."""
+    _mapped[0] = False
     return _mallopt(STEP_BLOCK, 2 * STEP_BLOCK)
 
 

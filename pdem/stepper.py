@@ -30,6 +30,7 @@ from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
+from .memory import large_blocks_mapped
 from .model.contacts import ContactStore
 from .model.csr import pair_key
 from .parallel import mpi
@@ -176,8 +177,10 @@ class Stepper:
         todo = todo.astype(np.uint8)
         before = contact_energies(c.pairs(), c.subs(), joints, todo)
         new = (c.warm == 0).astype(np.uint8)
+        # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
         res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
-                               todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm)
+                               todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm,
+                               not large_blocks_mapped())
         keep, start, pa, area, un, fs, us, dil, state, hist = res
         if s.joints.by_set and new.any():  # a new contact on a joint plane: the set's joint
             set_joints(new & keep, c.ia, c.ib, c.ka, c.kb, c.normal, b.x, b.R, b.face_start,

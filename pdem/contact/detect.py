@@ -113,7 +113,8 @@ def _copy_rows(dst, d0, src, s0, s1):
 
 
 @kernel
-def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_frac, alg):
+def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_frac, alg,
+                     trim=True):
     """Re-detect contacts; returns (keep, new_start, pa, area, un, fs, us, dil, state, hist).
 
     ``shapes`` (:class:`pdem.model.blocks.Shapes`): ``point_area[b]`` is the area given to
@@ -130,7 +131,11 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     copy of their old rows. (One pass into arrays grown on demand re-copied everything when a
     refreshed face contact went from 4 sub-contacts to 8 and then trimmed the slack: ~40 ns per
     untouched sub-contact, 9 of the 13 ms of an update of the 20³ cube stack.) When every
-    contact is updated (the first update) the side arrays are the outputs.
+    contact is updated (the first update) the side arrays are the outputs, trimmed to their
+    size with ``trim``; without it they are views of the side arrays: while every large array
+    is its own mapping (set-up, pdem.memory.map_large_blocks) the untouched slack was never
+    faulted in and holds no memory, and the trimming copy would only add its size to the
+    set-up's peak (~11 MB per rank for 64,000 cubes on 2 ranks, bench/setup.py).
     """
     c_ia, c_ib, c_normal, c_point = planes.ia, planes.ib, planes.normal, planes.point
     c_ka, c_kb = planes.ka, planes.kb
@@ -258,7 +263,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         tot += counts[c]
     new_start[nc] = tot
     if n_todo == nc:  # every contact updated: the side arrays, in contact order, are the result
-        if cap > tot + (tot >> 3) + 64:  # a contiguous copy (memcpy) rather than hold the slack
+        if trim and cap > tot + (tot >> 3) + 64:  # a copy (memcpy) rather than hold the slack
             # one array at a time, each original freed once copied: the update's peak is the
             # sub-contacts plus one copy, not twice the sub-contacts (the start's first update)
             pa = pa[:tot].copy()
