@@ -877,9 +877,10 @@ WHY: dict[str, str] = {
         "contacts keep their plane. The settled stack is the sensitive case: its diagonal "
         "neighbours touch along shared edges, whose plane is a tie until they press, and with "
         "0.3 and above the stack settles before a stale plane is replaced (spurious load "
-        "through the edges). 0 (every contact at every update) leaves it too, for a reason not "
-        "yet found: its faces then carry the closed form's loads to 0.2 %, yet the heights are "
-        "off by 15 % of the compression. In these small "
+        "through the edges). 0 (every contact at every update) leaves it by more, for a reason "
+        "not yet found (the table's error: the heights, off by that fraction of the "
+        "compression; before sub-contacts a hair apart were merged its faces carried the "
+        "closed form's loads to 0.2 % while the heights were off by 15 %). In these small "
         "cases the updates are a small part of the step, so the CPU time hardly moves; it pays "
         "in large models that mostly rest (bench/cube_stack.py).",
     "contact.ctol":
