@@ -6,8 +6,10 @@ model of memory and halo traffic per rank at 64-4096 ranks fitted to those runs.
     .venv/bin/python bench/scale.py --model-only FILE.json # the model from a saved run
 
 Measured (each size and rank count in a fresh job, bench/setup.py's child): seconds to the
-first step, peak resident MB per rank (the set-up) and after set-up (what the run keeps),
-block-steps/s over 20 steps. Saved as JSON (``--save``, default bench/scale-last.json).
+first step, peak resident MB per rank (the set-up) and after set-up (what the run keeps), the
+same as proportional set sizes (PSS: the libraries' pages shared by the ranks split among
+them, bench/setup.py), block-steps/s over 20 steps. The model is fitted to the resident
+figures. Saved as JSON (``--save``, default bench/scale-last.json).
 
 Model: a rank's memory after set-up is ``base + a N + h (owned + ghosts)``: ``a`` the bytes
 every rank keeps per scene block (the scene's per-block fields and block names), ``h`` the bytes
@@ -62,7 +64,8 @@ def measure(ns, ranks, memory) -> list[dict]:
             r = json.loads(line[0][7:])
             out.append(r)
             print(f"{r['cubes']:>10,} blocks {p} rank(s): first step {r['total']:7.1f} s, "
-                  f"peak {r['peak_mb']:7.0f} MB, after set-up {r['steady_mb']:7.0f} MB per rank, "
+                  f"peak {r['peak_mb']:7.0f} MB, after set-up {r['steady_mb']:7.0f} MB per rank "
+                  f"(PSS: {r['pss_peak_mb']:7.0f}, {r['pss_mb']:7.0f}), "
                   f"{r['rate']:.3g} block-steps/s", flush=True)
     return out
 

@@ -11,8 +11,8 @@ the set-up itself, not the kernels' load from the cache (about 0.5 s more on a c
 
 Prints per phase the seconds (slowest rank) and the memory per rank (MB, the largest over the
 ranks): resident (RSS: its peak, from getrusage, and after set-up) and proportional (PSS:
-shared pages split among the processes sharing them; the peak sampled every 10 ms by a thread,
-so a spike shorter than that can be missed). Ranks on one node share the libraries' pages
+shared pages split among the processes sharing them; the peak sampled by a thread every 10 ms,
+longer for a large process, so a short spike can be missed). Ranks on one node share the libraries' pages
 (numba's LLVM is ~66 MB of every rank's RSS): the node holds the sum of the ranks' PSS, so PSS
 is a rank's share of the node's memory, and RSS counts the shared pages once per rank. Run it
 against another tree with PYTHONPATH=that/tree to compare before and after a change. Issue
@@ -50,8 +50,10 @@ def _timed(times, key, fn):
 
 
 class PeakSampler:
-    """The largest PSS seen, sampled every ``period`` seconds by a thread (the kernels release
-    the GIL: the thread runs during them too)."""
+    """The largest PSS seen, sampled by a thread (the kernels release the GIL: the thread runs
+    during them too) every ``period`` seconds, or 4x as long as the last sample took: reading
+    a large process's ``smaps_rollup`` walks its page tables and holds its memory map, which
+    would slow the set-up's page faults (10^6 blocks: seconds)."""
 
     def __init__(self, period: float = 0.01):
         self.peak = proportional_mb()
@@ -60,8 +62,11 @@ class PeakSampler:
         self._thread.start()
 
     def _run(self, period: float) -> None:
-        while not self._stop.wait(period):
+        wait = period
+        while not self._stop.wait(wait):
+            t0 = time.perf_counter()
             self.peak = max(self.peak, proportional_mb())
+            wait = max(period, 4.0 * (time.perf_counter() - t0))
 
     def stop(self) -> float:
         self._stop.set()
