@@ -86,28 +86,26 @@ def return_freed_memory() -> None:
         trim(0)
 
 
+def _proc_mb(path: str, key: str) -> float:
+    """Field ``key`` (kB) of a /proc file of this process, in MB; 0 where /proc is missing."""
+    try:
+        with open(path) as f:
+            for line in f:
+                if line.startswith(key):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
 def proportional_mb() -> float:
     """This process's proportional set size now (MB; Linux ``smaps_rollup``, 0 elsewhere): its
     resident pages, each page it shares with other processes counted as its share. Ranks on one
     node share the libraries' pages (numba's LLVM alone is ~66 MB resident in every rank, once
     in the node's memory), so the node holds the sum of its ranks' PSS, not of their RSS."""
-    try:
-        with open("/proc/self/smaps_rollup") as f:
-            for line in f:
-                if line.startswith("Pss:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return 0.0
+    return _proc_mb("/proc/self/smaps_rollup", "Pss:")
 
 
 def resident_mb() -> float:
     """This process's resident memory now (MB), 0 where /proc is missing."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return 0.0
+    return _proc_mb("/proc/self/status", "VmRSS:")

@@ -113,6 +113,27 @@ def _copy_rows(dst, d0, src, s0, s1):
 
 
 @kernel
+def _new_subs(n, state_dtype_like, hist_width):
+    """Empty sub-contact columns for ``n`` rows: (pa, area, un, fs, us, dil, state, hist)."""
+    return (np.empty((n, 3)), np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3)),
+            np.empty(n), np.empty(n, state_dtype_like.dtype), np.empty((n, hist_width)))
+
+
+@kernel
+def _copy_subs(dst, d0, src, s0, s1):
+    """Rows ``s0:s1`` of every sub-contact column of ``src`` to ``dst`` from row ``d0`` (both
+    (pa, area, un, fs, us, dil, state, hist))."""
+    _copy_rows(dst[0], d0, src[0], s0, s1)
+    _copy_rows(dst[1], d0, src[1], s0, s1)
+    _copy_rows(dst[2], d0, src[2], s0, s1)
+    _copy_rows(dst[3], d0, src[3], s0, s1)
+    _copy_rows(dst[4], d0, src[4], s0, s1)
+    _copy_rows(dst[5], d0, src[5], s0, s1)
+    _copy_rows(dst[6], d0, src[6], s0, s1)
+    _copy_rows(dst[7], d0, src[7], s0, s1)
+
+
+@kernel
 def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_frac, alg,
                      trim=True):
     """Re-detect contacts; returns (keep, new_start, pa, area, un, fs, us, dil, state, hist).
@@ -159,14 +180,8 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     cap += 4 * n_new
     keep = np.zeros(nc, np.uint8)
     counts = np.zeros(nc, np.int64)
-    pa = np.empty((cap, 3))
-    area = np.empty(cap)
-    un = np.empty(cap)
-    fs = np.empty((cap, 3))
-    us = np.empty((cap, 3))
-    dil = np.empty(cap)
-    state = np.empty(cap, old_state.dtype)  # the store's (uint8 bits)
-    hist = np.empty((cap, old_hist.shape[1]))
+    # state: the store's dtype (uint8 bits)
+    pa, area, un, fs, us, dil, state, hist = _new_subs(cap, old_state, old_hist.shape[1])
     # world face normals and edge directions, once per piece (each is in many contacts)
     rows = np.zeros(vert_start.shape[0] - 1, np.uint8)
     if uses_face_normals(alg):
@@ -277,45 +292,21 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
             return keep, new_start, pa, area, un, fs, us, dil, state, hist
         return keep, new_start, pa[:tot], area[:tot], un[:tot], fs[:tot], us[:tot], \
             dil[:tot], state[:tot], hist[:tot]
-    out_pa = np.empty((tot, 3))
-    out_area = np.empty(tot)
-    out_un = np.empty(tot)
-    out_fs = np.empty((tot, 3))
-    out_us = np.empty((tot, 3))
-    out_dil = np.empty(tot)
-    out_state = np.empty(tot, old_state.dtype)
-    out_hist = np.empty((tot, old_hist.shape[1]))
+    out = _new_subs(tot, old_state, old_hist.shape[1])
+    side_rows = (pa, area, un, fs, us, dil, state, hist)
+    old_rows = (old_pa, old_area, old_un, old_fs, old_us, old_dil, old_state, old_hist)
     side = 0
     c = 0
     while c < nc:
         if todo[c] != 0:  # updated (or deleted: no rows): from the side arrays
             k = counts[c]
-            d0 = new_start[c]
-            _copy_rows(out_pa, d0, pa, side, side + k)
-            _copy_rows(out_area, d0, area, side, side + k)
-            _copy_rows(out_un, d0, un, side, side + k)
-            _copy_rows(out_fs, d0, fs, side, side + k)
-            _copy_rows(out_us, d0, us, side, side + k)
-            _copy_rows(out_dil, d0, dil, side, side + k)
-            _copy_rows(out_state, d0, state, side, side + k)
-            _copy_rows(out_hist, d0, hist, side, side + k)
+            _copy_subs(out, new_start[c], side_rows, side, side + k)
             side += k
             c += 1
             continue
         c1 = c + 1  # a run of untouched contacts: their old rows, contiguous, in one copy
         while c1 < nc and todo[c1] == 0:
             c1 += 1
-        o0 = old_start[c]
-        o1 = old_start[c1]
-        d0 = new_start[c]
-        _copy_rows(out_pa, d0, old_pa, o0, o1)
-        _copy_rows(out_area, d0, old_area, o0, o1)
-        _copy_rows(out_un, d0, old_un, o0, o1)
-        _copy_rows(out_fs, d0, old_fs, o0, o1)
-        _copy_rows(out_us, d0, old_us, o0, o1)
-        _copy_rows(out_dil, d0, old_dil, o0, o1)
-        _copy_rows(out_state, d0, old_state, o0, o1)
-        _copy_rows(out_hist, d0, old_hist, o0, o1)
+        _copy_subs(out, new_start[c], old_rows, old_start[c], old_start[c1])
         c = c1
-    return keep, new_start, out_pa, out_area, out_un, out_fs, out_us, out_dil, out_state, \
-        out_hist
+    return keep, new_start, out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7]

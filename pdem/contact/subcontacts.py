@@ -273,48 +273,36 @@ def merge_close_corners(pts, area, tol):
     instead of two a hair apart: the same force and moment to within ``tol`` times the force,
     for fewer sub-contacts (the 20^3 cube stack: 14 % fewer)."""
     k = pts.shape[0]
-    start = -1  # a corner far from its predecessor: clusters start there
+    apart = np.empty(k, np.bool_)  # corner i is farther than tol from corner i - 1
     for i in range(k):
         j = i - 1 if i > 0 else k - 1
-        if (pts[i, 0] - pts[j, 0]) ** 2 + (pts[i, 1] - pts[j, 1]) ** 2 > tol * tol:
-            start = i
+        apart[i] = (pts[i, 0] - pts[j, 0]) ** 2 + (pts[i, 1] - pts[j, 1]) ** 2 > tol * tol
+    first = 0  # a corner that starts a cluster (none apart: one cluster of all, from 0)
+    for i in range(k):
+        if apart[i]:
+            first = i
             break
-    # no corner apart from its predecessor (start -1): the whole region is one cluster
-    first = max(start, 0)
     out = np.empty((k, 2))
     out_area = np.empty(k)
     m = 0
-    sx = 0.0
-    sy = 0.0
-    sa = 0.0
-    cx = 0.0
-    cy = 0.0
-    cn = 0
-    for t in range(k):
+    sums = np.zeros(6)  # sum a x, sum a y, sum a, sum x, sum y, count
+    for t in range(k + 1):
         i = (first + t) % k
-        if t > 0 and start >= 0:
-            j = i - 1 if i > 0 else k - 1
-            if (pts[i, 0] - pts[j, 0]) ** 2 + (pts[i, 1] - pts[j, 1]) ** 2 > tol * tol:
-                out[m, 0] = sx / sa if sa > 0.0 else cx / cn
-                out[m, 1] = sy / sa if sa > 0.0 else cy / cn
-                out_area[m] = sa
-                m += 1
-                sx = 0.0
-                sy = 0.0
-                sa = 0.0
-                cx = 0.0
-                cy = 0.0
-                cn = 0
-        sx += area[i] * pts[i, 0]
-        sy += area[i] * pts[i, 1]
-        sa += area[i]
-        cx += pts[i, 0]
-        cy += pts[i, 1]
-        cn += 1
-    out[m, 0] = sx / sa if sa > 0.0 else cx / cn
-    out[m, 1] = sy / sa if sa > 0.0 else cy / cn
-    out_area[m] = sa
-    m += 1
+        if t == k or (t > 0 and apart[i]):  # close the cluster before corner i
+            w = sums[2] if sums[2] > 0.0 else sums[5]
+            out[m, 0] = (sums[0] if sums[2] > 0.0 else sums[3]) / w
+            out[m, 1] = (sums[1] if sums[2] > 0.0 else sums[4]) / w
+            out_area[m] = sums[2]
+            m += 1
+            sums[:] = 0.0
+            if t == k:
+                break
+        sums[0] += area[i] * pts[i, 0]
+        sums[1] += area[i] * pts[i, 1]
+        sums[2] += area[i]
+        sums[3] += pts[i, 0]
+        sums[4] += pts[i, 1]
+        sums[5] += 1.0
     if m == k:
         return pts, area
     return out[:m].copy(), out_area[:m].copy()

@@ -19,28 +19,19 @@ ROW = row_width(HALO)
 
 
 @kernel
-def gather_rows(columns, rows, out):
-    """``out[i]`` = the ``rows[i]`` rows of the 2-D float64 ``columns``, side by side."""
+def copy_rows(columns, rows, buf, pack):
+    """``pack``: ``buf[i]`` = the ``rows[i]`` rows of the 2-D float64 ``columns``, side by
+    side; else the inverse (the ghosts' rows from a received buffer)."""
     col = 0
     for a in columns:
         w = a.shape[1]
         for i in range(rows.shape[0]):
             r = rows[i]
             for k in range(w):
-                out[i, col + k] = a[r, k]
-        col += w
-
-
-@kernel
-def scatter_rows(columns, rows, buf):
-    """Inverse of :func:`gather_rows`."""
-    col = 0
-    for a in columns:
-        w = a.shape[1]
-        for i in range(rows.shape[0]):
-            r = rows[i]
-            for k in range(w):
-                a[r, k] = buf[i, col + k]
+                if pack:
+                    buf[i, col + k] = a[r, k]
+                else:
+                    a[r, k] = buf[i, col + k]
         col += w
 
 
@@ -95,14 +86,14 @@ class Halo:
             if columns is None:
                 pack(arrays, self.fields, rows, self.sbuf[r])
             else:
-                gather_rows(columns, rows, self.sbuf[r])
+                copy_rows(columns, rows, self.sbuf[r], True)
             reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=11))
         MPI.Request.Waitall(reqs)
         for r, rows in self.recv.items():
             if columns is None:
                 unpack(arrays, self.fields, rows, self.rbuf[r])
             else:
-                scatter_rows(columns, rows, self.rbuf[r])
+                copy_rows(columns, rows, self.rbuf[r], False)
 
 
 class RowHalo:
