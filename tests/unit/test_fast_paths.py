@@ -1,6 +1,7 @@
 """Shortcuts in the step's kernels that must not change an answer: the Coulomb law's slip
-test on squares (bit for bit the rounded root's decision) and the isotropic block's angular
-velocity (``L / I`` exactly, no midpoint iteration)."""
+test on squares (bit for bit the rounded root's decision), the isotropic block's angular
+velocity (``L / I`` exactly, no midpoint iteration) and the series for roots near 1 (the turned
+normal and shear force, the staleness check's angle: within an ulp of the library)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_dynamics import Blocks  # the tests directory is on sys.path (rootdir conftest)
 
+from pdem.contact.forces import SERIES_RANGE, carry_shear, root_near_one, turn_normal, unit_scale
 from pdem.contact.laws.coulomb import below_limit
+from pdem.contact.staleness import _angle
 from pdem.dynamics import motion as M
 from pdem.dynamics.rotation import quat_from_rotvec
 
@@ -76,3 +79,73 @@ def test_isotropic_block_turns_with_L_over_I():
     a.set_omega(np.array([0.4, 0.1, -0.6]))
     a.step(1e-2)
     assert a.stats[M.STAT_ROT_ITER] > 0
+
+
+@numba.njit
+def _unit_scale(m2):
+    return unit_scale(m2)
+
+
+@numba.njit
+def _root_near_one(r):
+    return root_near_one(r)
+
+
+@numba.njit
+def _angle_of(half):
+    return _angle(half)
+
+
+def _ulps(a, b):
+    return abs(a - b) / np.spacing(max(abs(a), abs(b)))
+
+
+@settings(max_examples=3000, deadline=None)
+@given(st.one_of(st.floats(-SERIES_RANGE, SERIES_RANGE), st.floats(-0.5, 0.5),
+                 st.sampled_from([-SERIES_RANGE, SERIES_RANGE, 0.0, 1e-300, -1e-300])))
+def test_series_roots_agree_with_the_library_to_an_ulp(e):
+    """The force loop's series for ``1/sqrt`` and ``sqrt`` near 1 (the turned normal, the
+    turned shear force): the truncation is below 4e-19, so the series and the library root
+    differ by their roundings only, one ulp at most, inside the series' range and at its
+    edges; outside it the library root is used as before, bit for bit."""
+    m = 1.0 + e
+    assert _ulps(_unit_scale(m), 1.0 / math.sqrt(m)) <= 1.0
+    assert _ulps(_root_near_one(m), math.sqrt(m)) <= 1.0
+    if abs(m - 1.0) >= SERIES_RANGE:
+        assert _unit_scale(m) == 1.0 / math.sqrt(m)
+        assert _root_near_one(m) == math.sqrt(m)
+
+
+@settings(max_examples=2000, deadline=None)
+@given(st.one_of(st.floats(0.0, 1e-3), st.floats(0.0, 1.0)))
+def test_relative_turn_angle_series_agrees_with_asin(half):
+    """The staleness check's rotation angle ``2 asin(h)`` by its series below 1e-3: within
+    two ulps of the library's asin (each rounds once or twice), and the library above."""
+    assert _ulps(_angle_of(half), 2.0 * math.asin(half)) <= 2.0
+
+
+def test_turned_normal_stays_unit_and_shear_keeps_its_magnitude():
+    """A contact's normal turned by small and large rotations stays a unit vector to rounding
+    (the series' range and beyond it), and the shear force carried into the turned plane
+    keeps its magnitude and lies in the plane: eq. 23."""
+    rng = np.random.default_rng(3)
+    for scale in (1e-9, 1e-6, 1e-4, 1e-2, 0.3):
+        normal = rng.normal(size=(1, 3))
+        normal /= np.linalg.norm(normal)
+        dtheta = rng.normal(size=(2, 3)) * scale
+        f = np.cross(normal[0], rng.normal(size=3)) * 1e5
+        n = np.array(_turn(normal, dtheta))
+        assert abs(np.linalg.norm(n) - 1.0) < 4e-16
+        g = np.array(_carry(*f, *n))
+        assert abs(np.linalg.norm(g) - np.linalg.norm(f)) < 4e-16 * np.linalg.norm(f)
+        assert abs(g @ n) < 1e-15 * np.linalg.norm(f)
+
+
+@numba.njit
+def _turn(normal, dtheta):
+    return turn_normal(normal, dtheta, 0, 0, 1)
+
+
+@numba.njit
+def _carry(fx, fy, fz, nx, ny, nz):
+    return carry_shear(fx, fy, fz, nx, ny, nz)
