@@ -11,6 +11,8 @@ Measured (2026-11-23, 2 shared cores under load, alternating with the tree befor
 (same bits): 3.7-3.8e5 -> 4.2-4.3e5 block-steps/s on CPU time (machine under load 3-4);
 with contacts re-detected by the motion of B relative to A (pdem.contact.staleness) too:
 7.0-7.1e5 against 3.9-4.1e5 for the tree before both (quiet machine, alternating, 2026-11-25).
+Later: the force loop's roots near 1 by series (docs/validation.md): defaults (n=10)
+9.4-9.9e5 against 8.6-9.3e5, 20 300: 8.9-9.3e5 against 8.5-8.9e5 (alternating, 2026-11-25).
 """
 
 from __future__ import annotations
