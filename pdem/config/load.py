@@ -162,7 +162,10 @@ def _yaml_problem(exc: yaml.YAMLError) -> str:
 def _anchor_files(data: dict, base: Path) -> None:
     """Mesh files named relative to the scene file are read from beside it (made absolute, so
     the scene stored in outputs and checkpoints still finds them)."""
-    for b in data.get("blocks") or ():
+    blocks = data.get("blocks")
+    if not isinstance(blocks, list):  # not a list: validation names the key
+        return
+    for b in blocks:
         mesh = b.get("mesh") if isinstance(b, dict) else None
         if isinstance(mesh, dict) and isinstance(mesh.get("file"), str):
             f = Path(mesh["file"])

@@ -120,3 +120,17 @@ def test_mass_scaling_flag_or_partial_mapping():
     (msg,) = errors_of(GOOD.replace(
         "steps: 10", "steps: 10, timestep: {dt: 1.0e-5}, mass_scaling: {timestep: 1.0e-4}"))
     assert msg.startswith("solve: give timestep.dt or mass_scaling.timestep, not both"), msg
+
+
+@pytest.mark.parametrize("value", ["true", "3", "box", "{a: 1}"])
+def test_blocks_not_a_list_is_one_message(value, tmp_path):
+    """``blocks:`` given as a scalar or a mapping (a fuzzed scene found ``blocks: true`` raising
+    a TypeError while mesh file names were anchored): the scene is refused with one message
+    naming the key, through the file loader that anchors relative mesh names."""
+    path = tmp_path / "scene.yaml"
+    path.write_text("name: s\nmaterials: {rock: {density: 2600}}\n"
+                    "joints: {default: {kn: 1.0e9, ks: 1.0e9}}\n"
+                    f"blocks: {value}\nsolve: {{steps: 1}}\n")
+    with pytest.raises(ConfigError) as e:
+        load_scene(path)
+    assert "blocks: Input should be a valid list" in str(e.value)
