@@ -35,7 +35,7 @@ from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
 from .parallel.decomposition import make_decomposition
 from .parallel.migrate import rebuild
-from .parallel.mpi import allgather, allgather_rows, broadcast
+from .parallel.mpi import allgather, allgather_rows, broadcast, configure_waits
 from .timers import Timers
 
 # a block may move up to this fraction of the thinnest piece's width in one step (see
@@ -166,6 +166,7 @@ class ModelState:
         :meth:`distribute_initial`. ``whole`` (or a scene that reads every block's faces, see
         :func:`needs_whole_scene`): every rank builds every block, as ``pdem check`` does."""
         map_large_blocks()  # arrays freed during set-up go back to the system (pdem.memory)
+        configure_waits(comm)  # oversubscribed ranks sleep while they wait (pdem.parallel.mpi)
         # refuse a scene too large for the machine before its blocks exist (docs/limits.md);
         # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
         memory = min(allgather(comm, machine_memory()))

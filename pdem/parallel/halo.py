@@ -12,6 +12,7 @@ import numpy as np
 
 from ..jit import kernel
 from ..model.fields import HALO, pack, row_width, unpack
+from .mpi import wait_all
 
 # columns of a full halo row: the block fields declared with halo=True (pdem.model.fields); a
 # scene sends those of the features it uses (pdem.model.fields.halo_fields)
@@ -73,7 +74,6 @@ class Halo:
 
     def forward(self, blocks):
         """Copy owners' state into the ghost rows (collective among neighbours)."""
-        from mpi4py import MPI
 
         if not self.send and not self.recv:
             return
@@ -88,7 +88,7 @@ class Halo:
             else:
                 copy_rows(columns, rows, self.sbuf[r], True)
             reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=11))
-        MPI.Request.Waitall(reqs)
+        wait_all(self.comm, reqs)
         for r, rows in self.recv.items():
             if columns is None:
                 unpack(arrays, self.fields, rows, self.rbuf[r])
@@ -117,8 +117,6 @@ class RowHalo:
     def forward(self, arrays) -> None:
         """Copy the owners' rows of ``arrays`` (each (n, k), the k summing to ``width``) into
         the ghost rows (collective among neighbours)."""
-        from mpi4py import MPI
-
         if not self.send and not self.recv:
             return
         reqs = [self.comm.Irecv(buf, source=r, tag=12) for r, buf in self.rbuf.items()]
@@ -128,7 +126,7 @@ class RowHalo:
                 self.sbuf[r][:, c:c + a.shape[1]] = a[idx]
                 c += a.shape[1]
             reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=12))
-        MPI.Request.Waitall(reqs)
+        wait_all(self.comm, reqs)
         for r, idx in self.recv.items():
             c = 0
             for a in arrays:

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import sys
+import time
 import traceback
 
 import numpy as np
@@ -74,13 +76,69 @@ def abort_with_message(comm, exc: BaseException) -> None:
     comm.Abort(1)
 
 
+# How a rank waits for the per-step messages (the halo, the step's reduction). MPICH spins in
+# a blocking wait, which is the fastest wait while every rank has a core of its own; with more
+# ranks than cores on a node (a laptop, a 2-core CI machine running 3 or 4 ranks) the spinning
+# rank takes the core from the rank it waits for, and every step costs scheduler time slices
+# (the pile of tests/mpi/test_decomposition.py: 4 s on 2 ranks, 47 s on 3). Such ranks test
+# their requests and sleep between tests instead. PDEM_MPI_WAIT=spin|sleep|auto (default auto:
+# sleep only where the node is oversubscribed).
+WAIT_MODES = ("auto", "spin", "sleep")
+SLEEP_POLL = 2e-5  # s between tests of a sleeping wait (the kernel rounds it up to ~60 us)
+_sleeping: set[int] = set()  # handles of the communicators whose ranks sleep while waiting
+
+
+def configure_waits(comm) -> bool:
+    """Decide (collectively) how this rank waits on ``comm`` (see :data:`WAIT_MODES`); True
+    if it sleeps. Oversubscribed: the ranks sharing this node are more than the distinct CPUs
+    they may run on (the union of their affinity masks, so ranks bound one per core are
+    not)."""
+    mode = os.environ.get("PDEM_MPI_WAIT", "auto").strip().lower() or "auto"
+    if mode not in WAIT_MODES:
+        from ..errors import UserError
+
+        raise UserError(f"PDEM_MPI_WAIT: must be one of {', '.join(WAIT_MODES)} (got {mode!r})")
+    if comm.size == 1:
+        return False
+    from mpi4py import MPI
+
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    try:
+        cpus = set().union(*node.allgather(sorted(os.sched_getaffinity(0))))
+        oversubscribed = node.size > len(cpus)
+    finally:
+        node.Free()
+    sleep = mode == "sleep" or (mode == "auto" and oversubscribed)
+    key = comm.py2f()
+    if sleep:
+        _sleeping.add(key)
+    else:
+        _sleeping.discard(key)
+    return sleep
+
+
+def wait_all(comm, requests: list) -> None:
+    """Complete ``requests`` (of ``comm``): spinning in MPI, or testing and sleeping where
+    :func:`configure_waits` said so."""
+    from mpi4py import MPI
+
+    if comm.py2f() not in _sleeping:
+        MPI.Request.Waitall(requests)
+        return
+    while not MPI.Request.Testall(requests):
+        time.sleep(SLEEP_POLL)
+
+
 def allreduce_max_array(comm, values: np.ndarray) -> np.ndarray:
     """Element-wise maximum over ranks (order-independent, so deterministic)."""
     if comm.size == 1:
         return values
     from mpi4py import MPI
 
-    comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
+    if comm.py2f() in _sleeping:
+        wait_all(comm, [comm.Iallreduce(MPI.IN_PLACE, values, op=MPI.MAX)])
+    else:
+        comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
     return values
 
 
