@@ -84,15 +84,20 @@ def abort_with_message(comm, exc: BaseException) -> None:
 # their requests and sleep between tests instead. PDEM_MPI_WAIT=spin|sleep|auto (default auto:
 # sleep only where the node is oversubscribed).
 WAIT_MODES = ("auto", "spin", "sleep")
-SLEEP_POLL = 2e-5  # s between tests of a sleeping wait (the kernel rounds it up to ~60 us)
+SLEEP_POLL = 2e-5  # s between tests of a sleeping wait (a sleep takes ~85 us on our machines)
 _sleeping: set[int] = set()  # handles of the communicators whose ranks sleep while waiting
+# handles of the communicators on which some rank sleeps: there every rank reduces with the
+# non-blocking collective (a blocking one must not meet it). Elsewhere the blocking one: an
+# Iallreduce waited for in MPICH took the 2-rank cube stack (bench/scaling.py) from 1.4-1.5e6
+# to 1.0e6 block-steps/s.
+_nonblocking: set[int] = set()
 
 
 def configure_waits(comm) -> bool:
     """Decide (collectively) how this rank waits on ``comm`` (see :data:`WAIT_MODES`); True
     if it sleeps. Oversubscribed: the ranks sharing this node are more than the distinct CPUs
     they may run on (the union of their affinity masks, so ranks bound one per core are
-    not)."""
+    not). Decided per node: on a cluster only an oversubscribed node's ranks sleep."""
     mode = os.environ.get("PDEM_MPI_WAIT", "auto").strip().lower() or "auto"
     if mode not in WAIT_MODES:
         from ..errors import UserError
@@ -110,10 +115,11 @@ def configure_waits(comm) -> bool:
         node.Free()
     sleep = mode == "sleep" or (mode == "auto" and oversubscribed)
     key = comm.py2f()
-    if sleep:
-        _sleeping.add(key)
-    else:
-        _sleeping.discard(key)
+    for handles, on in ((_sleeping, sleep), (_nonblocking, comm.allreduce(sleep, op=MPI.LOR))):
+        if on:
+            handles.add(key)
+        else:
+            handles.discard(key)
     return sleep
 
 
@@ -135,7 +141,7 @@ def allreduce_max_array(comm, values: np.ndarray) -> np.ndarray:
         return values
     from mpi4py import MPI
 
-    if comm.py2f() in _sleeping:
+    if comm.py2f() in _nonblocking:  # some rank sleeps while it waits
         wait_all(comm, [comm.Iallreduce(MPI.IN_PLACE, values, op=MPI.MAX)])
     else:
         comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
