@@ -74,7 +74,6 @@ class Halo:
 
     def forward(self, blocks):
         """Copy owners' state into the ghost rows (collective among neighbours)."""
-
         if not self.send and not self.recv:
             return
         arrays = {f.name: getattr(blocks, f.name) for f in self.fields}
