@@ -2,7 +2,7 @@
 decomposition on 64 and 512 ranks.
 
     .venv/bin/python bench/scaling.py [--n 22] [--steps 200] [--warmup 20] [--ranks 1 2]
-                                      [--dims x|auto|rcb] [--model-only]
+                                      [--dims x|auto|rcb] [--model-only] [--repeat R]
 
 Measured part: the script launches itself under ``mpiexec -n 1`` and ``mpiexec -n 2`` (n^3
 cubes, default 22^3 = 10648, split along x with ``parallel.dims [size, 1, 1]``, ``auto`` (the
@@ -10,7 +10,9 @@ uniform grid choose_dims picks) or ``rcb`` (``parallel.balance: rcb``, bench/bal
 times ``--steps`` steps after ``--warmup`` steps, and prints block-steps/s, the strong-scaling
 efficiency t1 / (p t_p), the halo bytes each rank sends per step (``load_report``) and the
 per-phase timers of every rank. On a 2-core machine the 2-rank figures are the real thing; on
-an oversubscribed one they are not.
+an oversubscribed one they are not. ``--repeat R`` runs the rank counts R times, alternating,
+and prints each round's rates and efficiency and their median: one 200-step window on a
+shared machine swings by tens of percent (docs/parallel.md, Scaling).
 
 Model part (no MPI run): for 64 and 512 ranks (and the measured counts, as a check), the rank
 grid ``choose_dims`` would pick and, from the geometry of the bricks, how many blocks each rank
@@ -126,6 +128,30 @@ def measured(args) -> list[dict]:
     return runs
 
 
+def repeated(args) -> None:
+    """``--repeat``: the rank counts alternated ``args.repeat`` times, one line a round, then
+    the medians."""
+    rates = {size: [] for size in args.ranks}
+    effs = []
+    for k in range(args.repeat):
+        runs = {size: launch(size, args) for size in args.ranks}
+        line = []
+        for size, r in runs.items():
+            rates[size].append(r["steps"] * r["free"] / r["elapsed"])
+            line.append(f"{size} rank{'s' if size > 1 else ''} {rates[size][-1]:.3g}")
+        if 1 in runs:
+            t1 = runs[1]["elapsed"]
+            eff = [t1 / (size * r["elapsed"]) for size, r in runs.items() if size > 1]
+            effs.append(eff[-1] if eff else 1.0)
+            line.append(f"efficiency {effs[-1]:.2f}")
+        print(f"round {k + 1}: " + ", ".join(line) + " (block-steps/s)", flush=True)
+    med = ", ".join(f"{size} rank{'s' if size > 1 else ''} {float(np.median(v)):.3g}"
+                    for size, v in rates.items())
+    print(f"median of {args.repeat} rounds: {med} block-steps/s"
+          + (f"; efficiency {float(np.median(effs)):.2f} (min {min(effs):.2f}, max "
+             f"{max(effs):.2f})" if effs else ""))
+
+
 # --------------------------------------------------------------------------- model
 def axis_counts(coords, edges, reach, margin):
     """Per axis: ``owned[a]`` coords in brick a (clamped as owner_of), ``has[a]`` whether brick a
@@ -203,10 +229,15 @@ def main():
     ap.add_argument("--dims", choices=["x", "auto", "rcb"], default="x",
                     help="x: parallel.dims [size, 1, 1]; auto: choose_dims; rcb: balance rcb")
     ap.add_argument("--model-only", action="store_true", help="skip the MPI runs")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="run the rank counts this many times, alternating; print the medians")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
         worker(args)
+        return
+    if args.repeat > 1 and not args.model_only:
+        repeated(args)
         return
     if not args.model_only:
         measured(args)
