@@ -106,7 +106,7 @@ class Boundary:
             for c in cond.components:
                 k = "xyz".index(c)
                 for store in (s.glob, s.blocks):
-                    if store is not None:
+                    if store is not None and "v" in vars(store):  # see stages._set
                         store.v[np.isin(store.gid, gids), k] = v0[k]
 
     def prescribe(self, s) -> None:

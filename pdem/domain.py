@@ -42,6 +42,19 @@ def take_out(state, bodies) -> None:
     remove_blocks(state, bodies, gids, code, "left the model domain")
 
 
+def set_block_fields(state, gids, **values) -> None:
+    """Set block fields of ``gids`` in this rank's rows (if any) and in the scene's store,
+    where it still keeps that field (pdem.state.RUN_CATALOGUE)."""
+    for store in (state.glob, state.blocks):
+        if store is None:
+            continue
+        hit = np.isin(store.gid, gids)
+        for key, v in values.items():
+            column = vars(store).get(key)
+            if column is not None:
+                column[hit] = v
+
+
 def remove_blocks(state, bodies, gids: np.ndarray, code: int, why: str) -> None:
     """Freeze (``FROZEN``) or delete (``DELETED``) blocks ``gids`` on every rank (every rank
     passes the same gids). Their kinetic energy and what their contacts held is booked as
@@ -50,13 +63,8 @@ def remove_blocks(state, bodies, gids: np.ndarray, code: int, why: str) -> None:
     gids = np.asarray(gids, np.int64)
     rows = np.nonzero(np.isin(b.gid[:n], gids) & (b.out[:n] == 0))[0]
     b.work[rows, motion.WORK_REMOVED] += kinetic_per_block(b, rows)
-    for store in (state.glob, b):  # every rank's copy of every such block, owned or ghost
-        hit = np.isin(store.gid, gids)
-        store.fixed[hit] = 1
-        store.out[hit] = code
-        store.v[hit] = 0.0
-        store.w[hit] = 0.0
-        store.L[hit] = 0.0
+    # every rank's copy of every such block, owned or ghost
+    set_block_fields(state, gids, fixed=1, out=code, v=0.0, w=0.0, L=0.0)
     c = state.contacts
     if code == DELETED and c.n:
         gone = np.isin(c.ga, gids) | np.isin(c.gb, gids)

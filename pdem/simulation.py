@@ -56,6 +56,7 @@ class Simulation:
             # the output writer has taken its share of the surfaces (it keeps its own copy)
             self.state.writer_mesh = None
             self.state.release_scene_geometry()
+            self.state.release_setup_fields()
         reuse_large_blocks()  # set up: the step's arrays come from the heap (pdem.memory)
 
     # the model, as scripts and tests read it

@@ -20,6 +20,7 @@ from .config import ConfigError
 from .config.resolve import _estimated_stiffness, _timestep, timestep_report
 from .contact.laws import joint_table
 from .domain import DELETED, remove_blocks
+from .domain import set_block_fields as _set
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
 
@@ -60,16 +61,6 @@ def selected(state, sel) -> np.ndarray:
         x = state.glob.x  # the scene's centroids: a selection does not depend on the motion
         keep &= np.all((x >= sel.range.box.min) & (x <= sel.range.box.max), axis=1)
     return np.nonzero(keep & (state.glob.out == 0))[0]
-
-
-def _set(state, gids, **values):
-    """Set block fields of ``gids`` in the global store and in this rank's rows (if any)."""
-    for store in (state.glob, state.blocks):
-        if store is None:
-            continue
-        hit = np.isin(store.gid, gids)
-        for key, v in values.items():
-            getattr(store, key)[hit] = v
 
 
 def stage_changes(s, k: int, motion: bool = True) -> None:

@@ -59,6 +59,12 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
 # pdem.domain), the rebuild's ownership and boxes (fixed, radius), a stage's timestep
 CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixed", "vfix",
              "out", "material", "group", "applied_force", "radius", "point_area")
+# what of it a rank keeps once the output is open (pdem.simulation): a stage's selections (the
+# scene centroids, out), its timestep and mass scaling (mass, inertia, radius, fixed, mscale)
+# and the rebuild's ownership and boxes (fixed, radius). The others were read by the set-up
+# only (the resolve's speeds and loads, the writer's initial centroids and groups); a stage,
+# a boundary condition or the domain sets them on the blocks a rank holds (pdem.stages._set).
+RUN_CATALOGUE = ("gid", "x", "mass", "inertia", "mscale", "fixed", "out", "radius")
 
 
 def needs_whole_scene(scene: Scene, comm) -> bool:
@@ -293,6 +299,14 @@ class ModelState:
             # the catalogue's envelopes (lo, hi: the resolve's) too, 48 bytes a scene block
             self.glob.keep_fields(CATALOGUE)
         return_freed_memory()
+
+    def release_setup_fields(self):
+        """Once the output is open: of every scene block keep only :data:`RUN_CATALOGUE`
+        (about 140 bytes a scene block fewer on every rank). A run that keeps the whole
+        scene (``pdem check``, a stage's boundary stress) keeps it all."""
+        if not self.keep_scene_geometry and not self.needs_scene_geometry():
+            self.glob.keep_fields(RUN_CATALOGUE)
+            return_freed_memory()
 
     def distribute_initial(self):
         """Every rank takes the blocks whose centroid lies in its brick (collective): from
