@@ -163,3 +163,42 @@ def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_resta
     sim = Simulation(held, MPI.COMM_SELF, output=False)
     sim.run(steps=2)
     assert sim.contacts.n and sim.contacts.held.shape == (sim.contacts.n, 6)
+
+
+def test_scene_store_keeps_only_the_run_catalogue_after_set_up(tmp_path):
+    """Once the output is open, every rank keeps of every scene block only what stages,
+    timesteps and the rebuild read (RUN_CATALOGUE); the set-up's other per-block fields are
+    gone. A stage then still stops and frees blocks by a selection, and deletes one leaving
+    the domain: the changes reach the blocks a rank holds and the fields the store kept."""
+    from pdem.state import CATALOGUE, RUN_CATALOGUE
+
+    text = """
+name: staged
+materials: {rock: {density: 2500.0}}
+joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 30.0}}
+blocks:
+  - {name: floor, box: {min: [-2, -1, -1], max: [2, 1, 0]}, material: rock, fixed: true}
+  - {name: a, box: {min: [-1.5, -0.5, 0.0], max: [-0.5, 0.5, 1.0]}, material: rock,
+     velocity: [0.5, 0.0, 0.0]}
+  - {name: b, box: {min: [0.5, -0.5, 0.0], max: [1.5, 0.5, 1.0]}, material: rock,
+     velocity: [0.0, 0.0, 4.0]}
+solve: {damping: none}
+domain: {min: [-3, -2, -2], max: [3, 2, 1.2], action: delete}
+stages:
+  - {name: hold, fix: {names: [a]}, solve: {time: 0.5}}
+"""
+    scene = parse_scene(text + f"output: {{file: {tmp_path}/s.h5}}\n")
+    sim = Simulation(scene, MPI.COMM_SELF)
+    kept = {f.name for f in F.BLOCK if f.name in vars(sim.state.glob)}
+    assert kept == set(RUN_CATALOGUE) and set(RUN_CATALOGUE) < set(CATALOGUE)
+    sim.run()
+    g, b = sim.state.glob, sim.blocks
+    names = [s.name for s in sim.state.specs]
+    a_row, b_row = (int(np.nonzero(b.gid == names.index(n))[0][0]) for n in "ab")
+    assert g.fixed[b.gid[a_row]] == 1 and b.fixed[a_row] == 1  # the stage's fix reached both
+    assert np.all(b.v[a_row] == 0.0)
+    assert g.out[b.gid[b_row]] == 2 and b.out[b_row] == 2  # b left the domain upwards
+    sim.close()
+    # pdem check keeps the whole scene
+    whole = Simulation(parse_scene(text), MPI.COMM_SELF, output=False, release=False)
+    assert set(CATALOGUE) <= set(vars(whole.state.glob))
