@@ -143,7 +143,7 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     g = s.glob
     g.mscale[:] = 1.0
     stiffness = _estimated_stiffness(s.specs, s.joints)
-    names = [sp.name for sp in s.specs]
+    names = s.specs.names  # read by index, in messages
     st = s.scene.stages[k].solve
     key = s.scene.at("stages", k, "solve", "mass_scaling", "timestep") \
         if st is not None and st.mass_scaling is not None else "solve.mass_scaling.timestep"

@@ -262,7 +262,8 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
     ext = (hi - lo)[free] if free.any() else hi - lo
     cell_size = float(np.mean(ext.max(axis=1))) if cs.cell_size == "auto" else float(cs.cell_size)
     k = _estimated_stiffness(specs, joints)
-    names = [sp.name for sp in specs]
+    # a SpecTable's names column (read by index, in messages), or a list's
+    names = specs.names if hasattr(specs, "names") else [sp.name for sp in specs]
     dt = _timestep(scene, glob, k, names)
     for line in timestep_report(scene, glob, k, dt, names):
         log.info("%s", line)

@@ -373,9 +373,7 @@ class OutputWriter:
         self._stage = series("stage", (), np.int32, 1024)  # index in `stages:` (0 without)
         g = f.create_group("blocks")
         for key, texts in (("name", block_names), ("parent", block_parents or block_names)):
-            encoded = [str(s).encode("utf-8") for s in texts]
-            text_t = h5py.string_dtype("utf-8", max(1, max(len(s) for s in encoded)))
-            self._write_static(g.create_dataset(key, (n,), dtype=text_t), np.array(encoded))
+            self._write_texts(g, key, texts)
         self._write_static(g.create_dataset("gid", (n,), dtype=np.int64), np.arange(n))
         self._series = {fd.output: series(f"blocks/{fd.output}", (n, *fd.shape), fd.dtype)
                         for fd in OUTPUT}
@@ -412,6 +410,19 @@ class OutputWriter:
             fspace.select_hyperslab(start, buf.shape)
             mspace = h5s.create_simple(buf.shape)
         dset.id.write(mspace, fspace, buf, mtype=mtype, dxpl=self._dxpl)
+
+    def _write_texts(self, group, key: str, texts: Sequence[str]) -> None:
+        """A fixed-width UTF-8 dataset of one text a block (all ranks know its width; each
+        encodes only the rows it writes: a name column of 10^6 blocks is not copied whole)."""
+        n = len(texts)
+        width = getattr(texts, "max_bytes", None)
+        if width is None:
+            width = max(len(str(t).encode("utf-8")) for t in texts)
+        dset = group.create_dataset(key, (n,), dtype=h5py.string_dtype("utf-8", max(1, width)))
+        lo, hi = _share(self.comm.rank, self.comm.size, n) if self.parallel else (0, n)
+        mine = np.array([str(texts[i]).encode("utf-8") for i in range(lo, hi)],
+                        dtype=f"S{max(1, width)}")
+        self._write(dset, (lo,), mine)
 
     def _write_static(self, dset: h5py.Dataset, data: np.ndarray) -> None:
         """Each rank writes its contiguous share of the rows of a dataset all ranks know."""

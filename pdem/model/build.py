@@ -23,6 +23,7 @@ from ..geometry import (
 from ..registry import Registry
 from .blocks import VERT_ROW, BlockStore
 from .fields import BLOCK, allocate
+from .strings import StringColumn
 
 
 @dataclass
@@ -134,9 +135,9 @@ class SpecView:
     pieces = None  # released: the geometry lives with the blocks' owners
 
     name = property(lambda self: self._t.names[self._g])
+    parent = property(lambda self: self._t.parent_of(self._g))
     entry = property(lambda self: int(self._t.entry[self._g]))
     spec = property(lambda self: self._t.scene_blocks[self.entry])
-    parent = property(lambda self: self._t.parents[self._t.parent[self._g]])
     group = property(lambda self: self._t.labels[self._t.group[self._g]])
     material = property(lambda self: self._t.labels[self._t.material[self._g]])
     volume = property(lambda self: float(self._t.volume[self._g]))
@@ -146,21 +147,25 @@ class SpecView:
 
     @property
     def excavate_at(self):
+        if self._t.excavate_at is None:
+            return None
         t = self._t.excavate_at[self._g]
         return None if np.isnan(t) else float(t)
 
     @property
     def excavate_stage(self):
+        if self._t.excavate_stage is None:
+            return None
         k = self._t.excavate_stage[self._g]
         return None if k < 0 else int(k)
 
 
 class SpecTable:
-    """The blocks' specs after set-up, as columns by gid (a list of names, a few numbers a
-    block) instead of one Python object each: every rank keeps them for every block (names in
-    messages, selections by name, group or stage), ~1 KB a block as objects, ~0.1 KB here.
-    Indexing and iteration give :class:`SpecView` objects with the released spec's
-    attributes."""
+    """The blocks' specs after set-up, as columns by gid (the names in one buffer, a few
+    numbers a block) instead of one Python object each: every rank keeps them for every block
+    (names in messages, selections by name, group or stage), ~1 KB a block as objects, ~60
+    bytes here. Indexing and iteration give :class:`SpecView` objects with the released
+    spec's attributes."""
 
     def __init__(self, specs: list[BlockSpec], scene_blocks, columns: dict | None = None):
         """``columns``: the geometric scalars (:func:`geometry_columns`) of every block when
@@ -168,12 +173,15 @@ class SpecTable:
         columns were gathered, pdem.state); else read from the released specs."""
         self.scene_blocks = scene_blocks
         n = len(specs)
-        self.names = [sp.name for sp in specs]
+        self.names = StringColumn(sp.name for sp in specs)
+        # a block's parent (the scene block it was cut from): -1 for its own name (every
+        # uncut block), else its row in ``parents`` (the few names that differ)
         parents: dict[str, int] = {}
-        labels: dict[str, int] = {}
-        self.parent = np.array([parents.setdefault(sp.parent, len(parents)) for sp in specs],
-                               np.int32)
+        self.parent = np.fromiter(
+            (-1 if sp.parent == sp.name else parents.setdefault(sp.parent, len(parents))
+             for sp in specs), np.int32, n)
         self.parents = list(parents)
+        labels: dict[str, int] = {}
         self.group = np.array([labels.setdefault(sp.group, len(labels)) for sp in specs],
                               np.int32)
         self.material = np.array([labels.setdefault(sp.material, len(labels)) for sp in specs],
@@ -185,10 +193,23 @@ class SpecTable:
                        for k, dt in GEOMETRY_COLUMNS.items()}
         for k in GEOMETRY_COLUMNS:
             setattr(self, k, columns[k])
-        self.excavate_at = np.fromiter(
-            (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float, n)
-        self.excavate_stage = np.fromiter(
-            (-1 if sp.excavate_stage is None else sp.excavate_stage for sp in specs), np.int32, n)
+        # excavation times and stages: columns only in scenes that excavate (12 bytes a block)
+        self.excavate_at = self.excavate_stage = None
+        if any(sp.excavate_at is not None or sp.excavate_stage is not None for sp in specs):
+            self.excavate_at = np.fromiter(
+                (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float,
+                n)
+            self.excavate_stage = np.fromiter(
+                (-1 if sp.excavate_stage is None else sp.excavate_stage for sp in specs),
+                np.int32, n)
+
+    def parent_of(self, gid: int) -> str:
+        k = self.parent[gid]
+        return self.names[gid] if k < 0 else self.parents[k]
+
+    def parent_names(self) -> ParentNames:
+        """Every block's parent name, read one at a time (the output's ``blocks/parent``)."""
+        return ParentNames(self)
 
     def __len__(self) -> int:
         return len(self.names)
@@ -198,6 +219,24 @@ class SpecTable:
 
     def __iter__(self):
         return (SpecView(self, g) for g in range(len(self.names)))
+
+
+class ParentNames:
+    """The sequence of a :class:`SpecTable`'s parent names, without a list of them."""
+
+    def __init__(self, table: SpecTable):
+        self._t = table
+
+    def __len__(self) -> int:
+        return len(self._t.names)
+
+    def __getitem__(self, gid) -> str:
+        return self._t.parent_of(int(gid))
+
+    @property
+    def max_bytes(self) -> int:
+        own = self._t.names.lengths()[self._t.parent < 0]
+        return max([int(own.max(initial=0)), *(len(p.encode("utf-8")) for p in self._t.parents)])
 
 
 # the per-block scalars of a spec's geometry that set-up reads for every block (stiffness

@@ -119,8 +119,8 @@ class Snapshots(Plugin):
                  "resolved": r.to_json()}
         attrs.update(_mass_scaling_attrs(state))
         self.writer = OutputWriter(
-            out.file, state.comm, block_names=[s.name for s in state.specs],
-            block_parents=[s.parent for s in state.specs],
+            out.file, state.comm, block_names=state.specs.names,
+            block_parents=state.specs.parent_names(),
             body_mesh=state.writer_mesh if state.writer_mesh is not None
             else body_surfaces(state.glob),
             scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
@@ -176,7 +176,7 @@ class Histories(Plugin):
     def __init__(self, state, snapshots: Snapshots):
         self.state = state
         self.writer = snapshots.writer
-        names = {s.name: i for i, s in enumerate(state.specs)}
+        names = state.specs.names.positions(h.block for h in state.scene.output.histories)
         self.items = []
         for h in state.scene.output.histories:
             name = f"{h.block}.{h.quantity}"

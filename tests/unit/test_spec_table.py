@@ -41,3 +41,36 @@ def test_a_run_keeps_names_not_shapes():
     spec.release()
     with pytest.raises(ValueError):
         spec.shape  # noqa: B018
+
+
+def test_string_column_reads_back_every_string():
+    """Names are one UTF-8 buffer with offsets: each reads back as given (empty, non-ASCII,
+    negative index), iteration and positions agree, out-of-range is an IndexError."""
+    from pdem.model.strings import StringColumn
+
+    texts = ["stack_0_0_0", "", "Blöck ∆", "b[1]", "stack_0_0_0"]
+    col = StringColumn(texts)
+    assert len(col) == 5 and list(col) == texts
+    assert [col[i] for i in range(5)] == texts and col[-3] == "Blöck ∆"
+    assert col.lengths().tolist() == [11, 0, 10, 4, 11] and col.max_bytes == 11
+    assert col.positions(["stack_0_0_0", "b[1]", "absent"]) == {"stack_0_0_0": 0, "b[1]": 3}
+    with pytest.raises(IndexError):
+        col[5]  # noqa: B018
+    assert len(StringColumn([])) == 0 and StringColumn([]).max_bytes == 0
+
+
+def test_names_take_their_bytes_not_python_objects():
+    """64,000 array blocks: the table keeps ~the names' bytes and an offset each, and no
+    parent names (every block is its own parent)."""
+    from pdem.cases.stacks import cube_stack_scene
+
+    scene = parse_scene(cube_stack_scene(40, "fast"))
+    specs = expand_blocks(scene, 10**7)
+    table = SpecTable(specs, scene.blocks, {k: None for k in ("volume", "surface", "max_face",
+                                                               "n_pieces")})
+    n = len(specs)
+    assert n == 64001 and table.parents == [] and (table.parent == -1).all()
+    assert table.names.nbytes < n * (8 + max(len(sp.name) for sp in specs))
+    assert table.excavate_at is None and table[7].excavate_at is None
+    assert [table[g].name for g in (0, 1, n - 1)] == [specs[g].name for g in (0, 1, n - 1)]
+    assert table.parent_names()[n - 1] == specs[n - 1].parent == specs[n - 1].name
