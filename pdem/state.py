@@ -65,6 +65,10 @@ CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixe
 # only (the resolve's speeds and loads, the writer's initial centroids and groups); a stage,
 # a boundary condition or the domain sets them on the blocks a rank holds (pdem.stages._set).
 RUN_CATALOGUE = ("gid", "x", "mass", "inertia", "mscale", "fixed", "out", "radius")
+# and what the output writer reads of every block when it opens (its initial centroids and
+# groups): kept from the first distribution until then (the rest of CATALOGUE is dropped before
+# the start's contact update, the set-up's peak)
+OUTPUT_CATALOGUE = ("x0", "group")
 
 
 def needs_whole_scene(scene: Scene, comm) -> bool:
@@ -287,6 +291,7 @@ class ModelState:
             self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
         if not self.keep_scene_geometry:
             self.release_scene_geometry()
+            self.release_setup_fields(OUTPUT_CATALOGUE if self.output_surfaces else ())
 
     def release_scene_geometry(self):
         """After set-up (blocks distributed, output opened): drop the geometry of the blocks
@@ -300,12 +305,14 @@ class ModelState:
             self.glob.keep_fields(CATALOGUE)
         return_freed_memory()
 
-    def release_setup_fields(self):
-        """Once the output is open: of every scene block keep only :data:`RUN_CATALOGUE`
-        (about 140 bytes a scene block fewer on every rank). A run that keeps the whole
-        scene (``pdem check``, a stage's boundary stress) keeps it all."""
+    def release_setup_fields(self, keep: tuple[str, ...] = ()):
+        """Of every scene block keep only :data:`RUN_CATALOGUE` and ``keep`` (about 140 bytes
+        a scene block fewer on every rank): once the blocks are distributed, with
+        :data:`OUTPUT_CATALOGUE` for the output writer still to open, and once the output is
+        open. A run that keeps the whole scene (``pdem check``, a stage's boundary stress)
+        keeps it all."""
         if not self.keep_scene_geometry and not self.needs_scene_geometry():
-            self.glob.keep_fields(RUN_CATALOGUE)
+            self.glob.keep_fields(RUN_CATALOGUE + keep)
             return_freed_memory()
 
     def distribute_initial(self):

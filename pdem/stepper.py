@@ -175,7 +175,8 @@ class Stepper:
         joints = s.joints.kernel_args
         # only updated contacts can change their stored energy (the others are copied)
         todo = todo.astype(np.uint8)
-        before = contact_energies(c.pairs(), c.subs(), joints, todo)
+        # (none stored before the first update: no array of zeros on top of its peak)
+        before = contact_energies(c.pairs(), c.subs(), joints, todo) if c.n_sub else None
         new = (c.warm == 0).astype(np.uint8)
         # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
         res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
@@ -204,7 +205,8 @@ class Stepper:
         # (after the zoned blocks' regrid: their sub-contacts are the regrid's)
         after = np.zeros(c.n)
         after[kept] = contact_energies(s.contacts.pairs(), s.contacts.subs(), joints, todo[kept])
-        forces.book_contact_energy(self.bodies(), c.ia, c.ib, after - before,
+        forces.book_contact_energy(self.bodies(), c.ia, c.ib,
+                                   after if before is None else after - before,
                                    motion.WORK_GEOMETRY)
 
     def bodies(self) -> Bodies:

@@ -179,7 +179,9 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
                 n_new += 1
     cap += 4 * n_new
     keep = np.zeros(nc, np.uint8)
-    counts = np.zeros(nc, np.int64)
+    # each contact's sub-contact count at c + 1, summed into the CSR start in place below (no
+    # count array of its own: it would add to the start's first update, the set-up's peak)
+    new_start = np.zeros(nc + 1, np.int64)
     # state: the store's dtype (uint8 bits)
     pa, area, un, fs, us, dil, state, hist = _new_subs(cap, old_state, old_hist.shape[1])
     # world face normals and edge directions, once per piece (each is in many contacts)
@@ -198,7 +200,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         b = c_ib[c]
         if todo[c] == 0:
             keep[c] = 1
-            counts[c] = old_start[c + 1] - old_start[c]
+            new_start[c + 1] = old_start[c + 1] - old_start[c]
             continue
         ka = c_ka[c]
         kb = c_kb[c]
@@ -269,14 +271,12 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
             carry_spring_energy(old_area[o0:o1], old_un[o0:o1], old_dil[o0:o1], old_fs[o0:o1],
                                 area[pos:pos + k], un[pos:pos + k], dil[pos:pos + k],
                                 fs[pos:pos + k])
-        counts[c] = k
+        new_start[c + 1] = k
         pos += k
-    new_start = np.zeros(nc + 1, np.int64)
     tot = 0
     for c in range(nc):
-        new_start[c] = tot
-        tot += counts[c]
-    new_start[nc] = tot
+        tot += new_start[c + 1]
+        new_start[c + 1] = tot
     if n_todo == nc:  # every contact updated: the side arrays, in contact order, are the result
         if trim and cap > tot + (tot >> 3) + 64:  # a copy (memcpy) rather than hold the slack
             # one array at a time, each original freed once copied: the update's peak is the
@@ -299,7 +299,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     c = 0
     while c < nc:
         if todo[c] != 0:  # updated (or deleted: no rows): from the side arrays
-            k = counts[c]
+            k = new_start[c + 1] - new_start[c]
             _copy_subs(out, new_start[c], side_rows, side, side + k)
             side += k
             c += 1
