@@ -26,6 +26,8 @@ from pdem.geometry.errors import GeometryError
 from pdem.geometry.hull import _hull_faces, default_tolerance
 from pdem.geometry.polyhedron import ConvexPolyhedron
 
+from .vector import cross
+
 #: Tag of a face that no cut has labelled (the original model surface).
 UNTAGGED = -1
 
@@ -99,15 +101,37 @@ def split_by_plane(
         exact planes, the cut face gets the exact cut plane; the volumes add up to the
         parent's to round-off.
     """
+    below, above, cut = _plane_cut(poly, normal, offset, tol, tag)
+    if cut is None:
+        return below, above
+    n, d = cut.plane
+    return cut.piece(n, d, keep=-1), cut.piece(-n, -d, keep=1)
+
+
+def clip_below(
+    poly: ConvexPolyhedron, normal, offset, tol: float = 0.0, tag: int = UNTAGGED
+) -> ConvexPolyhedron | None:
+    """The ``below`` piece of :func:`split_by_plane` (the same numbers), without making the
+    other one: clipping a polyhedron by a half-space."""
+    below, _, cut = _plane_cut(poly, normal, offset, tol, tag)
+    if cut is None:
+        return below
+    n, d = cut.plane
+    return cut.piece(n, d, keep=-1)
+
+
+def _plane_cut(poly, normal, offset, tol, tag):
+    """(below, above, None) when the plane leaves ``poly`` whole (see :func:`split_by_plane`),
+    else (None, None, the cut)."""
     n, d = _unit_plane(normal, offset)
     tol = _check_tol(tol)
     snap = default_tolerance(poly.vertices)
     s = poly.vertices @ n - d
     thin = max(tol, snap)
     if s.max() < thin:
-        return _tagged(poly), None
+        return _tagged(poly), None, None
     if s.min() > -thin:
-        return None, _tagged(poly)
+        return None, _tagged(poly), None
     # Vertices within round-off of the plane count as on it and belong to both pieces, so a
     # cut through a vertex does not leave a needle edge next to it.
     side = np.where(s > snap, 1, np.where(s < -snap, -1, 0)).astype(np.int64)
@@ -119,7 +143,8 @@ def split_by_plane(
     x_edge = np.full((len(e), 3), np.nan)
     x_edge[crossing] = poly.vertices[a] + t[:, None] * (poly.vertices[b] - poly.vertices[a])
     cut = _Cut(poly, side, x_edge, snap, tag)
-    return cut.piece(n, d, keep=-1), cut.piece(-n, -d, keep=1)
+    cut.plane = (n, d)
+    return None, None, cut
 
 
 class _Cut:
@@ -206,9 +231,9 @@ class _Cut:
         if len(ids) < 3:
             raise GeometryError("cut section has fewer than 3 distinct corners")
         p = self.points[ids]
-        u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+        u = cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
         u /= np.linalg.norm(u)
-        w = np.cross(n, u)  # (u, w, n) right-handed: increasing angle is CCW seen along n
+        w = cross(n, u)  # (u, w, n) right-handed: increasing angle is CCW seen along n
         q = p - p.mean(axis=0)
         order = np.argsort(np.arctan2(q @ w, q @ u), kind="stable")
         return [ids[k] for k in order]
@@ -238,7 +263,7 @@ def _drop_repeats(ids: list[int]) -> list[int]:
 
 def _match_plane(face_pts: np.ndarray, cand_n: np.ndarray, cand_d: np.ndarray) -> int:
     """Index of the candidate plane that a face polygon lies on (smallest distance)."""
-    area = np.cross(face_pts - face_pts[0], np.roll(face_pts, -1, axis=0) - face_pts[0]).sum(axis=0)
+    area = cross(face_pts - face_pts[0], np.roll(face_pts, -1, axis=0) - face_pts[0]).sum(axis=0)
     nf = area / np.linalg.norm(area)
     err = np.max(np.abs(face_pts @ cand_n.T - cand_d), axis=0)
     err[cand_n @ nf < _PLANE_MATCH_COS] = np.inf
@@ -505,9 +530,9 @@ def cylinder_planes(start, end, radius: float, sides: int = 16) -> tuple[np.ndar
     if not (np.isfinite(radius) and radius > 0.0) or int(sides) != sides or sides < 3:
         raise GeometryError(f"cylinder needs radius > 0 and sides >= 3, got {radius}, {sides}")
     a = axis / length
-    u = np.cross(np.eye(3)[int(np.argmin(np.abs(a)))], a)
+    u = cross(np.eye(3)[int(np.argmin(np.abs(a)))], a)
     u /= np.linalg.norm(u)
-    w = np.cross(a, u)
+    w = cross(a, u)
     phi = (np.arange(sides) + 0.5) * (2.0 * np.pi / sides)  # face normals between corners
     lateral = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w
     normals = np.concatenate([lateral, [-a, a]])

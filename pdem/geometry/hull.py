@@ -16,6 +16,8 @@ import numpy as np
 from pdem.geometry.errors import GeometryError
 from pdem.geometry.polyhedron import ConvexPolyhedron
 
+from .vector import cross
+
 # Relative tolerance: distances below REL_TOL * (point-cloud diagonal) count as zero.
 REL_TOL = 1e-9
 
@@ -73,7 +75,7 @@ class _TriHull:
         """Add triangles (CCW from outside); return their ids."""
         p = self.p
         t = np.array(tris, dtype=np.int64).reshape(-1, 3)
-        n = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+        n = cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
         norm = np.linalg.norm(n, axis=1)
         if np.any(norm == 0.0):
             raise GeometryError("hull construction produced a degenerate triangle")
@@ -151,7 +153,7 @@ def _initial_simplex(p: np.ndarray, tol: float) -> list[int]:
     i2 = int(np.argmax(np.linalg.norm(perp, axis=1)))
     if np.linalg.norm(perp[i2]) <= tol:
         raise GeometryError("all points are collinear: the polyhedron has zero volume")
-    n = _unit(np.cross(p[i1] - p[i0], p[i2] - p[i0]))
+    n = _unit(cross(p[i1] - p[i0], p[i2] - p[i0]))
     h = r @ n
     i3 = int(np.argmax(np.abs(h)))
     if abs(h[i3]) <= tol:
@@ -245,7 +247,7 @@ def _merge_faces(hull: _TriHull, tol: float) -> tuple[list[list[int]], set[int]]
     faces = [f for f in range(len(hull.tris)) if hull.alive[f]]
     tris = np.array([hull.tris[f] for f in faces])
     area2 = np.linalg.norm(
-        np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]), axis=1
+        cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]), axis=1
     )
     local = {f: k for k, f in enumerate(faces)}
     group = np.full(len(faces), -1)
@@ -276,10 +278,10 @@ def _merge_faces(hull: _TriHull, tol: float) -> tuple[list[list[int]], set[int]]
             continue
         mt = tris[members]
         verts = np.unique(mt)
-        n = np.cross(p[mt[:, 1]] - p[mt[:, 0]], p[mt[:, 2]] - p[mt[:, 0]]).sum(axis=0)
+        n = cross(p[mt[:, 1]] - p[mt[:, 0]], p[mt[:, 2]] - p[mt[:, 0]]).sum(axis=0)
         n = _unit(n)
-        u = _unit(np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))]))
-        v = np.cross(n, u)  # (u, v, n) right-handed: CCW in (u, v) is CCW seen from outside
+        u = _unit(cross(n, np.eye(3)[int(np.argmin(np.abs(n)))]))
+        v = cross(n, u)  # (u, v, n) right-handed: CCW in (u, v) is CCW seen from outside
         xy = np.stack([p[verts] @ u, p[verts] @ v], axis=1)
         ring = _polygon_2d(xy, tol)
         kept = verts[ring]

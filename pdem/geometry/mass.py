@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .vector import cross
+
 
 def fan_triangles(face_start: np.ndarray, face_verts: np.ndarray) -> np.ndarray:
     """Fan every face polygon into triangles ``(v0, v_i, v_{i+1})``.
@@ -70,7 +72,7 @@ def mass_properties(
     a = v[tri[:, 0]] - ref
     b = v[tri[:, 1]] - ref
     c = v[tri[:, 2]] - ref
-    det = np.einsum("ij,ij->i", a, np.cross(b, c))  # 6 x signed tetrahedron volume
+    det = np.einsum("ij,ij->i", a, cross(b, c))  # 6 x signed tetrahedron volume
     volume = det.sum() / 6.0
     s = a + b + c
     first = (det[:, None] * s).sum(axis=0) / 24.0  # sum of V_t * (a+b+c)/4

@@ -11,6 +11,8 @@ from pdem.geometry.errors import GeometryError
 from pdem.geometry.mass import fan_triangles, mass_properties
 from pdem.geometry.topology import build_half_edges
 
+from .vector import cross
+
 
 def _readonly(a: np.ndarray, dtype) -> np.ndarray:
     # Always copy: never freeze (or alias) an array the caller still owns.
@@ -33,14 +35,14 @@ def newell_normal(points: np.ndarray) -> np.ndarray:
         Sum of ``p_i x p_{i+1}`` taken about the polygon's mean (for round-off).
     """
     p = points - points.mean(axis=0)
-    return np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+    return cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
 
 
 def _face_area_vectors(v: np.ndarray, face_start: np.ndarray, face_verts: np.ndarray):
     """``2 * area * unit normal`` of every face, from its triangle fan (vectorised Newell)."""
     tri = fan_triangles(face_start, face_verts)
     a = v[tri[:, 0]]
-    cr = np.cross(v[tri[:, 1]] - a, v[tri[:, 2]] - a)
+    cr = cross(v[tri[:, 1]] - a, v[tri[:, 2]] - a)
     face_of_tri = np.repeat(np.arange(len(face_start) - 1), np.diff(face_start) - 2)
     out = np.zeros((len(face_start) - 1, 3))
     np.add.at(out, face_of_tri, cr)
@@ -379,7 +381,7 @@ def face_areas(polys) -> list[np.ndarray]:
                 sel = faces[c0:c0 + _AREA_CHUNK]
                 pts = verts[fverts[fstart[sel, None] + np.arange(k)]]  # (F, k, 3) polygons
                 pts = pts - pts.mean(axis=1)[:, None, :]
-                a = np.cross(pts, np.roll(pts, -1, axis=1)).sum(axis=1)
+                a = cross(pts, np.roll(pts, -1, axis=1)).sum(axis=1)
                 # vector @ vector per face: numpy's dot, as np.linalg.norm of one vector
                 areas[sel] = 0.5 * np.sqrt(np.matmul(a[:, None, :], a[:, :, None])[:, 0, 0])
         for p, part in zip(todo, np.split(areas, np.cumsum(nf)[:-1]), strict=True):

@@ -31,11 +31,11 @@ from ..geometry import ConvexPolyhedron, GeometryError, from_planes
 from ..geometry.cutting import (
     UNTAGGED,
     box_planes,
+    clip_below,
     cut_blocks,
     cylinder_planes,
     excavate,
     joint_set_planes,
-    split_by_plane,
 )
 from ..geometry.hull import default_tolerance
 
@@ -160,6 +160,7 @@ def join_slivers(specs, fraction: float, same_parent: bool = True):
 
     lo = np.array([np.min([p.vertices.min(axis=0) for p in s.pieces], axis=0) for s in specs])
     hi = np.array([np.max([p.vertices.max(axis=0) for p in s.pieces], axis=0) for s in specs])
+    grown: dict = {}  # each small piece grown once for all its neighbours (touch_area)
     for k in small:
         pad = 1e-6 * vol[k] ** (1.0 / 3.0)
         near = np.nonzero(np.all((lo <= hi[k] + pad) & (hi >= lo[k] - pad), axis=1))[0]
@@ -168,7 +169,8 @@ def join_slivers(specs, fraction: float, same_parent: bool = True):
             j = int(j)
             if find(j) == find(k) or kind(specs[j]) != kind(specs[k]):
                 continue
-            area = sum(touch_area(p, q) for p in specs[k].pieces for q in specs[j].pieces)
+            area = sum(touch_area(p, q, grown) for p in specs[k].pieces
+                       for q in specs[j].pieces)
             if area > best_area:
                 best, best_area = j, area
         if best >= 0 and best_area > TOUCH_AREA * vol[k] ** (2.0 / 3.0):
@@ -211,17 +213,29 @@ def _planes(poly: ConvexPolyhedron):
     return np.asarray(poly.normals), np.asarray(poly.offsets)
 
 
-def touch_area(p: ConvexPolyhedron, q: ConvexPolyhedron) -> float:
+def touch_area(p: ConvexPolyhedron, q: ConvexPolyhedron, grown: dict | None = None) -> float:
     """Area of the face patch two convex pieces share (0 if they do not touch face to face):
-    the volume of their intersection, each grown by a small ``eps``, over ``2 eps``."""
+    the volume of their intersection, each grown by a small ``eps``, over ``2 eps``.
+
+    ``grown``: a cache of the grown ``p`` by (piece, eps), for a caller that measures one
+    piece against several neighbours (the hull of the grown piece was ~70 % of a rock mass's
+    build in sliver joining); the same numbers as without it."""
     eps = 1e-6 * min(_size(p), _size(q))
-    n, d = _planes(p)
-    try:
-        inner = from_planes(n, d + eps)
-    except GeometryError:
+    key = (id(p), eps)
+    if grown is not None and key in grown:
+        inner = grown[key]
+    else:
+        n, d = _planes(p)
+        try:
+            inner = from_planes(n, d + eps)
+        except GeometryError:
+            inner = None
+        if grown is not None:
+            grown[key] = inner
+    if inner is None:
         return 0.0
     for m, e in zip(*_planes(q), strict=True):
-        inner, _ = split_by_plane(inner, m, e + eps, 0.0)
+        inner = clip_below(inner, m, e + eps, 0.0)
         if inner is None:
             return 0.0
     return float(inner.volume) / (2.0 * eps)
@@ -338,7 +352,7 @@ def inside_part(poly: ConvexPolyhedron, normals, offsets, tol) -> ConvexPolyhedr
     """The part of ``poly`` inside the convex region (None if thinner than ``tol``)."""
     inner = poly
     for n, d in zip(normals, offsets, strict=True):
-        inner, _ = split_by_plane(inner, n, d, tol, UNTAGGED)
+        inner = clip_below(inner, n, d, tol, UNTAGGED)
         if inner is None:
             return None
     return inner

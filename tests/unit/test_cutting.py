@@ -10,6 +10,7 @@ from pdem.geometry.cutting import (
     UNTAGGED,
     _Cut,
     box_planes,
+    clip_below,
     cut_blocks,
     cylinder_planes,
     dip_normal,
@@ -449,3 +450,26 @@ def test_excavate_blocks_many():
     np.testing.assert_allclose(removed, [0.125, 0.25, 0.125, 0.0], rtol=1e-12)
     assert parent.tolist() == sorted(parent.tolist()) and parent[-1] == 3
     assert np.bincount(parent).tolist() == [5, 4, 5, 1]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_clip_below_is_split_by_planes_below_piece(seed):
+    """Clipping by a half-space gives the very ``below`` piece of the split (vertices, faces,
+    tags, volume: the same bits), whole blocks and misses included."""
+    poly = random_block(seed)
+    rng = np.random.default_rng(100 + seed)
+    c = poly.vertices.mean(axis=0)
+    for k in range(8):
+        n = rng.normal(size=3)
+        s = (poly.vertices - c) @ (n / np.linalg.norm(n))
+        d = float(np.linalg.norm(n) * (n / np.linalg.norm(n)) @ c) + np.linalg.norm(n) * \
+            (s.min() - 0.1 + (s.max() - s.min() + 0.2) * k / 7)
+        below, _ = split_by_plane(poly, n, d, 0.01, tag=3)
+        clipped = clip_below(poly, n, d, 0.01, tag=3)
+        assert (below is None) == (clipped is None)
+        if below is not None:
+            assert np.array_equal(below.vertices, clipped.vertices)
+            for k in ("face_start", "face_verts", "normals", "offsets", "face_tag", "centroid",
+                      "inertia"):
+                assert np.array_equal(getattr(below, k), getattr(clipped, k)), k
+            assert below.volume == clipped.volume

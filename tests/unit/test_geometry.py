@@ -454,3 +454,17 @@ def test_prism_errors():
         prism([[0, 0, 0], [1, 0, 0], [1, 1, 0.5], [0, 1, 0]], [0, 0, 1])
     with pytest.raises(GeometryError):
         tetrahedron([0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0])
+
+
+def test_cross_is_numpys_bit_for_bit():
+    """pdem.geometry.vector.cross against np.cross on broadcast shapes and awkward values
+    (huge, tiny, mixed signs, integers): the same bits."""
+    from pdem.geometry.vector import cross
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(50, 3)) * 10.0 ** rng.integers(-12, 12, size=(50, 1))
+    b = rng.normal(size=(50, 3)) * 10.0 ** rng.integers(-12, 12, size=(50, 1))
+    for x, y in ((a, b), (a[0], b), (a, b[3]), (a[0], b[1]), (a.reshape(5, 10, 3), b[:10]),
+                 (np.eye(3)[1], a), (np.array([1, 2, 3]), np.array([4, -5, 6]))):
+        assert np.array_equal(cross(x, y), np.cross(x, y))
+        assert cross(x, y).shape == np.cross(x, y).shape
