@@ -184,7 +184,7 @@ class ModelState:
         whole = whole or needs_whole_scene(scene, comm)
         estimate = preflight(scene, comm.size, memory, warn, whole)
         specs = expand_blocks(scene, estimate.max_blocks,
-                              None if whole else lambda n: build_share(comm, n))
+                              None if whole else lambda n: build_share(comm, n), comm)
         if len(specs) != estimate.blocks:  # cuts and mesh cells are counted only once built
             estimate = rescaled(estimate, len(specs))
             if len(specs) > estimate.max_blocks or estimate.bytes_per_rank > estimate.max_bytes:

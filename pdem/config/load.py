@@ -22,6 +22,9 @@ class ConfigError(UserError, ValueError):
         self.source = source
         super().__init__(f"{source}: invalid scene\n" + "\n".join(f"  - {m}" for m in messages))
 
+    def __reduce__(self):  # pickled by its messages (sent between ranks, pdem.parallel.mpi)
+        return type(self), (self.messages, self.source)
+
 
 def _line_index(text: str) -> dict[tuple, int]:
     """Map each key path (tuple of keys/indices) to the 1-based YAML line it starts on."""

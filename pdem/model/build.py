@@ -422,14 +422,17 @@ for _name, _builder in (("box", _box), ("polyhedron", _polyhedron), ("prism", _p
     SHAPES.register(_name, _builder)
 
 
-def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None) -> list[BlockSpec]:
+def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
+                  comm=None) -> list[BlockSpec]:
     """Every block of the scene in gid order, shapes in the world frame: the ``blocks:``
     entries, then their cuts, joins and excavations (pdem.model.rockmass).
 
     ``share(n)``: the gids ``[lo, hi)`` whose shapes this rank needs, of ``n`` blocks; the
     members of families (``array``, ``random``) outside it are specs without pieces (a
     name, an entry, one piece), an array's never built. Only when the scene's blocks are
-    known without building them: no cuts, joins, excavations or meshes (:func:`lazy_scene`)."""
+    known without building them: no cuts, joins, excavations or meshes (:func:`lazy_scene`).
+    ``comm``: the ranks share the work of the cuts (collective; every rank gets every block,
+    pdem.model.rockmass.build_rock_mass)."""
     out: list[BlockSpec] = []
     errors: list[str] = []
     lo, hi = share(sum(_family_size(b) or 1 for b in scene.blocks)) \
@@ -469,7 +472,7 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None) -> li
         raise ConfigError(errors)
     from .rockmass import build_rock_mass
 
-    out = build_rock_mass(scene, out, max_blocks)
+    out = build_rock_mass(scene, out, max_blocks, comm)
     if any(b.zones is not None for b in scene.blocks):
         from ..deformable.store import zone_specs
 

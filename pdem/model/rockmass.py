@@ -38,6 +38,7 @@ from ..geometry.cutting import (
     joint_set_planes,
 )
 from ..geometry.hull import default_tolerance
+from ..parallel.mpi import shared_work
 
 # Relative sliver size: pieces thinner than this fraction of the cut block's size (cube root
 # of its volume) are not created, unless ``cut_tolerance`` says otherwise.
@@ -47,14 +48,18 @@ AUTO_CUT_TOLERANCE = 0.01
 TOUCH_AREA = 1e-4
 
 
-def build_rock_mass(scene, specs, max_blocks: int | None = None):
-    """The scene's blocks after its cuts, joins and excavations (gid order)."""
+def build_rock_mass(scene, specs, max_blocks: int | None = None, comm=None):
+    """The scene's blocks after its cuts, joins and excavations (gid order).
+
+    ``comm``: the ranks share the cutting of each joint set and sliver joining's face areas
+    (:func:`pdem.parallel.mpi.shared_work`) and each gets the whole result, the same on any
+    number of ranks (collective); None: this process does it all."""
     if scene.cuts:
-        specs = apply_cuts(scene, specs, max_blocks)
+        specs = apply_cuts(scene, specs, max_blocks, comm)
     if scene.join:
         specs = apply_joins(scene, specs)
     if scene.excavate or any(st.excavate for st in scene.stages):
-        specs = apply_excavations(scene, specs)
+        specs = apply_excavations(scene, specs, comm)
     return specs
 
 
@@ -72,7 +77,7 @@ def _in_box(point, box) -> bool:
     return bool(np.all(np.asarray(point) >= box.min) and np.all(np.asarray(point) <= box.max))
 
 
-def apply_cuts(scene, specs, max_blocks=None):
+def apply_cuts(scene, specs, max_blocks=None, comm=None):
     for i, cut in enumerate(scene.cuts):
         where = f"{scene.at('cuts', i)} ({cut.name!r})"
         chosen = [
@@ -96,21 +101,37 @@ def apply_cuts(scene, specs, max_blocks=None):
         # refuse a set that would make too many blocks before cutting (a tiny spacing would
         # otherwise take hours): each block gets at most one piece per plane crossing it, +1
         crossing = 0
-        for s, c in zip(specs, chosen, strict=True):
+        todo, planes = [], []  # the chosen blocks and how many planes cross each
+        for k, (s, c) in enumerate(zip(specs, chosen, strict=True)):
             if c:
                 proj = s.pieces[0].vertices @ normal
-                crossing += int(np.searchsorted(offsets, proj.max())
-                                - np.searchsorted(offsets, proj.min(), side="right"))
+                m = int(np.searchsorted(offsets, proj.max())
+                        - np.searchsorted(offsets, proj.min(), side="right"))
+                crossing += m
+                todo.append(k)
+                planes.append(m)
         if len(specs) + crossing > limit:
             raise ConfigError([f"{where}: would make up to {len(specs) + crossing} blocks, more "
                                f"than {int(limit)} (limits.max_blocks): a larger spacing, a "
                                "range, or a higher limits.max_blocks"])
+
+        def cut_share(lo, hi, i=i, normal=normal, offsets=offsets, todo=todo, specs=specs):
+            out = []
+            for k in todo[lo:hi]:
+                poly = specs[k].pieces[0]
+                out.append(cut_blocks([poly], i, normal, offsets,
+                                      tol=_cut_tolerance(scene, poly))[0])
+            return out
+
+        # the ranks cut shares of the blocks (weighted by the planes crossing them) and each
+        # gets every block's pieces, in block order: the same list as one rank cutting all
+        cut_pieces = dict(zip(todo, shared_work(comm, np.asarray(planes) + 1.0, cut_share),
+                              strict=True))
         for k, (s, c) in enumerate(zip(specs, chosen, strict=True)):
             if not c:
                 out.append(s)
                 continue
-            poly = s.pieces[0]
-            pieces, _ = cut_blocks([poly], i, normal, offsets, tol=_cut_tolerance(scene, poly))
+            pieces = cut_pieces.pop(k)
             made += len(pieces) - 1
             out.extend(dataclasses.replace(s, pieces=[p]) for p in pieces)
             if len(out) + len(specs) - k - 1 > limit:
@@ -122,11 +143,11 @@ def apply_cuts(scene, specs, max_blocks=None):
                                f"{len(offsets)} plane(s) through origin {list(cut.origin)})"])
         specs = out
     if scene.join_slivers > 0.0:
-        specs = join_slivers(specs, scene.join_slivers)
+        specs = join_slivers(specs, scene.join_slivers, comm=comm)
     return _name_pieces(specs)
 
 
-def join_slivers(specs, fraction: float, same_parent: bool = True):
+def join_slivers(specs, fraction: float, same_parent: bool = True, comm=None):
     """Join every cut piece smaller than ``fraction`` of the median cut piece (by volume) to
     the block it shares the largest face with (smallest first; same material, group and
     excavation time; of the same parent block with ``same_parent``).
@@ -134,7 +155,11 @@ def join_slivers(specs, fraction: float, same_parent: bool = True):
     Three sets leave small corner pieces even when no piece is thin along any one normal, and
     an excavation leaves corner bits of the blocks it cuts; the smallest block sets the
     timestep (eq. 87), so one sliver can cost 100x in run time. 3DEC users join them by hand;
-    here they go into a neighbour, making it concave (fixed if the neighbour is)."""
+    here they go into a neighbour, making it concave (fixed if the neighbour is).
+
+    The face areas between each small piece and its neighbours (nearly all the work) are
+    measured first, shared over the ranks (``comm``, :func:`pdem.parallel.mpi.shared_work`),
+    then the pieces are joined in order as before: the same blocks on any number of ranks."""
     count: dict[str, int] = {}
     for s in specs:
         count[s.parent] = count.get(s.parent, 0) + 1
@@ -160,17 +185,28 @@ def join_slivers(specs, fraction: float, same_parent: bool = True):
 
     lo = np.array([np.min([p.vertices.min(axis=0) for p in s.pieces], axis=0) for s in specs])
     hi = np.array([np.max([p.vertices.max(axis=0) for p in s.pieces], axis=0) for s in specs])
-    grown: dict = {}  # each small piece grown once for all its neighbours (touch_area)
+    # every (small piece, neighbour of its kind) pair whose face area the joining may read
+    near_of = {}
+    pairs = []
     for k in small:
         pad = 1e-6 * vol[k] ** (1.0 / 3.0)
         near = np.nonzero(np.all((lo <= hi[k] + pad) & (hi >= lo[k] - pad), axis=1))[0]
+        near_of[k] = [int(j) for j in near if int(j) != k and kind(specs[j]) == kind(specs[k])]
+        pairs.extend((k, j) for j in near_of[k])
+
+    def areas(a, b):
+        grown: dict = {}  # each small piece grown once for all its neighbours (touch_area)
+        return [sum(touch_area(p, q, grown) for p in specs[k].pieces for q in specs[j].pieces)
+                for k, j in pairs[a:b]]
+
+    weights = [len(specs[k].pieces) * len(specs[j].pieces) for k, j in pairs]
+    area_of = dict(zip(pairs, shared_work(comm, weights, areas), strict=True))
+    for k in small:
         best, best_area = -1, 0.0
-        for j in near:
-            j = int(j)
-            if find(j) == find(k) or kind(specs[j]) != kind(specs[k]):
+        for j in near_of[k]:
+            if find(j) == find(k):
                 continue
-            area = sum(touch_area(p, q, grown) for p in specs[k].pieces
-                       for q in specs[j].pieces)
+            area = area_of[k, j]
             if area > best_area:
                 best, best_area = j, area
         if best >= 0 and best_area > TOUCH_AREA * vol[k] ** (2.0 / 3.0):
@@ -368,7 +404,7 @@ def _excavations(scene):
             yield f"{scene.at('stages', i, 'excavate', j)} ({exc.region_kind})", exc, i
 
 
-def apply_excavations(scene, specs):
+def apply_excavations(scene, specs, comm=None):
     for where, exc, stage in _excavations(scene):
         later = exc.time > 0.0 or stage is not None  # the inside stays a block until then
         try:
@@ -416,5 +452,5 @@ def apply_excavations(scene, specs):
             raise ConfigError([f"{where}: removes every block"])
         specs = out
     if scene.join_slivers > 0.0:
-        specs = join_slivers(specs, scene.join_slivers, same_parent=False)
+        specs = join_slivers(specs, scene.join_slivers, same_parent=False, comm=comm)
     return specs

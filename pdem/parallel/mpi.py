@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import pickle
 import sys
 import time
 import traceback
@@ -216,6 +217,60 @@ def exact_sum(comm, values: np.ndarray) -> np.ndarray:
 def allgather(comm, value) -> list:
     """Every rank's ``value``, in rank order."""
     return comm.allgather(value) if comm.size > 1 else [value]
+
+
+def weighted_share(rank: int, size: int, weights) -> tuple[int, int]:
+    """Rank ``rank``'s contiguous items ``[lo, hi)`` of items with these (non-negative)
+    weights, so that each of ``size`` ranks gets about an even share of the total weight."""
+    w = np.asarray(weights, np.float64)
+    if len(w) == 0:
+        return 0, 0
+    edges = np.concatenate([[0.0], np.cumsum(w)])
+    total = edges[-1]
+    if total <= 0.0:  # all weightless: an even split by count
+        return len(w) * rank // size, len(w) * (rank + 1) // size
+    # item i goes to the rank whose share holds the middle of its weight
+    middle = 0.5 * (edges[:-1] + edges[1:]) / total
+    owner = np.minimum((middle * size).astype(np.int64), size - 1)
+    return int(np.searchsorted(owner, rank)), int(np.searchsorted(owner, rank, side="right"))
+
+
+def shared_work(comm, weights, work) -> list:
+    """Items of a deterministic computation split over the ranks: each rank runs ``work(lo,
+    hi)`` (a list of ``hi - lo`` results) on its contiguous share (:func:`weighted_share`), and
+    every rank gets all the results in item order (a pickled allgather), the same as one rank
+    running ``work(0, n)``. ``comm`` None: this process does it all.
+
+    An exception on any rank is raised on every rank (that of the lowest rank that failed), so
+    no rank is left waiting in the next collective: where it was raised as itself, elsewhere
+    as the same exception unpickled (a :class:`RuntimeError` naming the rank if it does not
+    unpickle)."""
+    n = len(weights)
+    if comm is None or comm.size == 1:
+        return list(work(0, n))
+    lo, hi = weighted_share(comm.rank, comm.size, weights)
+    failure = None
+    try:
+        mine = list(work(lo, hi))
+    except Exception as exc:  # noqa: BLE001 - every rank must hear of it
+        mine = None
+        failure = exc
+        try:
+            sent = ("raised", pickle.dumps(exc), str(exc))
+        except Exception:  # noqa: BLE001 - an unpicklable exception: its text
+            sent = ("raised", None, f"{type(exc).__name__}: {exc}")
+    parts = comm.allgather(mine if failure is None else sent)
+    for r, part in enumerate(parts):
+        if isinstance(part, tuple) and part and part[0] == "raised":
+            if r == comm.rank:
+                raise failure
+            try:
+                exc = pickle.loads(part[1]) if part[1] is not None else None
+            except Exception:  # noqa: BLE001
+                exc = None
+            raise exc if isinstance(exc, BaseException) else RuntimeError(
+                f"rank {r}: {part[2]}")
+    return [x for part in parts for x in part]
 
 
 def allgather_rows(comm, values: np.ndarray) -> np.ndarray:

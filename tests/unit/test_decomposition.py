@@ -252,3 +252,20 @@ def test_balance_setting():
         scene_with("{rebalance: 0.9}")
     with pytest.raises(ConfigError, match="parallel.balance"):
         scene_with("{balance: grid}")
+
+
+def test_weighted_share_is_contiguous_complete_and_balanced():
+    """Shares of weighted items: contiguous, covering every item once in rank order, each
+    within one item's weight of an even share; all-zero weights split by count."""
+    from pdem.parallel.mpi import weighted_share
+
+    rng = np.random.default_rng(3)
+    for size in (1, 2, 3, 7):
+        for w in (rng.uniform(0, 10, 101), np.ones(5), np.zeros(9), np.array([100.0, 1, 1, 1]),
+                  np.zeros(0)):
+            shares = [weighted_share(r, size, w) for r in range(size)]
+            assert shares[0][0] == 0 and shares[-1][1] == len(w)
+            assert all(a[1] == b[0] for a, b in zip(shares, shares[1:], strict=False))
+            if w.sum() > 0:
+                even = w.sum() / size
+                assert all(abs(w[lo:hi].sum() - even) <= w.max() + 1e-9 for lo, hi in shares)
