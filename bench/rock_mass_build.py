@@ -1,0 +1,101 @@
+"""Rock mass build benchmark: a 40 x 40 x 30 m region on a fixed base, cut by three joint sets
+of one spacing (pdem.model.rockmass: the cuts, then sliver joining), set up to the first step.
+
+    .venv/bin/python bench/rock_mass_build.py                   # spacings 2 and 1.5, 1 and 2 ranks
+    .venv/bin/python bench/rock_mass_build.py --spacing 4 2 --ranks 1 2 3
+
+Prints, per spacing and rank count, the blocks made, the seconds of the build (the cuts and
+sliver joining: every rank gets every block) and of the whole set-up to the first step (the
+slowest rank). Run it against another tree with PYTHONPATH=that/tree to compare. Not a test:
+timings on shared machines are noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+SCENE = """
+name: jointed-{spacing}
+materials:
+  granite: {{density: 2600}}
+joints:
+  default: {{kn: 5.0e9, ks: 2.5e9, friction: 35}}
+blocks:
+  - {{name: rock, box: {{min: [0, 0, 0], max: [40, 40, 30]}}, material: granite, group: rock}}
+  - {{name: base, box: {{min: [-5, -5, -5], max: [45, 45, 0]}}, material: granite, group: base,
+     fixed: true}}
+cuts:
+  - {{name: J1, dip: 60, dip_direction: 120, origin: [20, 20, 15], spacing: {spacing}, groups: [rock]}}
+  - {{name: J2, dip: 50, dip_direction: 220, origin: [20, 20, 15], spacing: {spacing}, groups: [rock]}}
+  - {{name: B, dip: 5, dip_direction: 180, origin: [20, 20, 15], spacing: {spacing}, groups: [rock]}}
+solve: {{steps: 1}}
+"""
+
+
+def child(spacing: float) -> None:
+    from mpi4py import MPI
+
+    import pdem.state as st
+    from pdem.config import parse_scene
+    from pdem.simulation import Simulation
+
+    comm = MPI.COMM_WORLD
+    build = [0.0]
+    expand = st.expand_blocks
+
+    def timed(*args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return expand(*args, **kwargs)
+        finally:
+            build[0] += time.perf_counter() - t0
+
+    st.expand_blocks = timed
+    scene = parse_scene(SCENE.format(spacing=spacing))
+    comm.Barrier()
+    t0 = time.perf_counter()
+    sim = Simulation(scene, comm, output=False)
+    sim.run(steps=1)
+    total = time.perf_counter() - t0
+    rows = comm.gather((build[0], total), root=0)
+    if comm.rank == 0:
+        print("RESULT " + json.dumps({"spacing": spacing, "ranks": comm.size,
+                                      "blocks": sim.state.glob.n,
+                                      "build": max(r[0] for r in rows),
+                                      "total": max(r[1] for r in rows)}), flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--spacing", type=float, nargs="+", default=[2.0, 1.5])
+    ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--child", type=float, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child is not None:
+        child(args.child)
+        return
+    py = sys.executable
+    mpiexec = Path(py).with_name("mpiexec")
+    print(f"{'spacing':>8} {'ranks':>6} {'blocks':>8} {'build s':>9} {'set-up s':>9}")
+    for spacing in args.spacing:
+        for ranks in args.ranks:
+            cmd = [str(mpiexec), "-n", str(ranks), py, __file__, "--child", str(spacing)]
+            proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ)
+            line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+            if proc.returncode or not line:
+                print(f"spacing {spacing}, {ranks} ranks: failed (exit {proc.returncode})\n"
+                      f"{proc.stderr[-2000:]}")
+                continue
+            r = json.loads(line[0][7:])
+            print(f"{spacing:>8g} {ranks:>6} {r['blocks']:>8} {r['build']:>9.2f} "
+                  f"{r['total']:>9.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
