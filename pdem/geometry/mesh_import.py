@@ -373,7 +373,8 @@ def _read(path: Path):
     raise GeometryError(f"cannot read mesh {path}: {reason}") from None
 
 
-def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_TOL) -> list[MeshCell]:
+def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_TOL,
+                    share_work=None) -> list[MeshCell]:
     """Read every 3D cell of a volume mesh as a convex block.
 
     Parameters
@@ -388,6 +389,10 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
         callable ``select(index, kind, data) -> bool`` is asked per 3D cell. Default: all.
     rel_tol : float
         Planarity/convexity tolerance relative to the cell's diagonal (:data:`REL_TOL`).
+    share_work : callable, optional
+        ``share_work(weights, work) -> list``: runs ``work(lo, hi)`` (the polyhedra of the
+        selected cells ``[lo, hi)``) over all of them and returns the results in order, e.g.
+        shared by the ranks (:func:`pdem.parallel.mpi.shared_work`). Default: here, in one go.
 
     Returns
     -------
@@ -430,7 +435,9 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
     keep = _selector(select, list(data_arrays))
     first_index = np.concatenate([[0], np.cumsum([len(c) for c in mesh.cells])])
 
-    cells: list[MeshCell] = []
+    # the selected cells' nodes and faces, in mesh order; their polyhedra (the work: ~1 ms a
+    # cell) are made after, in shares when ``share_work`` splits them
+    jobs: list[tuple] = []
     for k, b in enumerate(blocks):
         block = mesh.cells[b]
         kind = block.type
@@ -466,11 +473,18 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
                 cell_faces = faces
             if node_ids.size and (node_ids.min() < 0 or node_ids.max() >= len(points)):
                 raise GeometryError(f"{where}: node id out of range (mesh has {len(points)} points)")
+            jobs.append((index, kind, data, where, node_ids, cell_faces))
+
+    def polyhedra(lo: int, hi: int) -> list[ConvexPolyhedron]:
+        out = []
+        for _, _, _, where, node_ids, cell_faces in jobs[lo:hi]:
             try:
-                poly = cell_polyhedron(
-                    points, node_ids, cell_faces, rel_tol=rel_tol, coord_eps=coord_eps
-                )
+                out.append(cell_polyhedron(points, node_ids, cell_faces, rel_tol=rel_tol,
+                                           coord_eps=coord_eps))
             except GeometryError as exc:
                 raise GeometryError(f"{where}: {exc}") from None
-            cells.append(MeshCell(index=index, kind=kind, poly=poly, data=data))
-    return cells
+        return out
+
+    polys = (share_work or (lambda w, work: work(0, len(w))))(np.ones(len(jobs)), polyhedra)
+    return [MeshCell(index=index, kind=kind, poly=poly, data=data)
+            for (index, kind, data, _, _, _), poly in zip(jobs, polys, strict=True)]

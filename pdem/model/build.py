@@ -442,7 +442,7 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
         if kind == "mesh":
             from .mesh_blocks import mesh_blocks
 
-            out.extend(mesh_blocks(scene, i, b))
+            out.extend(mesh_blocks(scene, i, b, comm))
             continue
         size = _family_size(b)
         g0 = len(out)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from ..config import ConfigError
 from ..geometry import GeometryError
 from ..geometry.mesh_import import read_mesh_cells
+from ..parallel.mpi import shared_work
 from .rockmass import components
 
 
@@ -27,9 +28,10 @@ def _value(scene, where, cell, key):
     return _label(cell.data[key])
 
 
-def mesh_blocks(scene, entry: int, block) -> list:
+def mesh_blocks(scene, entry: int, block, comm=None) -> list:
     """The blocks of ``scene.blocks[entry]`` (a ``mesh:`` entry), in cell order (a joined
-    block where its first cell is)."""
+    block where its first cell is). ``comm``: the ranks share making the cells' polyhedra
+    and each gets them all (collective, pdem.parallel.mpi.shared_work)."""
     from .build import BlockSpec
 
     m = block.mesh
@@ -38,7 +40,8 @@ def mesh_blocks(scene, entry: int, block) -> list:
     if m.select:
         select = {k: (v if isinstance(v, list) else [v]) for k, v in m.select.items()}
     try:
-        cells = read_mesh_cells(m.file, select=select)
+        cells = read_mesh_cells(m.file, select=select,
+                                share_work=lambda w, work: shared_work(comm, w, work))
     except GeometryError as exc:
         raise ConfigError([f"{where}: {exc}"]) from None
     if not cells:

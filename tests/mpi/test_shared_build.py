@@ -13,6 +13,7 @@ import hashlib
 import numpy as np
 import pytest
 from mpi4py import MPI
+from support import shared_dir
 
 from pdem.cases.rock_mass import tunnel_scene
 from pdem.config import ConfigError, parse_scene
@@ -63,6 +64,64 @@ def test_shared_build_is_the_one_process_build(text):
     joined = sum(len(s.pieces) > 1 for s in shared)
     assert len(set(digests)) == 1 and digests[0] == alone, (len(shared), joined)
     assert len(shared) > 40 and joined > 0
+
+
+def hex_mesh(path, n: int, warp: int | None = None) -> None:
+    """An n x n x n lattice of unit hexahedra; cell data ``pair`` joins cells two by two
+    along x; ``warp``: that cell's first node is pushed out of its face's plane."""
+    import meshio
+
+    x = np.arange(n + 1, dtype=float)
+    pts = np.stack(np.meshgrid(x, x, x, indexing="ij"), axis=-1).reshape(-1, 3)
+
+    def node(i, j, k):
+        return (i * (n + 1) + j) * (n + 1) + k
+
+    cells = np.array([[node(i, j, k), node(i + 1, j, k), node(i + 1, j + 1, k), node(i, j + 1, k),
+                       node(i, j, k + 1), node(i + 1, j, k + 1), node(i + 1, j + 1, k + 1),
+                       node(i, j + 1, k + 1)]
+                      for i in range(n) for j in range(n) for k in range(n)])
+    if warp is not None:
+        pts = np.concatenate([pts, [pts[cells[warp, 0]] + [0.0, 0.0, 0.3]]])
+        cells[warp, 0] = len(pts) - 1
+    pair = np.array([(i // 2) * n * n + j * n + k for i in range(n) for j in range(n)
+                     for k in range(n)], float)
+    meshio.write(path, meshio.Mesh(pts, [("hexahedron", cells)], cell_data={"pair": [pair]}))
+
+
+MESHED = """
+name: meshed
+materials:
+  granite: {{density: 2600}}
+joints:
+  default: {{kn: 5.0e9, ks: 2.5e9, friction: 35}}
+blocks:
+  - {{name: rock, mesh: {{file: {path}, cell_data_group: pair}}, material: granite}}
+solve: {{steps: 1}}
+"""
+
+
+def test_a_meshs_cells_are_shared_and_a_bad_cell_named_on_every_rank(tmp_path):
+    """A volume mesh's cells are made into blocks in shares: the same blocks as one process
+    (cells joined two by two); a warped cell in the last share is the same one-line scene
+    error on every rank, naming that cell."""
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    if comm.rank == 0:
+        hex_mesh(f"{base}/good.vtu", 6)
+        hex_mesh(f"{base}/warped.vtu", 6, warp=200)
+    comm.Barrier()
+    scene = parse_scene(MESHED.format(path=f"{base}/good.vtu"))
+    shared = expand_blocks(scene, 10**6, None, comm)
+    digests = comm.allgather(build_digest(shared))
+    alone = comm.bcast(build_digest(expand_blocks(scene, 10**6)) if comm.rank == 0 else None)
+    assert len(set(digests)) == 1 and digests[0] == alone
+    assert len(shared) == 108 and all(len(s.pieces) == 2 for s in shared)
+    bad = parse_scene(MESHED.format(path=f"{base}/warped.vtu"))
+    with pytest.raises(ConfigError) as err:
+        expand_blocks(bad, 10**6, None, comm)
+    assert "cell 200 (hexahedron)" in str(err.value)
+    comm.Barrier()
 
 
 def test_an_error_on_one_rank_is_raised_on_every_rank():
