@@ -44,6 +44,15 @@ class StringColumn:
             yield buf[start:end].decode("utf-8")
             start = end
 
+    def __eq__(self, other) -> bool:
+        if isinstance(other, StringColumn):
+            return self._buf == other._buf and np.array_equal(self._end, other._end)
+        if isinstance(other, (list, tuple)):
+            return len(other) == len(self) and all(a == b for a, b in zip(self, other, strict=True))
+        return NotImplemented
+
+    __hash__ = None  # mutable-looking container semantics: equal by content, not hashable
+
     def positions(self, wanted: Iterable[str]) -> dict[str, int]:
         """The first index of each string of ``wanted`` that is in the column (one pass)."""
         want = set(wanted)

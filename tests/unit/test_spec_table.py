@@ -54,6 +54,8 @@ def test_string_column_reads_back_every_string():
     assert [col[i] for i in range(5)] == texts and col[-3] == "Blöck ∆"
     assert col.lengths().tolist() == [11, 0, 10, 4, 11] and col.max_bytes == 11
     assert col.positions(["stack_0_0_0", "b[1]", "absent"]) == {"stack_0_0_0": 0, "b[1]": 3}
+    assert col == StringColumn(texts) and col == texts and col != texts[:4]
+    assert col != StringColumn(texts[::-1])
     with pytest.raises(IndexError):
         col[5]  # noqa: B018
     assert len(StringColumn([])) == 0 and StringColumn([]).max_bytes == 0
