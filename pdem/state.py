@@ -59,7 +59,8 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
 # pdem.domain), the rebuild's ownership and boxes (fixed, radius), a stage's timestep
 CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixed", "vfix",
              "out", "material", "group", "applied_force", "radius", "point_area")
-# what of it a rank keeps once the output is open (pdem.simulation): a stage's selections (the
+# what of it a rank keeps once the blocks are distributed (ModelState._distributed_from_scene)
+# and the output is open (pdem.simulation): a stage's selections (the
 # scene centroids, out), its timestep and mass scaling (mass, inertia, radius, fixed, mscale)
 # and the rebuild's ownership and boxes (fixed, radius). The others were read by the set-up
 # only (the resolve's speeds and loads, the writer's initial centroids and groups); a stage,
