@@ -21,23 +21,22 @@ from mpi4py import MPI
 from pdem.cases.stacks import cube_stack_scene
 from pdem.config import parse_scene
 from pdem.config.resolve import TOUCH_FRACTION
-from pdem.contact.detect import Planes, _plane, refresh_contacts
+from pdem.contact.detect import Planes, _plane, plane_scratch, refresh_contacts
 from pdem.contact.forces import contact_forces
 from pdem.contact.subcontacts import contact_region
 from pdem.dynamics import motion
-from pdem.dynamics.kinematics import rotation_matrices, update_world_vertices, world_vectors
+from pdem.dynamics.kinematics import rotation_matrices, update_world_vertices
 from pdem.simulation import Simulation
 from pdem.stepper import motion_record
 
 
 @numba.njit
 def _planes_only(shapes, R, ka, kb, normal, point, warm, alg):
-    rows = np.ones(shapes.vert_start.shape[0] - 1, np.uint8)
-    nw = world_vectors(R, shapes.piece_block, shapes.face_start, shapes.normals_local, rows)
-    ew = world_vectors(R, shapes.piece_block, shapes.edir_start, shapes.edirs_local, rows)
+    scratch = plane_scratch(shapes)
     g = 0.0
     for c in range(ka.shape[0]):
-        _, _, gap = _plane(ka[c], kb[c], shapes, nw, ew, normal[c], point[c], warm[c] == 1, alg)
+        _, _, gap = _plane(ka[c], kb[c], shapes, R, scratch, normal[c], point[c], warm[c] == 1,
+                           alg)
         g += gap
     return g
 

@@ -177,11 +177,10 @@ class Stepper:
         todo = todo.astype(np.uint8)
         # (none stored before the first update: no array of zeros on top of its peak)
         before = contact_energies(c.pairs(), c.subs(), joints, todo) if c.n_sub else None
-        new = (c.warm == 0).astype(np.uint8)
+        new = (c.warm == 0).astype(np.uint8) if s.joints.by_set else None
         # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
-        res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(),
-                               todo.astype(np.uint8), s.ctol, TOUCH_FRACTION, s.algorithm,
-                               not large_blocks_mapped())
+        res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(), todo,
+                               s.ctol, TOUCH_FRACTION, s.algorithm, not large_blocks_mapped())
         keep, start, pa, area, un, fs, us, dil, state, hist = res
         if s.joints.by_set and new.any():  # a new contact on a joint plane: the set's joint
             set_joints(new & keep, c.ia, c.ib, c.ka, c.kb, c.normal, b.x, b.R, b.face_start,
@@ -193,18 +192,27 @@ class Stepper:
             from .deformable.subcontacts import carry_grid_columns
 
             sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
-        c.frozen[todo.astype(bool)] = 0  # new sub-contacts: held forces are void
+        c.frozen[todo != 0] = 0  # new sub-contacts: held forces are void
         refreshed = ContactStore(c.arrays, sub, start)
         # the common case deletes no contact: no need to copy every contact field (a select is
-        # a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts)
-        kept = keep.astype(bool)
-        s.contacts = refreshed if keep.all() else refreshed.select(kept)
+        # a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts), nor any
+        # per-contact array below (the start's first update is the set-up's peak)
+        all_kept = bool(keep.all())
+        kept = None if all_kept else keep.astype(bool)
+        s.contacts = refreshed if all_kept else refreshed.select(kept)
+        todo_kept = todo if all_kept else todo[kept]
         if s.grids is not None:  # zoned blocks: sub-contacts at their surface gridpoints
-            s.contacts = s.grids.regrid(c, s.contacts, todo[kept], b, TOUCH_FRACTION * s.ctol)
+            s.contacts = s.grids.regrid(c, s.contacts, todo_kept, b, TOUCH_FRACTION * s.ctol)
         # energy budget: what the update changed in the joints' springs, with no work done
         # (after the zoned blocks' regrid: their sub-contacts are the regrid's)
-        after = np.zeros(c.n)
-        after[kept] = contact_energies(s.contacts.pairs(), s.contacts.subs(), joints, todo[kept])
+        if before is None and all_kept:
+            forces.book_stored_energy(self.bodies(), s.contacts.pairs(), s.contacts.subs(),
+                                      joints, todo, motion.WORK_GEOMETRY)
+            return
+        after = contact_energies(s.contacts.pairs(), s.contacts.subs(), joints, todo_kept)
+        if not all_kept:  # a deleted contact's energy after is 0
+            after, kept_after = np.zeros(c.n), after
+            after[kept] = kept_after
         forces.book_contact_energy(self.bodies(), c.ia, c.ib,
                                    after if before is None else after - before,
                                    motion.WORK_GEOMETRY)

@@ -18,7 +18,6 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..dynamics.kinematics import world_vectors
 from ..jit import inline_kernel, kernel
 from .algorithms import find_plane, uses_face_normals
 from .common_plane import type_code
@@ -31,16 +30,46 @@ Planes = namedtuple("Planes", "ia ib ka kb normal point gap ctype warm")
 
 
 @inline_kernel
-def _plane(a, b, shapes, normals_world, edirs_world, n_in, p_in, warm, alg):
-    """Common plane of convex pieces a and b, world face normals and edge directions
-    precomputed."""
+def _plane(a, b, shapes, R, scratch, n_in, p_in, warm, alg):
+    """Common plane of convex pieces a and b. The algorithms that read world face normals
+    and edge directions (:func:`.algorithms.uses_face_normals`) get the two pieces' rotated
+    into ``scratch`` (:func:`plane_scratch`) here, per contact: an array of every piece's
+    (~7 MB for 64,000 cubes) was the peak of the start's first update, the set-up's, and most
+    of a periodic update's fixed cost when it re-detects a few contacts."""
     vs, fs, es = shapes.vert_start, shapes.face_start, shapes.edir_start
     va = shapes.verts_world[vs[a]:vs[a + 1]]
     vb = shapes.verts_world[vs[b]:vs[b + 1]]
+    na, nb, ea, eb = scratch
+    if uses_face_normals(alg):
+        pb = shapes.piece_block
+        _to_world(R, pb[a], shapes.normals_local, fs[a], fs[a + 1], na)
+        _to_world(R, pb[b], shapes.normals_local, fs[b], fs[b + 1], nb)
+        _to_world(R, pb[a], shapes.edirs_local, es[a], es[a + 1], ea)
+        _to_world(R, pb[b], shapes.edirs_local, es[b], es[b + 1], eb)
     x = shapes.piece_x
-    return find_plane(alg, va, vb, x[a], x[b], normals_world[fs[a]:fs[a + 1]],
-                      normals_world[fs[b]:fs[b + 1]], edirs_world[es[a]:es[a + 1]],
-                      edirs_world[es[b]:es[b + 1]], n_in, p_in, warm)
+    return find_plane(alg, va, vb, x[a], x[b], na[:fs[a + 1] - fs[a]], nb[:fs[b + 1] - fs[b]],
+                      ea[:es[a + 1] - es[a]], eb[:es[b + 1] - es[b]], n_in, p_in, warm)
+
+
+@inline_kernel
+def _to_world(R, b, local, f0, f1, out):
+    """``out[:f1 - f0]``: body-frame vectors ``local[f0:f1]`` of block b rotated to the
+    world."""
+    for f in range(f0, f1):
+        for k in range(3):
+            out[f - f0, k] = R[b, k, 0] * local[f, 0] + R[b, k, 1] * local[f, 1] \
+                + R[b, k, 2] * local[f, 2]
+
+
+@kernel
+def plane_scratch(shapes):
+    """Room for two pieces' world face normals and edge directions (:func:`_plane`)."""
+    mf = 0
+    me = 0
+    for p in range(shapes.face_start.shape[0] - 1):
+        mf = max(mf, shapes.face_start[p + 1] - shapes.face_start[p])
+        me = max(me, shapes.edir_start[p + 1] - shapes.edir_start[p])
+    return np.empty((mf, 3)), np.empty((mf, 3)), np.empty((me, 3)), np.empty((me, 3))
 
 
 @kernel
@@ -184,16 +213,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     new_start = np.zeros(nc + 1, np.int64)
     # state: the store's dtype (uint8 bits)
     pa, area, un, fs, us, dil, state, hist = _new_subs(cap, old_state, old_hist.shape[1])
-    # world face normals and edge directions, once per piece (each is in many contacts)
-    rows = np.zeros(vert_start.shape[0] - 1, np.uint8)
-    if uses_face_normals(alg):
-        for c in range(nc):
-            if todo[c] != 0:
-                rows[c_ka[c]] = 1
-                rows[c_kb[c]] = 1
-    pb = shapes.piece_block
-    normals_world = world_vectors(R, pb, shapes.face_start, shapes.normals_local, rows)
-    edirs_world = world_vectors(R, pb, shapes.edir_start, shapes.edirs_local, rows)
+    scratch = plane_scratch(shapes)
     pos = 0
     for c in range(nc):
         a = c_ia[c]
@@ -204,8 +224,8 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
             continue
         ka = c_ka[c]
         kb = c_kb[c]
-        n, p, gap = _plane(ka, kb, shapes, normals_world, edirs_world, c_normal[c],
-                           c_point[c], c_warm[c] == 1, alg)
+        n, p, gap = _plane(ka, kb, shapes, R, scratch, c_normal[c], c_point[c], c_warm[c] == 1,
+                           alg)
         if gap > ctol:
             continue
         keep[c] = 1

@@ -231,6 +231,29 @@ def contact_energies(pairs, subs, joints, which):
 
 
 @kernel
+def book_stored_energy(bodies, pairs, subs, joints, which, column):
+    """``book_contact_energy(bodies, ia, ib, contact_energies(pairs, subs, joints, which),
+    column)``, the same operations, without the per-contact array: the start's first contact
+    update books every contact's energy at the set-up's peak."""
+    for c in range(pairs.ia.shape[0]):
+        e = 0.0
+        if which[c] != 0:
+            jrow = pairs.joint[c]
+            slot = joints.slot[jrow]
+            j = joints.row[jrow]
+            for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
+                _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
+                                   subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
+                                   subs.state[s])
+                e += es
+        a = pairs.ia[c]
+        b = pairs.ib[c]
+        wa, wb = energy_shares(bodies, a, b)
+        bodies.work[a, column] += wa * e
+        bodies.work[b, column] += wb * e
+
+
+@kernel
 def book_contact_energy(bodies, ia, ib, energy, column):
     """Book a per-contact energy change on the blocks' ``work[:, column]``
     (:func:`pdem.contact.rigid.energy_shares`): a geometry update's jump of the stored energy

@@ -51,22 +51,6 @@ def world_vertices(x, R, piece_block, piece_center, piece_x, vert_start, verts_l
 
 
 @kernel
-def world_vectors(R, piece_block, start, local, rows):
-    """Body-frame vectors (CSR by piece, ``start``) rotated to the world, for the pieces with
-    ``rows[p] != 0`` (others are left uninitialised)."""
-    out = np.empty_like(local)
-    for p in range(start.shape[0] - 1):
-        if rows[p] == 0:
-            continue
-        b = piece_block[p]
-        for f in range(start[p], start[p + 1]):
-            for k in range(3):
-                out[f, k] = R[b, k, 0] * local[f, 0] + R[b, k, 1] * local[f, 1] \
-                    + R[b, k, 2] * local[f, 2]
-    return out
-
-
-@kernel
 def envelopes(piece_block, vert_start, verts_world, pad, piece_lo, piece_hi, lo, hi):
     """Axis-aligned envelope of each piece and of each block (the union of its pieces'),
     enlarged by ``pad`` on every side."""

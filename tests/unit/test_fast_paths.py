@@ -13,6 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_dynamics import Blocks  # the tests directory is on sys.path (rootdir conftest)
 
+from pdem.contact.algorithms import find_plane
+from pdem.contact.detect import _plane
 from pdem.contact.forces import SERIES_RANGE, carry_shear, root_near_one, turn_normal, unit_scale
 from pdem.contact.laws.coulomb import below_limit
 from pdem.contact.staleness import _angle
@@ -149,3 +151,87 @@ def _turn(normal, dtheta):
 @numba.njit
 def _carry(fx, fy, fz, nx, ny, nz):
     return carry_shear(fx, fy, fz, nx, ny, nz)
+
+
+def _settled_stack():
+    """A 3³ cube stack after 150 steps: contacts sticking and slipping, the blocks turned."""
+    from mpi4py import MPI
+
+    from pdem.cases.stacks import cube_stack_scene
+    from pdem.config import parse_scene
+    from pdem.simulation import Simulation
+
+    sim = Simulation(parse_scene(cube_stack_scene(3, "fast")), MPI.COMM_SELF, output=False)
+    sim.run(steps=150)
+    return sim
+
+
+def test_booking_stored_energy_in_one_kernel_is_bitwise_the_two_step_booking():
+    """The start's first contact update books every contact's stored energy without a
+    per-contact array (pdem.stepper.refresh): the same operations, so the same bits."""
+    from pdem.contact.forces import book_contact_energy, book_stored_energy, contact_energies
+    from pdem.dynamics.motion import WORK_GEOMETRY
+
+    sim = _settled_stack()
+    s, c = sim.state, sim.state.contacts
+    joints = s.joints.kernel_args
+    which = (np.arange(c.n) % 3 != 0).astype(np.uint8)  # some contacts left out
+    work0 = s.blocks.work.copy()
+    energy = contact_energies(c.pairs(), c.subs(), joints, which)
+    assert (energy > 0).sum() > 10  # the stack is loaded: the springs hold energy
+    book_contact_energy(sim.stepper.bodies(), c.ia, c.ib, energy, WORK_GEOMETRY)
+    two_step = s.blocks.work.copy()
+    s.blocks.work[:] = work0
+    book_stored_energy(sim.stepper.bodies(), c.pairs(), c.subs(), joints, which, WORK_GEOMETRY)
+    assert np.array_equal(s.blocks.work.view(np.uint64), two_step.view(np.uint64))
+    assert not np.array_equal(two_step, work0)
+
+
+@numba.njit
+def _plane_by_scratch(ka, kb, shapes, R, scratch, n, p, alg):
+    return _plane(ka, kb, shapes, R, scratch, n, p, True, alg)
+
+
+@numba.njit
+def _plane_given(ka, kb, shapes, na, nb, ea, eb, n, p, alg):
+    vs = shapes.vert_start
+    va = shapes.verts_world[vs[ka]:vs[ka + 1]]
+    vb = shapes.verts_world[vs[kb]:vs[kb + 1]]
+    return find_plane(alg, va, vb, shapes.piece_x[ka], shapes.piece_x[kb], na, nb, ea, eb, n, p,
+                      True)
+
+
+def test_planes_from_per_contact_world_normals_are_those_from_whole_arrays():
+    """The Fast Common Plane rotates each contact's two pieces' face normals and edge
+    directions into scratch rows (pdem.contact.detect._plane) instead of reading arrays of
+    every piece's: for every contact of a turned, settled stack the scratch rows are the
+    rotated vectors and the plane is bit for bit the one found from vectors rotated whole."""
+    from pdem.contact.detect import plane_scratch
+
+    sim = _settled_stack()
+    s, b, c = sim.state, sim.state.blocks, sim.state.contacts
+    shapes = b.shapes()
+    scratch = plane_scratch(shapes)
+    fs, es, pb = shapes.face_start, shapes.edir_start, shapes.piece_block
+    assert scratch[0].shape[0] == int(np.diff(fs).max())
+
+    def world(start, local, k):
+        rot = b.R[pb[k]]
+        rows = local[start[k]:start[k + 1]]
+        return np.stack([rot[i, 0] * rows[:, 0] + rot[i, 1] * rows[:, 1] + rot[i, 2] * rows[:, 2]
+                         for i in range(3)], axis=1)
+
+    turned = 0
+    for k in range(c.n):
+        ka, kb = int(c.ka[k]), int(c.kb[k])
+        got = _plane_by_scratch(ka, kb, shapes, b.R, scratch, c.normal[k].copy(),
+                                c.point[k].copy(), s.algorithm)
+        na, nb = world(fs, shapes.normals_local, ka), world(fs, shapes.normals_local, kb)
+        ea, eb = world(es, shapes.edirs_local, ka), world(es, shapes.edirs_local, kb)
+        assert np.array_equal(scratch[1][:len(nb)], nb) and np.array_equal(scratch[3][:len(eb)], eb)
+        want = _plane_given(ka, kb, shapes, na, nb, ea, eb, c.normal[k].copy(), c.point[k].copy(),
+                            s.algorithm)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        assert got[2] == want[2]
+        turned += not np.array_equal(nb, shapes.normals_local[fs[kb]:fs[kb + 1]])
+    assert turned > c.n // 2  # the blocks have turned: the rotation was exercised
