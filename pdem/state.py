@@ -34,7 +34,7 @@ from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
 from .parallel.decomposition import make_decomposition
-from .parallel.migrate import rebuild
+from .parallel.migrate import rebuild, route_contacts
 from .parallel.mpi import allgather, allgather_rows, broadcast, configure_waits
 from .timers import Timers
 
@@ -244,10 +244,11 @@ class ModelState:
 
     # ------------------------------------------------------------------ ownership
     def distribute(self, owned_gids, state: dict, contacts: ContactStore, source=None,
-                   consume: bool = False):
+                   consume: bool = False, consume_contacts: bool = False):
         """(Re)build this rank's blocks, contacts and halo (collective), see parallel.migrate.
         ``source``: a store holding the blocks ``owned_gids`` (default: this rank's);
-        ``consume``: it is dropped once sent (the build share)."""
+        ``consume``: it is dropped once sent (the build share); ``consume_contacts``:
+        ``contacts`` are dropped once merged (a restart's, read for this call)."""
         with self.timers.phase("migrate"):
             r = self.resolved
             grids = self.grids
@@ -256,7 +257,7 @@ class ModelState:
                 owned_gids, state, contacts, 0.5 * r.ctol, r.margin,
                 halo_fields(self.scene.solve.inactive is not None,
                             any(x.zones is not None for x in self.scene.blocks)), consume,
-                None if grids is None else grids.payload())
+                None if grids is None else grids.payload(), consume_contacts)
             b = self.blocks
             if grids is not None:  # zoned blocks' grids came with them (owned and ghosts)
                 self.grids = type(grids).arrived(grids, b, self.n_owned, held)
@@ -383,13 +384,17 @@ class ModelState:
         if "blocks" in ck:  # read whole by one process (read_checkpoint)
             self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
                                 lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
-                                lambda mine: ck["contacts"], ck["path"])
+                                lambda mine: ck["contacts"], ck["path"], read=False)
             return
         path = ck["path"]
+        if self.share is not None:
+            with self._reader(path, by_share=True) as reader:
+                self._restore_by_share(reader, path)
+            return
         with self._reader(path) as reader:
-            # every rank reads the centroids (who owns what) and the contacts' blocks, then the
-            # rows it will hold: its blocks and the contacts of its free blocks (the rebuild
-            # keeps no others)
+            # every rank has every block (it reads every block's centroid: who owns what) and
+            # reads the contacts' blocks, then the rows it will hold: its blocks and the
+            # contacts of its free blocks (the rebuild keeps no others)
             out, x = self._checked(lambda: (reader.block_column("out"),
                                             reader.block_column("x")), path)
             self._restore_share(
@@ -399,10 +404,45 @@ class ModelState:
                     mine[reader.contact_column("ga")] | mine[reader.contact_column("gb")])[0],
                     path)), path)
 
-    def _restore_share(self, out, x, block_rows, contacts, path):
+    def _restore_by_share(self, reader, path):
+        """Each rank reads the rows of its build share's blocks and an even, contiguous share
+        of the contacts (hyperslabs: no rank reads a whole column), then sends each contact
+        to the ranks whose build share holds a free block of it; the rebuild takes both to
+        the owners. What every rank learns of every block is the ``out`` code, gathered from
+        the shares (the catalogue keeps it)."""
+        comm = self.comm
+        gids = self.share.gid.copy()
+        rows = self._checked(lambda: reader.block_rows(gids, MIGRATE), path)
+        out = allgather_rows(comm, rows["out"])
+        c0, c1, nsub = self._checked(lambda: reader.contact_share(comm.rank, comm.size), path)
+        counts = allgather(comm, int(nsub.sum()))
+        if sum(counts) != reader.n_sub:  # every rank alike: the sum is everyone's
+            raise UserError(f"cannot restart from {path}: contacts/nsub counts {sum(counts)} "
+                            f"sub-contacts, the file holds {reader.n_sub}")
+        part = self._checked(lambda: reader.contact_range(c0, c1, nsub, sum(counts[:comm.rank])),
+                             path)
+        self._restore_share(out, None, lambda owned: rows, lambda mine: self._route(part), path)
+
+    def _route(self, part: ContactStore) -> ContactStore:
+        """Contacts read by this rank (``part``) to the ranks whose build share holds a free
+        block of theirs (collective); returns those sent here, in file (key) order."""
+        from .io.writer import _share
+
+        comm = self.comm
+        starts = np.array([_share(r, comm.size, self.glob.n)[0] for r in range(comm.size)])
+        fixed = self.glob.fixed
+        # the last share starting at or before the block (empty ones are skipped), if free
+        ga, gb = part.ga, part.gb
+        to_a = np.where(fixed[ga] == 0, np.searchsorted(starts, ga, side="right") - 1, -1)
+        to_b = np.where(fixed[gb] == 0, np.searchsorted(starts, gb, side="right") - 1, -1)
+        return route_contacts(comm, part, to_a, to_b)
+
+    def _restore_share(self, out, x, block_rows, contacts, path, read: bool = True):
         """The blocks this rank brings in (its build share, or those it owns at the
         checkpoint's poses) from ``block_rows(gids)``, and the contacts of their free ones,
-        ``contacts(mask of those free blocks by gid)``: the rebuild sends both to the owners."""
+        ``contacts(mask of those free blocks by gid)``: the rebuild sends both to the owners.
+        ``read``: the contacts were read for this (the rebuild drops them as it merges),
+        else they are the caller's (a checkpoint read whole)."""
         gone = out > 0  # blocks that left the model domain act as fixed ones
         self.glob.fixed[gone] = 1
         self.glob.out[gone] = out[gone]
@@ -419,7 +459,7 @@ class ModelState:
         # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
         held = held_width(self.scene.solve.inactive is not None)
         self.distribute(owned, block_rows(owned), contacts(mine).with_held(held), source=source,
-                        consume=source is not self.glob)
+                        consume=source is not self.glob, consume_contacts=read)
         if self.grids is not None:  # zoned rows and pieces from the stored gridpoints
             b, rows = self.blocks, self.grids.rows
             x_saved = b.x[rows].copy()
@@ -429,11 +469,11 @@ class ModelState:
             b.dx[rows] = 0.0
         self._distributed_from_scene()
 
-    def _reader(self, path):
+    def _reader(self, path, by_share: bool = False):
         """The checkpoint opened on every rank (collective), or one line of why not."""
         from .io.checkpoint import CheckpointReader
 
-        return self._checked(lambda: CheckpointReader(path, self.comm), path)
+        return self._checked(lambda: CheckpointReader(path, self.comm, by_share), path)
 
     def _checked(self, read, path):
         """``read()`` on every rank; a damaged file found by any rank is refused by all

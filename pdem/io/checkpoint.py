@@ -192,10 +192,14 @@ class CheckpointReader:
     """An open checkpoint: attributes checked at opening, rows read by selection, so that a
     rank reads the rows of the blocks and contacts it will hold (``ModelState.restore``).
     Opened collectively with the mpio driver when h5py has it and ``comm`` has several ranks
-    (each rank then reads its own rows), else by each rank on its own."""
+    (each rank then reads its own rows), else by each rank on its own. ``by_share``: the
+    contacts are read in contiguous shares (:meth:`contact_share`, :meth:`contact_range`), so
+    the sub-contact counts of every contact are not read at opening (their checks are the
+    shares')."""
 
-    def __init__(self, path: str | os.PathLike, comm=None):
+    def __init__(self, path: str | os.PathLike, comm=None, by_share: bool = False):
         self.path = Path(path)
+        self.by_share = by_share
         if not self.path.exists():
             raise FileNotFoundError(f"no checkpoint at {self.path}")
         parallel = comm is not None and comm.size > 1 and h5py.get_config().mpi
@@ -237,9 +241,8 @@ class CheckpointReader:
                                  "continue")
         if "contacts/nsub" not in f:
             raise ValueError(f"{self.path}: contacts/nsub missing: not a complete checkpoint")
-        self.nsub = f["contacts/nsub"][()]
-        if (self.nsub < 0).any():
-            raise ValueError(f"{self.path}: contacts/nsub has negative counts")
+        self.n_contacts = int(f["contacts/nsub"].shape[0])
+        self.nsub = None if self.by_share else self._counts(0, self.n_contacts)
         names = {fd.name for fd in CONTACT_CK if f"contacts/{fd.name}" in f}
         for piece, block in (("pga", "ga"), ("pgb", "gb")):
             if piece not in names and block in names:  # format <= 2: every block one piece
@@ -249,20 +252,32 @@ class CheckpointReader:
         if missing:
             raise ValueError(f"{self.path}: contacts/{missing[0]} missing: not a complete "
                              "checkpoint")
-        nc, ns = len(self.nsub), int(self.nsub.sum())
+        nc = self.n_contacts
         for fd in CONTACT_CK:
             if f"contacts/{fd.name}" in f and len(f[f"contacts/{fd.name}"]) != nc:
                 raise ValueError(f"{self.path}: contacts/{fd.name} has "
                                  f"{len(f[f'contacts/{fd.name}'])} rows, contacts/nsub {nc}")
+        # by shares, the counts' sum is checked against these rows once summed (the restart)
+        self.n_sub = int(self.nsub.sum()) if self.nsub is not None else None
         for fd in SUB_CK:
             if f"subcontacts/{fd.name}" not in f:
                 if fd.name == "sc_hist":  # format 1: no law history
                     continue
                 raise ValueError(f"{self.path}: subcontacts/{fd.name} missing: not a complete "
                                  "checkpoint")
-            if len(f[f"subcontacts/{fd.name}"]) != ns:
-                raise ValueError(f"{self.path}: subcontacts/{fd.name} has "
-                                 f"{len(f[f'subcontacts/{fd.name}'])} rows, expected {ns}")
+            rows = len(f[f"subcontacts/{fd.name}"])
+            if self.n_sub is None:
+                self.n_sub = rows
+            if rows != self.n_sub:
+                raise ValueError(f"{self.path}: subcontacts/{fd.name} has {rows} rows, expected "
+                                 f"{self.n_sub}")
+
+    def _counts(self, c0: int, c1: int) -> np.ndarray:
+        """The sub-contact counts of contacts ``c0:c1``, checked."""
+        nsub = self.f["contacts/nsub"][c0:c1]
+        if (nsub < 0).any():
+            raise ValueError(f"{self.path}: contacts/nsub has negative counts")
+        return nsub
 
     def block_column(self, k: str) -> np.ndarray:
         """Field ``k`` of every block (a field added after the file was written: zeros)."""
@@ -303,6 +318,31 @@ class CheckpointReader:
     def contacts(self, rows: np.ndarray) -> ContactStore:
         """Contacts ``rows`` (sorted) with their sub-contacts, in the fields' dtypes (``held``
         as stored: the restart fits it to the scene, ContactStore.with_held)."""
+        sub_rows, start = csr.take(csr.starts(self.nsub), rows)
+        return self._contact_store(rows, sub_rows, start)
+
+    def contact_share(self, rank: int, size: int) -> tuple[int, int, np.ndarray]:
+        """Rank ``rank``'s contiguous share ``[c0, c1)`` of the contact rows and their
+        sub-contact counts (checked): what it reads of the contacts (:meth:`contact_range`)."""
+        from .writer import _share
+
+        c0, c1 = _share(rank, size, self.n_contacts)
+        return c0, c1, self._counts(c0, c1)
+
+    def contact_range(self, c0: int, c1: int, nsub: np.ndarray, s0: int) -> ContactStore:
+        """Contacts ``c0:c1`` (sub-contact counts ``nsub``, the first of their sub-contacts at
+        row ``s0``): one slice of each dataset; their blocks are checked to be the model's."""
+        rows = np.arange(c0, c1)
+        start = csr.starts(nsub)
+        part = self._contact_store(rows, np.arange(s0, s0 + int(start[-1])), start)
+        for k in ("ga", "gb"):
+            a = part.arrays[k]
+            if len(a) and not ((a >= 0) & (a < self.n_blocks)).all():
+                raise ValueError(f"{self.path}: contacts/{k} names blocks outside "
+                                 f"0..{self.n_blocks - 1}")
+        return part
+
+    def _contact_store(self, rows, sub_rows, start) -> ContactStore:
         f = self.f
         arrays = {fd.name: self._declared(f"contacts/{fd.name}", fd,
                                           _read_rows(f[f"contacts/{fd.name}"], rows))
@@ -312,7 +352,6 @@ class CheckpointReader:
                 arrays[piece] = arrays[block].copy()
         for fd in CONTACT:  # rows are local: reassigned when the contacts are distributed
             arrays.setdefault(fd.name, np.zeros((len(rows), *fd.shape), fd.dtype))
-        sub_rows, start = csr.take(csr.starts(self.nsub), rows)
         sub = {fd.name: self._declared(f"subcontacts/{fd.name}", fd,
                                        _read_rows(f[f"subcontacts/{fd.name}"], sub_rows))
                for fd in SUB_CK + (SUB_GRID,) if f"subcontacts/{fd.name}" in f}
@@ -335,8 +374,8 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
 
 def open_checkpoint(path: str | os.PathLike) -> dict:
     """A checkpoint's attributes, checked (its rows are read by ``ModelState.restore``,
-    each rank its own): ``attrs`` and ``path``."""
-    with CheckpointReader(path) as r:
+    each rank its own, so none of them is read here): ``attrs`` and ``path``."""
+    with CheckpointReader(path, by_share=True) as r:
         return {"attrs": r.attrs, "path": str(path)}
 
 

@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model import csr
 from ..model.blocks import BlockStore, pack, take_rows, unpack, whole_message
 from ..model.contacts import ContactStore
 from ..model.fields import HALO, MIGRATE
 from .halo import Halo
-from .mpi import allgather, alltoall
+from .mpi import allgather, alltoall, alltoall_rows
 
 
 def _boxes(x, radius, pad):
@@ -37,11 +38,60 @@ def contacts_needed(contacts: ContactStore, owned_free_gids: np.ndarray) -> np.n
     return np.isin(contacts.ga, owned_free_gids) | np.isin(contacts.gb, owned_free_gids)
 
 
-def _merge_contacts(parts: list[ContactStore]) -> ContactStore:
-    """Union by key (duplicates are identical copies: keep the first), sorted by key."""
-    merged = ContactStore.concatenate(parts, parts[0].hist_width)
-    _, first = np.unique(merged.keys(), return_index=True)  # sorted by key, first occurrence
-    return merged.take(first)
+def _merge_contacts(parts: list[ContactStore], free_gids: np.ndarray, drop: list[bool]
+                    ) -> ContactStore:
+    """The contacts of ``parts`` in which a block of ``free_gids`` is (:func:`contacts_needed`),
+    each once (duplicates are identical copies: the first is kept), sorted by key. Column by
+    column from the parts, each part's column dropped once taken where ``drop`` says so (the
+    parts are not first concatenated whole and the union then selected: two copies of every
+    contact on top of the parts were a restart's peak)."""
+    given = parts
+    drop = [d for p, d in zip(parts, drop, strict=True) if p.n]
+    parts = [p for p in parts if p.n]
+    if not parts:
+        return given[0].take(np.zeros(0, np.int64))
+
+    def column(columns: str, k: str, rows: np.ndarray) -> np.ndarray:
+        cols = [getattr(p, columns).pop(k) if d else getattr(p, columns)[k]
+                for p, d in zip(parts, drop, strict=True)]
+        return np.concatenate(cols)[rows]
+
+    _, first = np.unique(np.concatenate([p.keys() for p in parts]), return_index=True)
+    ga = np.concatenate([p.arrays["ga"] for p in parts])[first]
+    gb = np.concatenate([p.arrays["gb"] for p in parts])[first]
+    first = first[np.isin(ga, free_gids) | np.isin(gb, free_gids)]
+    del ga, gb
+    sub_rows, start = csr.take(csr.starts(np.concatenate([np.diff(p.sc_start) for p in parts])),
+                               first)
+    arrays = {k: column("arrays", k, first) for k in list(parts[0].arrays)}
+    sub = {k: column("sub", k, sub_rows) for k in list(parts[0].sub)}
+    return ContactStore(arrays, sub, start)
+
+
+def route_contacts(comm, contacts: ContactStore, to_a: np.ndarray, to_b: np.ndarray
+                   ) -> ContactStore:
+    """Each contact to rank ``to_a[c]`` and to rank ``to_b[c]`` (-1: none; once if the
+    same), with its sub-contacts (collective); returns the contacts sent here, in rank order
+    and each rank's in its order. Column by column as raw rows (no pickle), each of
+    ``contacts``' columns dropped once sent: the caller's store is consumed."""
+    n = contacts.n
+    to_b = np.where(to_b != to_a, to_b, -1)
+    dest = np.concatenate([to_a, to_b])
+    which = np.concatenate([np.arange(n), np.arange(n)])
+    sent = dest >= 0
+    dest, which = dest[sent], which[sent]
+    order = np.lexsort((which, dest))  # by rank, then in the store's order
+    send = which[order]
+    counts = np.bincount(dest, minlength=comm.size)
+    sub_rows, start = csr.take(contacts.sc_start, send)
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    sub_counts = start[bounds[1:]] - start[bounds[:-1]]
+    nsub = alltoall_rows(comm, np.diff(start), counts)
+    arrays = {k: alltoall_rows(comm, contacts.arrays.pop(k)[send], counts)
+              for k in list(contacts.arrays)}
+    sub = {k: alltoall_rows(comm, contacts.sub.pop(k)[sub_rows], sub_counts)
+           for k in list(contacts.sub)}
+    return ContactStore(arrays, sub, csr.starts(nsub))
 
 
 def rows_of(gids_held: np.ndarray, gids: np.ndarray) -> np.ndarray:
@@ -57,7 +107,7 @@ def rows_of(gids_held: np.ndarray, gids: np.ndarray) -> np.ndarray:
 
 def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.ndarray,
             state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO,
-            consume: bool = False, extras: dict | None = None):
+            consume: bool = False, extras: dict | None = None, consume_contacts: bool = False):
     """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo, extras).
 
     ``glob``: the per-block static fields of every block, by gid (fixed, radius);
@@ -68,7 +118,8 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields);
     ``consume``: ``source`` is not used after this call (the set-up's build share): its
     arrays are dropped as soon as its blocks are packed, not kept through the rebuild's
-    peak;
+    peak; ``consume_contacts``: the same for ``contacts`` (a restart's, read for this
+    rebuild), whose columns are dropped as they are merged;
     ``extras``: objects by gid that travel with their blocks, to the new owner and to the
     ranks that ghost them (the zoned blocks' grids: pdem.deformable.store), for blocks of
     ``owned_gids``; returned for the blocks held after (owned and ghosts), None without.
@@ -115,11 +166,14 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     del arrived
     parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
     del got
-    merged = _merge_contacts(parts)
-    del parts
 
     # 2. interest boxes and ghosts
     free_now = gids[~fixed[gids]]
+    # the contacts this rank computes: those of its free blocks (rows renumbered at 4.)
+    # (a restart's contacts, read for this rebuild, and the ones received: their columns
+    # dropped as they are merged)
+    mine = _merge_contacts(parts, free_now, [consume_contacts] + [True] * (len(parts) - 1))
+    del parts
     if len(free_now):
         sel = ~fixed[gids]
         lo, hi = _boxes(new_state["x"][sel], mine_store.radius[sel], pad)
@@ -171,9 +225,7 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     for k in MIGRATE:
         getattr(blocks, k)[:] = np.concatenate([new_state[k], g_state[k]])
 
-    # 4. contacts this rank computes, rows renumbered
-    needed = contacts_needed(merged, free_now)
-    mine = merged.select(needed)
+    # 4. the contacts' rows renumbered
     row_of = np.argsort(all_gids, kind="stable")
     sorted_gids = all_gids[row_of]
     for side, g in (("ia", "ga"), ("ib", "gb")):

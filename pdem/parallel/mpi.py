@@ -292,6 +292,30 @@ def allgather_rows(comm, values: np.ndarray) -> np.ndarray:
     return out
 
 
+def alltoall_rows(comm, values: np.ndarray, counts) -> np.ndarray:
+    """Rows of ``values``, grouped by destination (``counts[r]`` rows, in order, to rank r),
+    sent to their ranks; returns the rows received, in rank order. One Alltoallv of the raw
+    bytes, not a pickle of each part: a restart's contacts (hundreds of MB at 10^6 blocks)."""
+    values = np.ascontiguousarray(values)
+    if comm.size == 1:
+        return values
+    from mpi4py import MPI
+
+    counts = np.asarray(counts, np.int64)
+    got = np.empty(comm.size, np.int64)
+    comm.Alltoall(counts, got)
+    out = np.empty((int(got.sum()), *values.shape[1:]), values.dtype)
+    row_bytes = values.dtype.itemsize * int(np.prod(values.shape[1:], dtype=np.int64))
+    if row_bytes == 0:  # columns of zero width (a law without history)
+        return out
+    send, recv = counts * row_bytes, got * row_bytes
+    comm.Alltoallv([values.view(np.uint8).reshape(-1), send,
+                    np.concatenate([[0], np.cumsum(send)[:-1]]), MPI.BYTE],
+                   [out.view(np.uint8).reshape(-1), recv,
+                    np.concatenate([[0], np.cumsum(recv)[:-1]]), MPI.BYTE])
+    return out
+
+
 def alltoall(comm, values: list) -> list:
     """``values[r]`` goes to rank r; returns what each rank sent here (pickled: rare path)."""
     return comm.alltoall(values) if comm.size > 1 else values

@@ -95,15 +95,59 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     for k in FIELDS:
         assert np.array_equal(got[k], ref[k]), k
     n_blocks, n_contacts = len(ck["blocks"]["x"]), ck["contacts"].n
-    # the centroids by every rank (who owns what), then the rows of its build share (centroid
-    # included), which the rebuild sends to their owners; gathered before asserting, so that
-    # no rank waits in a collective for one that failed
+    # the rows of its build share only (no rank reads every block's centroid), which the
+    # rebuild sends to their owners; gathered before asserting, so that no rank waits in a
+    # collective for one that failed
     lo, hi = build_share(comm, n_blocks)
     rows = comm.allgather((read["/blocks/x"], read["/blocks/q"], hi - lo, owned))
-    assert all(x == n_blocks + share and q == share for x, q, share, _ in rows), rows
+    assert all(x == share and q == share for x, q, share, _ in rows), rows
     assert sum(o for *_, o in rows) == n_blocks
     if comm.size > 1:
         assert owned < n_blocks
-    counts = comm.allgather(read.get("/contacts/normal", 0))
-    # each contact by a rank whose share holds one of its free blocks: once, or twice
-    assert n_contacts <= sum(counts) < 2 * n_contacts and max(counts) < n_contacts, counts
+    # each contact read once, by one rank, in even shares (its sub-contacts with it); then sent
+    # to the ranks whose share holds one of its free blocks
+    counts = comm.allgather((read.get("/contacts/normal", 0), read.get("/contacts/ga", 0),
+                             read.get("/subcontacts/sc_fs", 0)))
+    assert [c[0] for c in counts] == [c[1] for c in counts], counts
+    assert sum(c[0] for c in counts) == n_contacts, counts
+    assert max(c[0] for c in counts) - min(c[0] for c in counts) <= 1, counts
+    assert sum(c[2] for c in counts) == ck["contacts"].n_sub, counts
+
+
+@pytest.mark.mpi(min_size=2)
+@pytest.mark.parametrize("damage", ["negative", "sum"])
+def test_damaged_contact_counts_are_refused_alike_by_every_rank(tmp_path, damage):
+    """The ranks read the sub-contact counts in shares: a negative count in the last rank's
+    share, or counts summing to more sub-contacts than the file holds, are refused by every
+    rank with the same line (no rank reads past a dataset or waits for one that failed)."""
+    from pdem.errors import UserError
+
+    comm = MPI.COMM_WORLD
+    d = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
+    os.makedirs(d, exist_ok=True)
+    text = SCENE.format(steps=N, half=N, out=f"{d}/straight.h5", ck=f"{d}/ck")
+    s = Simulation(parse_scene(text), comm)
+    s.run()
+    s.close()
+    comm.Barrier()
+    path = f"{d}/ck-{N:09d}.h5"
+    if comm.rank == 0:
+        with h5py.File(path, "r+") as f:
+            nsub = f["contacts/nsub"]
+            assert len(nsub) > comm.size
+            row = len(nsub) - 1 if damage == "negative" else 0
+            nsub[row] = -1 if damage == "negative" else nsub[row] + 5
+    comm.Barrier()
+    sc = parse_scene(text)
+    sc = sc.model_copy(update={"output": sc.output.model_copy(update={"file": f"{d}/r.h5"}),
+                               "checkpoint": None})
+    try:
+        Simulation(sc, comm, checkpoint=open_checkpoint(path))
+        why = None
+    except UserError as exc:
+        why = str(exc)
+    whys = comm.allgather(why)
+    assert whys[0] is not None and len(set(whys)) == 1, whys
+    assert whys[0].startswith(f"cannot restart from {path}: ") and "\n" not in whys[0]
+    assert ("negative counts" if damage == "negative" else "sub-contacts, the file holds") \
+        in whys[0], whys[0]
