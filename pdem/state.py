@@ -384,7 +384,7 @@ class ModelState:
         if "blocks" in ck:  # read whole by one process (read_checkpoint)
             self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
                                 lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
-                                lambda mine: ck["contacts"], ck["path"], read=False)
+                                lambda free: ck["contacts"], ck["path"], read=False)
             return
         path = ck["path"]
         if self.share is not None:
@@ -400,9 +400,9 @@ class ModelState:
             self._restore_share(
                 out, x, lambda owned: self._checked(lambda: reader.block_rows(owned, MIGRATE),
                                                     path),
-                lambda mine: reader.contacts(self._checked(lambda: np.nonzero(
-                    mine[reader.contact_column("ga")] | mine[reader.contact_column("gb")])[0],
-                    path)), path)
+                lambda free: reader.contacts(self._checked(lambda: np.nonzero(
+                    np.isin(reader.contact_column("ga"), free)
+                    | np.isin(reader.contact_column("gb"), free))[0], path)), path)
 
     def _restore_by_share(self, reader, path):
         """Each rank reads the rows of its build share's blocks and an even, contiguous share
@@ -421,7 +421,7 @@ class ModelState:
                             f"sub-contacts, the file holds {reader.n_sub}")
         part = self._checked(lambda: reader.contact_range(c0, c1, nsub, sum(counts[:comm.rank])),
                              path)
-        self._restore_share(out, None, lambda owned: rows, lambda mine: self._route(part), path)
+        self._restore_share(out, None, lambda owned: rows, lambda free: self._route(part), path)
 
     def _route(self, part: ContactStore) -> ContactStore:
         """Contacts read by this rank (``part``) to the ranks whose build share holds a free
@@ -440,7 +440,7 @@ class ModelState:
     def _restore_share(self, out, x, block_rows, contacts, path, read: bool = True):
         """The blocks this rank brings in (its build share, or those it owns at the
         checkpoint's poses) from ``block_rows(gids)``, and the contacts of their free ones,
-        ``contacts(mask of those free blocks by gid)``: the rebuild sends both to the owners.
+        ``contacts(gids of those free blocks)``: the rebuild sends both to the owners.
         ``read``: the contacts were read for this (the rebuild drops them as it merges),
         else they are the caller's (a checkpoint read whole)."""
         gone = out > 0  # blocks that left the model domain act as fixed ones
@@ -452,13 +452,12 @@ class ModelState:
         else:  # each rank sends its share's blocks, at their checkpoint poses, to the owners
             source = self._take_share()
             owned = source.gid.copy()
-        mine = np.zeros(self.glob.n, bool)
-        mine[owned] = self.glob.fixed[owned] == 0
+        free = owned[self.glob.fixed[owned] == 0]  # the contacts of these come along
         if self.grids is not None:  # the grids held here (by the build) from the file
             self._checked(lambda: self.grids.load(path), path)
         # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
         held = held_width(self.scene.solve.inactive is not None)
-        self.distribute(owned, block_rows(owned), contacts(mine).with_held(held), source=source,
+        self.distribute(owned, block_rows(owned), contacts(free).with_held(held), source=source,
                         consume=source is not self.glob, consume_contacts=read)
         if self.grids is not None:  # zoned rows and pieces from the stored gridpoints
             b, rows = self.blocks, self.grids.rows
