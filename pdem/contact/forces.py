@@ -174,6 +174,21 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
             pairs.frozen[c] = 1
 
 
+@inline_kernel
+def spring_energy(pairs, subs, joints, c):
+    """Spring energy stored in contact c's joint: its sub-contacts' sum, in their order."""
+    jrow = pairs.joint[c]
+    slot = joints.slot[jrow]
+    j = joints.row[jrow]
+    e = 0.0
+    for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
+        _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
+                           subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
+                           subs.state[s])
+        e += es
+    return e
+
+
 @kernel
 def stored_energy(bodies, pairs, subs, joints, out):
     """Spring energy stored in every contact's joint, booked on its blocks as the dissipation
@@ -181,15 +196,7 @@ def stored_energy(bodies, pairs, subs, joints, out):
     for c in range(pairs.ia.shape[0]):
         a = pairs.ia[c]
         b = pairs.ib[c]
-        jrow = pairs.joint[c]
-        slot = joints.slot[jrow]
-        j = joints.row[jrow]
-        e = 0.0
-        for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
-            _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
-                               subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
-                               subs.state[s])
-            e += es
+        e = spring_energy(pairs, subs, joints, c)
         wa, wb = energy_shares(bodies, a, b)
         out[a] += wa * e
         out[b] += wb * e
@@ -217,16 +224,8 @@ def contact_energies(pairs, subs, joints, which):
     others)."""
     out = np.zeros(pairs.ia.shape[0])
     for c in range(pairs.ia.shape[0]):
-        if which[c] == 0:
-            continue
-        jrow = pairs.joint[c]
-        slot = joints.slot[jrow]
-        j = joints.row[jrow]
-        for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
-            _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
-                               subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
-                               subs.state[s])
-            out[c] += es
+        if which[c] != 0:
+            out[c] = spring_energy(pairs, subs, joints, c)
     return out
 
 
@@ -236,16 +235,7 @@ def book_stored_energy(bodies, pairs, subs, joints, which, column):
     column)``, the same operations, without the per-contact array: the start's first contact
     update books every contact's energy at the set-up's peak."""
     for c in range(pairs.ia.shape[0]):
-        e = 0.0
-        if which[c] != 0:
-            jrow = pairs.joint[c]
-            slot = joints.slot[jrow]
-            j = joints.row[jrow]
-            for s in range(pairs.sc_start[c], pairs.sc_start[c + 1]):
-                _, es = law_energy(joints.laws, slot, j, s, subs.hist, subs.un[s], subs.dil[s],
-                                   subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], subs.area[s],
-                                   subs.state[s])
-                e += es
+        e = spring_energy(pairs, subs, joints, c) if which[c] != 0 else 0.0
         a = pairs.ia[c]
         b = pairs.ib[c]
         wa, wb = energy_shares(bodies, a, b)
