@@ -75,6 +75,17 @@ class PeakSampler:
         return self.peak
 
 
+def scene_bytes(state) -> int:
+    """Bytes of what a rank keeps for every scene block (counted by ``nbytes``): the scene
+    store's per-block fields (pdem.state.RUN_CATALOGUE), the spec columns and the names."""
+    import numpy as np
+
+    arrays = [*vars(state.glob).values(), *vars(state.specs).values()]
+    names = state.specs.names
+    return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray)) \
+        + len(names._buf) + names._end.nbytes
+
+
 def child(n: int) -> None:
     """Build the n^3 model on MPI.COMM_WORLD, step once; print one JSON line (rank 0)."""
     from mpi4py import MPI
@@ -118,14 +129,14 @@ def child(n: int) -> None:
     t2 = time.perf_counter()
     sim.run(steps=STEPS)
     rate = (sim.state.glob.n - 1) * STEPS / (time.perf_counter() - t2)
-    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1, now, rate, pss_now, pss_peak),
-                       root=0)
+    rows = comm.gather((times, rss, rss0, sim.state.glob.n - 1, now, rate, pss_now, pss_peak,
+                        scene_bytes(sim.state) / sim.state.glob.n), root=0)
     if comm.rank == 0:
         out = {k: max(r[0].get(k, 0.0) for r in rows) for k in (*PHASES, "total")}
         out.update(n=n, cubes=rows[0][3], ranks=comm.size, peak_mb=max(r[1] for r in rows),
                    base_mb=max(r[2] for r in rows), steady_mb=max(r[4] for r in rows),
                    rate=min(r[5] for r in rows), pss_mb=max(r[6] for r in rows),
-                   pss_peak_mb=max(r[7] for r in rows))
+                   pss_peak_mb=max(r[7] for r in rows), scene_b=max(r[8] for r in rows))
         print("RESULT " + json.dumps(out), flush=True)
 
 
@@ -170,6 +181,8 @@ def main() -> None:
     print(f"{'KB per block':>14}" + "".join(
         f"{1024.0 * (r['peak_mb'] - r['base_mb']) / r['cubes']:>12.1f}" for r in results))
     print(f"{'after set-up MB':>14}" + "".join(f"{r['steady_mb']:>12.0f}" for r in results))
+    print(f"{'scene B/block':>14}" + "".join(f"{r.get('scene_b', 0.0):>12.1f}" for r in results)
+          + "   (kept on every rank for every scene block: catalogue, spec columns, names)")
     print(f"{'PSS peak MB':>14}" + "".join(f"{r['pss_peak_mb']:>12.0f}" for r in results))
     print(f"{'PSS after MB':>14}" + "".join(f"{r['pss_mb']:>12.0f}" for r in results))
     print(f"{'block-steps/s':>14}" + "".join(f"{r['rate']:>12.3g}" for r in results)

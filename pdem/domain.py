@@ -44,11 +44,12 @@ def take_out(state, bodies) -> None:
 
 def set_block_fields(state, gids, **values) -> None:
     """Set block fields of ``gids`` in this rank's rows (if any) and in the scene's store,
-    where it still keeps that field (pdem.state.RUN_CATALOGUE)."""
+    where it still keeps that field (pdem.state.RUN_CATALOGUE; its rows are the gids)."""
+    gids = np.asarray(gids, np.int64)
     for store in (state.glob, state.blocks):
         if store is None:
             continue
-        hit = np.isin(store.gid, gids)
+        hit = gids if store is state.glob else np.isin(store.gid, gids)
         for key, v in values.items():
             column = vars(store).get(key)
             if column is not None:

@@ -23,6 +23,8 @@ from .domain import DELETED, remove_blocks
 from .domain import set_block_fields as _set
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
+from .parallel.mpi import allgather_rows
+from .state import TIMESTEP_FIELDS
 
 log = logging.getLogger("pdem")
 
@@ -48,19 +50,33 @@ def stage_scene(scene, k: int):
 
 
 def selected(state, sel) -> np.ndarray:
-    """Gids of the blocks a :class:`pdem.config.schema.Selection` names (every rank alike)."""
+    """Gids of the blocks a :class:`pdem.config.schema.Selection` names, in gid order (every
+    rank alike; collective once the blocks are distributed). A range selects by the scene's
+    centroids (the blocks' ``x0``): a selection does not depend on the motion. Before the
+    blocks are distributed the scene's store has every block's; after, each rank selects
+    among the blocks it owns and the ranks gather the gids selected (no rank keeps the
+    centroids of blocks it does not hold, pdem.state.RUN_CATALOGUE)."""
+    g = state.glob
+    if "x" in vars(g):
+        gids = np.arange(g.n)
+        x, out = g.x, g.out
+    else:
+        b, n = state.blocks, state.n_owned
+        gids, x, out = b.gid[:n], b.x0[:n], b.out[:n]
+    keep = out == 0
     specs = state.specs
-    keep = np.ones(len(specs), bool)
     if sel.names is not None:
         want = set(sel.names)
         keep &= np.array([s.name in want or s.spec.name in want or s.parent in want
-                          for s in specs])
+                          for s in (specs[i] for i in gids)], bool)
     if sel.groups is not None:
-        keep &= np.isin(np.array([s.group for s in specs]), sel.groups)
+        keep &= np.isin(np.array([specs[i].group for i in gids], object), sel.groups)
     if sel.range is not None:
-        x = state.glob.x  # the scene's centroids: a selection does not depend on the motion
         keep &= np.all((x >= sel.range.box.min) & (x <= sel.range.box.max), axis=1)
-    return np.nonzero(keep & (state.glob.out == 0))[0]
+    mine = gids[keep].astype(np.int64)
+    if "x" in vars(g):
+        return mine
+    return np.sort(allgather_rows(state.comm, mine))
 
 
 def stage_changes(s, k: int, motion: bool = True) -> None:
@@ -140,7 +156,7 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     """Timestep, mass scaling and damping of a stage (every rank alike). The mass-scale
     factors are recomputed from the stage's joints and fixed/free blocks, on every rank
     alike; a restart replays this (:func:`replay_stages`), so they need no checkpoint."""
-    g = s.glob
+    g = s.scene_fields(TIMESTEP_FIELDS)  # gathered from the owners once distributed
     g.mscale[:] = 1.0
     stiffness = _estimated_stiffness(s.specs, s.joints)
     names = s.specs.names  # read by index, in messages

@@ -3,7 +3,8 @@
 Built from a scene (or a checkpoint) on every rank alike. The static model (shapes, masses,
 initial state) is built on every rank from the scene, keyed by gid (``glob``); a rank holds rows
 of it (owned + ghosts) in ``blocks``, and after set-up keeps only those rows' geometry (it
-travels with the blocks, pdem.parallel.migrate) and a few per-block fields of every block.
+travels with the blocks, pdem.parallel.migrate) and two bytes of every block (RUN_CATALOGUE);
+a stage asks the owners for what else it reads of every block (ModelState.scene_fields).
 Everything the cycle reads and writes lives here; the stepper (:mod:`pdem.stepper`) changes
 it, plugins (:mod:`pdem.plugins`) observe it.
 """
@@ -60,12 +61,16 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
 CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixed", "vfix",
              "out", "material", "group", "applied_force", "radius", "point_area")
 # what of it a rank keeps once the blocks are distributed (ModelState._distributed_from_scene)
-# and the output is open (pdem.simulation): a stage's selections (the
-# scene centroids, out), its timestep and mass scaling (mass, inertia, radius, fixed, mscale)
-# and the rebuild's ownership and boxes (fixed, radius). The others were read by the set-up
-# only (the resolve's speeds and loads, the writer's initial centroids and groups); a stage,
-# a boundary condition or the domain sets them on the blocks a rank holds (pdem.stages._set).
-RUN_CATALOGUE = ("gid", "x", "mass", "inertia", "mscale", "fixed", "out", "radius")
+# and the output is open (pdem.simulation): two bytes a scene block, read by the rebuild
+# (which contacts travel: fixed), the checkpoint (which copy of a contact is written: fixed)
+# and the excavations (out). The rest was read by the set-up only, or is read again at a
+# stage's start (its selections and its timestep and mass scaling), which asks the blocks'
+# owners for it (ModelState.scene_fields, ModelState.select); a stage, a boundary condition or
+# the domain sets fields on the blocks a rank holds (pdem.domain.set_block_fields). The
+# store's rows stay by gid (``glob.n`` is the scene's block count).
+RUN_CATALOGUE = ("fixed", "out")
+# the per-block fields a stage's timestep and mass scaling read (pdem.stages._solve_settings)
+TIMESTEP_FIELDS = ("mass", "inertia", "radius", "fixed", "mscale")
 # and what the output writer reads of every block when it opens (its initial centroids and
 # groups): kept from the first distribution until then (the rest of CATALOGUE is dropped before
 # the start's contact update, the set-up's peak)
@@ -276,6 +281,23 @@ class ModelState:
         if not self.glob.has_geometry:
             raise RuntimeError("the scene's block geometry was released after set-up")
         return self.glob
+
+    def scene_fields(self, names) -> BlockStore:
+        """Per-block fields ``names`` of every scene block, rows by gid: the scene's store
+        while it keeps them (set-up, a restart's replay, a run that keeps the whole scene),
+        else gathered from the blocks' owners (collective; a transient of a stage's start or
+        of the output's opening: no rank keeps them for blocks it does not hold)."""
+        g = self.glob
+        if all(k in vars(g) for k in names):
+            return g
+        b, n = self.blocks, self.n_owned
+        gid = allgather_rows(self.comm, b.gid[:n])
+        order = np.argsort(gid, kind="stable")
+        if len(gid) != g.n or not np.array_equal(gid[order], np.arange(g.n)):
+            raise RuntimeError(f"scene_fields: the ranks own {len(gid)} blocks, not each of "
+                               f"the scene's {g.n} once")
+        return BlockStore.catalogue({"gid": gid[order], **{
+            k: allgather_rows(self.comm, getattr(b, k)[:n])[order] for k in names}})
 
     def needs_scene_geometry(self) -> bool:
         """Whether the run reads the geometry of blocks it does not hold after set-up: a

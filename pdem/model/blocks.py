@@ -73,7 +73,10 @@ class BlockStore:
 
     @property
     def n(self) -> int:
-        return len(self.gid)
+        # the scene's store after set-up keeps no gid column (its rows are the gids) but
+        # always ``fixed`` (pdem.state.RUN_CATALOGUE)
+        column = self.__dict__.get("gid")
+        return len(column if column is not None else self.fixed)
 
     @property
     def n_pieces(self) -> int:

@@ -166,10 +166,11 @@ def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_resta
 
 
 def test_scene_store_keeps_only_the_run_catalogue_after_set_up(tmp_path):
-    """Once the output is open, every rank keeps of every scene block only what stages,
-    timesteps and the rebuild read (RUN_CATALOGUE); the set-up's other per-block fields are
-    gone. A stage then still stops and frees blocks by a selection, and deletes one leaving
-    the domain: the changes reach the blocks a rank holds and the fields the store kept."""
+    """Once the output is open, every rank keeps of every scene block only what the rebuild,
+    the checkpoint and the excavations read (RUN_CATALOGUE: fixed, out); the set-up's other
+    per-block fields are gone, the centroids, masses and inertias too. A stage then still
+    stops blocks by a selection (asking the owners) and deletes one leaving the domain: the
+    changes reach the blocks a rank holds and the fields the store kept."""
     from pdem.state import CATALOGUE, RUN_CATALOGUE
 
     text = """
@@ -190,7 +191,8 @@ stages:
     scene = parse_scene(text + f"output: {{file: {tmp_path}/s.h5}}\n")
     sim = Simulation(scene, MPI.COMM_SELF)
     kept = {f.name for f in F.BLOCK if f.name in vars(sim.state.glob)}
-    assert kept == set(RUN_CATALOGUE) and set(RUN_CATALOGUE) < set(CATALOGUE)
+    assert kept == set(RUN_CATALOGUE) == {"fixed", "out"} and set(RUN_CATALOGUE) < set(CATALOGUE)
+    assert sim.state.glob.n == 3
     sim.run()
     g, b = sim.state.glob, sim.blocks
     names = [s.name for s in sim.state.specs]

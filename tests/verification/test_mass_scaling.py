@@ -71,8 +71,10 @@ def test_only_the_pebble_is_scaled_and_the_step_is_dt():
     assert b.mscale[r["pebble"]] == pytest.approx(S_PEBBLE, rel=1e-12)
     # the per-block criterion the factors meet: every free block is stable at DT
     from pdem.config.resolve import _estimated_stiffness
+    from pdem.state import TIMESTEP_FIELDS
 
-    g = s.state.glob
+    g = s.state.scene_fields(TIMESTEP_FIELDS)  # every block's, from its owner
+    assert g is not s.state.glob and np.array_equal(g.gid, np.arange(len(s.specs)))
     k = _estimated_stiffness(s.specs, s.state.joints)
     own = critical_steps(g.mass, k, 0.1, g.inertia, g.radius, g.mscale)[g.fixed == 0]
     assert own.min() >= DT * (1.0 - 1e-12)
@@ -211,7 +213,8 @@ def test_restart_continues_bitwise(tmp_path):
     scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
                                      "checkpoint": None})
     r = Simulation(scene, MPI.COMM_SELF, checkpoint=ck)
-    assert r.dt == DT and np.array_equal(r.state.glob.mscale, s.state.glob.mscale)
+    assert r.dt == DT and np.array_equal(r.state.scene_fields(("mscale",)).mscale,
+                                         s.state.scene_fields(("mscale",)).mscale)
     r.run()
     r.close()
     with h5py.File(f"{tmp_path}/straight.h5") as a, h5py.File(out) as b:
