@@ -80,10 +80,8 @@ def scene_bytes(state) -> int:
     store's per-block fields (pdem.state.RUN_CATALOGUE), the spec columns and the names."""
     import numpy as np
 
-    arrays = [*vars(state.glob).values(), *vars(state.specs).values()]
-    names = state.specs.names
-    return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray)) \
-        + len(names._buf) + names._end.nbytes
+    kept = sum(a.nbytes for a in vars(state.glob).values() if isinstance(a, np.ndarray))
+    return kept + state.specs.nbytes
 
 
 def child(n: int) -> None:

@@ -133,7 +133,7 @@ def apply_stage(run, k: int) -> None:
     """Start stage ``k`` (collective): its excavations, its changes, the contacts they make."""
     s = run.state
     st = s.scene.stages[k]
-    gone = np.array([g for g, sp in enumerate(s.specs) if sp.excavate_stage == k], np.int64)
+    gone = s.specs.excavated_by_stage(k)
     s.stage_times[k] = s.time
     if len(gone):
         remove_blocks(s, run.stepper.bodies(), gone, DELETED,

@@ -67,7 +67,7 @@ class Resolved:
 def block_sizes(specs) -> np.ndarray:
     """Equivalent size (cube root of the volume) of every block, gid order."""
     if hasattr(specs, "volume"):  # a SpecTable (after set-up): the column
-        return specs.volume ** (1.0 / 3.0)
+        return np.asarray(specs.volume) ** (1.0 / 3.0)
     return np.array([s.volume for s in specs]) ** (1.0 / 3.0)
 
 
@@ -76,7 +76,7 @@ def surface_areas(specs) -> np.ndarray:
     vectorised: the areas in one batch, one-piece blocks summed row-wise in stacks of equal
     face counts (numpy sums each row as it sums the block's 1-D array: bitwise the same)."""
     if hasattr(specs, "surface"):  # a SpecTable (after set-up): the sums kept at release
-        return specs.surface.copy()
+        return np.array(specs.surface)
     face_areas([p for s in specs if s.pieces is not None for p in s.pieces])  # one batch
     surf = np.empty(len(specs))
     stacks: dict[int, list[int]] = {}

@@ -432,10 +432,22 @@ class OutputWriter:
             lo, hi = 0, len(data)
         self._write(dset, (lo,) + (0,) * (data.ndim - 1), data[lo:hi])
 
-    def _write_triangles(self, dset: h5py.Dataset, per_block: np.ndarray) -> None:
-        """A static per-triangle dataset from per-block values (every block's, gid order):
-        each rank writes the triangles of its gid range."""
-        mine = np.asarray(per_block)[self._lo + self._my_tblock]
+    def _write_range(self, dset: h5py.Dataset, rows: np.ndarray) -> None:
+        """Rows of this rank's gid range (``[lo, hi)``) of a per-block dataset."""
+        self._write(dset, (self._lo,) + (0,) * (rows.ndim - 1), rows)
+
+    def _fill_origin(self, mine: np.ndarray) -> None:
+        """Rows written without a stage origin (NaN): the initial centroids (the first
+        snapshot's when none were given), as without stages."""
+        col, w = _COLS["stage_origin"]
+        origin = mine[:, col : col + w]
+        unset = np.isnan(origin[:, 0])
+        origin[unset] = (self._x0 if self._x0 is not None else _cols(mine, "centroid"))[unset]
+
+    def _write_triangles(self, dset: h5py.Dataset, per_block: np.ndarray, first: int = 0) -> None:
+        """A static per-triangle dataset from per-block values (gid order, from gid ``first``:
+        every block's, or this rank's range's): each rank writes the triangles of its range."""
+        mine = np.asarray(per_block)[self._lo - first + self._my_tblock]
         self._write(dset, (self._tlo,) + (0,) * (mine.ndim - 1), mine if len(mine) else None)
 
     def _write_row(
@@ -529,10 +541,8 @@ class OutputWriter:
                 if name not in fields and name not in _OPTIONAL:
                     raise ValueError(f"write_snapshot: no {name} rows")
                 default = np.zeros((k, w))
-                if name == "stage_origin":  # no stages: measured from the start
-                    default = (self._x0_all[gids] if self._x0_all is not None and k
-                               and gids.min() >= 0 and gids.max() < self.n_blocks
-                               else np.asarray(fields["centroid"], np.float64).reshape(k, 3))
+                if name == "stage_origin":  # no stages: measured from the start, filled in
+                    default = np.full((k, 3), np.nan)  # by the rows' writer (_fill_origin)
                 a = np.asarray(fields.get(name, default), dtype=np.float64)
                 if a.size != k * w:
                     raise ValueError(f"write_snapshot: {name} has shape {a.shape}, need ({k}, {w})")
@@ -553,6 +563,8 @@ class OutputWriter:
             msg = msg or zmsg
         self._raise_if_any(msg)
         mine = self._assemble(gids, rows)
+        if "stage_origin" not in fields:
+            self._fill_origin(mine)
         if self.contacts:
             crows, srows = self._assemble_contacts(crows, srows)
         if self.zone_layout is not None:
@@ -595,23 +607,29 @@ class OutputWriter:
             raise ValueError(f"OutputWriter: group, fixed and initial_centroid need {n} rows")
         if group.min() < 0 or group.max() >= len(names):
             raise ValueError(f"OutputWriter: group ids outside [0, {len(names)}) (group_names)")
-        self._group, self._group_names = group.astype(np.int32), names
-        self._fixed, self._x0_all = fixed.astype(np.int32), x0
-        self._x0: np.ndarray | None = None  # reference centroids of this rank's gid range
+        # of every block, only this rank's gid range is kept: group and fixed until they are
+        # written (_create_fields), the initial centroids for the displacements (None: the
+        # first snapshot's); every rank keeping every block's would be 32 bytes a block
+        lo, hi = self._lo, self._hi
+        self._group_names = names
+        self._group, self._fixed = group[lo:hi].astype(np.int32), fixed[lo:hi].astype(np.int32)
+        self._x0: np.ndarray | None = None if x0 is None else x0[lo:hi].copy()
 
     def _create_fields(self) -> None:
         """Static per-block and per-triangle data, and the per-triangle series (IO ranks)."""
         f, n, nt = self._f, self.n_blocks, self.n_tri
         grp = f["blocks"].create_dataset("group", (n,), np.int32)
         grp.attrs["names"] = self._group_names
-        self._write_static(grp, self._group)
-        self._write_static(f["blocks"].create_dataset("fixed", (n,), np.int32), self._fixed)
+        self._write_range(grp, self._group)
+        self._write_range(f["blocks"].create_dataset("fixed", (n,), np.int32), self._fixed)
         x0 = f["blocks"].create_dataset("initial_centroid", (n, 3), np.float64)
         x0.attrs["units"] = "m"
-        if self._x0_all is not None:
-            self._write_static(x0, self._x0_all)
+        if self._x0 is not None:
+            self._write_range(x0, self._x0)
         for name, values in (("group", self._group), ("fixed", self._fixed)):
-            self._write_triangles(f["surface"].create_dataset(name, (nt,), np.int32), values)
+            self._write_triangles(f["surface"].create_dataset(name, (nt,), np.int32), values,
+                                  self._lo)
+        self._group = self._fixed = None  # written
         self._cells = {}
         for name, width, units in CELL_FIELDS:
             tail = (nt, width) if width > 1 else (nt,)
@@ -628,11 +646,8 @@ class OutputWriter:
     def _write_fields(self, i: int, mine: np.ndarray) -> None:
         """Snapshot ``i`` of the per-triangle series, and its ``/xdmf`` views (collective)."""
         if self._x0 is None:  # first snapshot: fix the displacement reference
-            if self._x0_all is not None:
-                self._x0 = self._x0_all[self._lo : self._hi]
-            else:
-                self._x0 = _cols(mine, "centroid").copy()
-                self._write(self._f["blocks/initial_centroid"], (self._lo, 0), self._x0)
+            self._x0 = _cols(mine, "centroid").copy()
+            self._write(self._f["blocks/initial_centroid"], (self._lo, 0), self._x0)
         values = _block_fields(_cols(mine, "centroid"), self._x0, _cols(mine, "velocity"),
                                _cols(mine, "angular_velocity"), _cols(mine, "removed")[:, 0],
                                _cols(mine, "stage_origin"))

@@ -23,7 +23,8 @@ from ..geometry import (
 from ..registry import Registry
 from .blocks import VERT_ROW, BlockStore
 from .fields import BLOCK, allocate
-from .strings import StringColumn
+from .names import NameColumn
+from .runs import RunColumn
 
 
 @dataclass
@@ -161,11 +162,13 @@ class SpecView:
 
 
 class SpecTable:
-    """The blocks' specs after set-up, as columns by gid (the names in one buffer, a few
-    numbers a block) instead of one Python object each: every rank keeps them for every block
-    (names in messages, selections by name, group or stage), ~1 KB a block as objects, ~60
-    bytes here. Indexing and iteration give :class:`SpecView` objects with the released
-    spec's attributes."""
+    """The blocks' specs after set-up, as columns by gid instead of one Python object each:
+    every rank keeps them for every block (names in messages, selections by name, group or
+    stage). The names are runs of ``prefix[k]`` (:class:`pdem.model.names.NameColumn`) and
+    the other columns runs of equal values (:class:`pdem.model.runs.RunColumn`), each plain
+    where runs would not be smaller: an ``array:`` of cubes costs a few bytes an entry, a cut
+    rock mass its geometric scalars (28 bytes a block). Indexing and iteration give
+    :class:`SpecView` objects with the released spec's attributes."""
 
     def __init__(self, specs: list[BlockSpec], scene_blocks, columns: dict | None = None):
         """``columns``: the geometric scalars (:func:`geometry_columns`) of every block when
@@ -173,35 +176,53 @@ class SpecTable:
         columns were gathered, pdem.state); else read from the released specs."""
         self.scene_blocks = scene_blocks
         n = len(specs)
-        self.names = StringColumn(sp.name for sp in specs)
+        self.names = NameColumn(sp.name for sp in specs)
         # a block's parent (the scene block it was cut from): -1 for its own name (every
         # uncut block), else its row in ``parents`` (the few names that differ)
         parents: dict[str, int] = {}
-        self.parent = np.fromiter(
+        self.parent = RunColumn(np.fromiter(
             (-1 if sp.parent == sp.name else parents.setdefault(sp.parent, len(parents))
-             for sp in specs), np.int32, n)
+             for sp in specs), np.int32, n))
         self.parents = list(parents)
         labels: dict[str, int] = {}
-        self.group = np.array([labels.setdefault(sp.group, len(labels)) for sp in specs],
-                              np.int32)
-        self.material = np.array([labels.setdefault(sp.material, len(labels)) for sp in specs],
-                                 np.int32)
+        self.group = RunColumn(np.fromiter((labels.setdefault(sp.group, len(labels))
+                                            for sp in specs), np.int32, n))
+        self.material = RunColumn(np.fromiter((labels.setdefault(sp.material, len(labels))
+                                               for sp in specs), np.int32, n))
         self.labels = list(labels)
-        self.entry = np.fromiter((sp.entry for sp in specs), np.int32, n)
+        self.entry = RunColumn(np.fromiter((sp.entry for sp in specs), np.int32, n))
         if columns is None:
             columns = {k: np.fromiter((getattr(sp, k) for sp in specs), dt, n)
                        for k, dt in GEOMETRY_COLUMNS.items()}
         for k in GEOMETRY_COLUMNS:
-            setattr(self, k, columns[k])
-        # excavation times and stages: columns only in scenes that excavate (12 bytes a block)
+            setattr(self, k, RunColumn(columns[k]))
+        # excavation times and stages: columns only in scenes that excavate
         self.excavate_at = self.excavate_stage = None
         if any(sp.excavate_at is not None or sp.excavate_stage is not None for sp in specs):
-            self.excavate_at = np.fromiter(
+            self.excavate_at = RunColumn(np.fromiter(
                 (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float,
-                n)
-            self.excavate_stage = np.fromiter(
+                n))
+            self.excavate_stage = RunColumn(np.fromiter(
                 (-1 if sp.excavate_stage is None else sp.excavate_stage for sp in specs),
-                np.int32, n)
+                np.int32, n))
+
+    def excavation_times(self) -> np.ndarray:
+        """Every block's excavation time (NaN: none), gid order."""
+        if self.excavate_at is None:
+            return np.full(len(self), np.nan)
+        return np.asarray(self.excavate_at)
+
+    def excavated_by_stage(self, k: int) -> np.ndarray:
+        """Gids of the blocks stage ``k`` excavates."""
+        if self.excavate_stage is None:
+            return np.zeros(0, np.int64)
+        return np.flatnonzero(np.asarray(self.excavate_stage) == k).astype(np.int64)
+
+    @property
+    def nbytes(self) -> int:
+        """What the table keeps for its blocks (the columns and the names)."""
+        return sum(c.nbytes for c in vars(self).values()
+                   if isinstance(c, (RunColumn, NameColumn)))
 
     def parent_of(self, gid: int) -> str:
         k = self.parent[gid]
@@ -235,7 +256,7 @@ class ParentNames:
 
     @property
     def max_bytes(self) -> int:
-        own = self._t.names.lengths()[self._t.parent < 0]
+        own = self._t.names.lengths()[np.asarray(self._t.parent) < 0]
         return max([int(own.max(initial=0)), *(len(p.encode("utf-8")) for p in self._t.parents)])
 
 

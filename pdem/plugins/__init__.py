@@ -6,6 +6,8 @@ hooks (:class:`Plugin`). To add one, write a class here and add it in :func:`def
 
 from __future__ import annotations
 
+import numpy as np
+
 from .base import Plugin, interval_steps
 from .checkpoints import Checkpoints
 from .energy import EnergyBudget
@@ -23,7 +25,7 @@ def default_plugins(state, output: bool = True) -> list[Plugin]:
     plugins: list[Plugin] = []
     if state.scene.stages:
         plugins.append(StageState(state))
-    if any(sp.excavate_at is not None for sp in state.specs):
+    if not np.isnan(state.specs.excavation_times()).all():
         plugins.append(Excavations(state))  # first: a checkpoint after it sees it done
     if state.scene.checkpoint is not None:
         plugins.append(Checkpoints(state))

@@ -22,8 +22,8 @@ class Excavations(Plugin):
 
     def start(self, run):
         s = self.state
-        self.pending = sorted({sp.excavate_at for g, sp in enumerate(s.specs)
-                               if sp.excavate_at is not None and s.glob.out[g] == 0})
+        t = s.specs.excavation_times()
+        self.pending = sorted(set(t[~np.isnan(t) & (s.glob.out == 0)].tolist()))
         self.after_step(run)  # an excavation due at the start time
 
     def horizon(self, run):

@@ -168,3 +168,38 @@ def test_bad_ownership_raises_on_every_rank(tmp_path):
         with h5py.File(f"{base}/bad.h5", "r") as f:
             assert f["time"].shape == (1,)
             assert np.array_equal(f["blocks/centroid"][0], c)
+
+
+def test_writer_keeps_its_range_of_the_static_fields(tmp_path):
+    """Of every block's group, fixed flag and initial centroid a writer keeps only its gid
+    range once the file is open (no rank keeps 32 bytes of every block); a snapshot without
+    stage origins, from blocks owned across the ranks' ranges, still records every block's
+    initial centroid as its origin."""
+    comm = MPI.COMM_WORLD
+    n = 11
+    base = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
+    x0 = np.random.default_rng(3).normal(size=(n, 3))
+    owned = np.arange(n)[np.arange(n) % comm.size == (comm.rank + 1) % comm.size]
+    viewer = {"group": np.arange(n) % 2, "group_names": ["even", "odd"],
+              "fixed": np.arange(n) == 0, "initial_centroid": x0}
+    path = f"{base}/range.h5"
+    with OutputWriter(path, comm, **make_scene(n), **viewer) as w:
+        lo, hi = w._lo, w._hi
+        assert w._group is None and w._fixed is None and w._x0.shape == (hi - lo, 3)
+        assert hi - lo < n
+        for step, t, c, q, v, om in make_snapshots(n):
+            w.write_snapshot(step, t, owned, rows(c[owned], q[owned], v[owned], om[owned]))
+    err = None
+    if comm.rank == 0:  # every rank learns of a failed check (none left waiting)
+        try:
+            with h5py.File(path, "r") as f:
+                assert np.array_equal(f["blocks/initial_centroid"][()], x0)
+                origin = f["blocks/stage_origin"][()]
+                assert origin.shape == (3, n, 3)
+                assert np.array_equal(origin, np.broadcast_to(x0, origin.shape))
+                assert np.array_equal(f["blocks/fixed"][()], (np.arange(n) == 0).astype(np.int32))
+                assert np.array_equal(f["blocks/group"][()], np.arange(n) % 2)
+        except Exception:
+            err = traceback.format_exc()
+    err = comm.bcast(err, root=0)
+    assert err is None, f"rank 0: {err}"

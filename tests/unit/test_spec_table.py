@@ -61,18 +61,101 @@ def test_string_column_reads_back_every_string():
     assert len(StringColumn([])) == 0 and StringColumn([]).max_bytes == 0
 
 
-def test_names_take_their_bytes_not_python_objects():
-    """64,000 array blocks: the table keeps ~the names' bytes and an offset each, and no
-    parent names (every block is its own parent)."""
+def test_an_array_keeps_a_few_bytes_not_a_few_a_block():
+    """64,000 array blocks on a floor: the names are runs of ``cube[k]`` and every column a
+    run per entry, so the whole table keeps under a kilobyte (it was ~62 bytes a block: the
+    names' bytes and offsets, 44 bytes of columns); each block still reads back as its spec."""
+    import numpy as np
+
     from pdem.cases.stacks import cube_stack_scene
+    from pdem.model.build import geometry_columns
 
     scene = parse_scene(cube_stack_scene(40, "fast"))
     specs = expand_blocks(scene, 10**7)
-    table = SpecTable(specs, scene.blocks, {k: None for k in ("volume", "surface", "max_face",
-                                                               "n_pieces")})
+    table = SpecTable(specs, scene.blocks, geometry_columns(specs))
     n = len(specs)
-    assert n == 64001 and table.parents == [] and (table.parent == -1).all()
-    assert table.names.nbytes < n * (8 + max(len(sp.name) for sp in specs))
+    assert n == 64001 and table.parents == [] and (np.asarray(table.parent) == -1).all()
+    assert table.names.is_runs and table.nbytes < 1024, table.nbytes
     assert table.excavate_at is None and table[7].excavate_at is None
-    assert [table[g].name for g in (0, 1, n - 1)] == [specs[g].name for g in (0, 1, n - 1)]
+    for g in (0, 1, 2, 4321, n - 1):
+        for k in FIELDS:
+            assert getattr(table[g], k) == getattr(specs[g], k), (g, k)
     assert table.parent_names()[n - 1] == specs[n - 1].parent == specs[n - 1].name
+    assert table.parent_names().max_bytes == max(len(sp.name) for sp in specs)
+
+
+def test_a_cut_rock_mass_keeps_its_varying_columns_plain():
+    """Cut pieces differ in volume and surface: those columns stay plain arrays (runs would
+    not be smaller), the labels still run; the tunnel's cut splits pieces into ``rock[13][0]``,
+    ``rock[13][1]``, ... (runs of two), so the names stay plain too. Every view reads as its
+    spec."""
+    import numpy as np
+
+    from pdem.cases.rock_mass import tunnel_scene
+
+    scene = parse_scene(tunnel_scene(at=1.0, time=0.1))
+    specs = expand_blocks(scene, 10**6)
+    for sp in specs:
+        sp.release()
+    table = SpecTable(specs, scene.blocks)
+    assert not table.volume.is_runs and table.group.is_runs and not table.names.is_runs
+    assert np.array_equal(np.asarray(table.volume), [sp.volume for sp in specs])
+    for g, (view, sp) in enumerate(zip(table, specs, strict=True)):
+        for k in FIELDS:
+            assert getattr(view, k) == getattr(sp, k), (g, k)
+
+
+NAMES = [
+    [f"cube[{k}]" for k in range(1000)],
+    ["floor", *(f"cube[{k}]" for k in range(500)), "wall", "a[007]", "a[7]", "a[8]", "rock[3]",
+     "rock[4]", "b[-1]", "é[1]", "é[2]", "", "x[99]", "x[100]", "x[9]", "x[10]", "floor"],
+    [f"s_{k}" for k in range(100)],  # no counter: stays one plain buffer
+    [],
+]
+
+
+@pytest.mark.parametrize("texts", NAMES, ids=["array", "mixed", "plain", "empty"])
+def test_name_runs_read_back_as_the_string_column(texts):
+    """Runs of ``prefix[k]`` give back every name (non-counted ones, leading zeros, signs,
+    non-ASCII, a counter that gains a digit, repeats), with the lengths, longest name and
+    first positions of the plain column; they are smaller where names count up."""
+    from pdem.model.names import NameColumn
+    from pdem.model.strings import StringColumn
+
+    col, plain = NameColumn(texts), StringColumn(texts)
+    assert len(col) == len(texts) and list(col) == texts and col == plain and col == texts
+    assert [col[i] for i in range(len(texts))] == texts
+    assert col.lengths().tolist() == plain.lengths().tolist()
+    assert col.max_bytes == plain.max_bytes
+    want = [*texts[::7], "absent", "cube[100000]", "a[07]", "x[10]"]
+    assert col.positions(want) == plain.positions(want)
+    assert col.nbytes <= plain.nbytes
+    assert col.is_runs == (texts is not NAMES[2])
+    if texts:
+        assert col[-1] == texts[-1]
+    with pytest.raises(IndexError):
+        col[len(texts)]  # noqa: B018
+
+
+def test_run_column_reads_back_as_the_array():
+    """Runs of equal values by their bits (NaN runs, -0.0 is not 0.0): an int, an index
+    array (negative too), a mask and a slice read as the array; a column of distinct values
+    stays plain."""
+    import numpy as np
+
+    from pdem.model.runs import RunColumn
+
+    v = np.array([1.0, 1.0, 1.0, 2.0, 2.0, np.nan, np.nan, -0.0, 0.0] + [3.0] * 100)
+    col = RunColumn(v)
+    assert col.is_runs and col.nbytes == 6 * 16 and len(col) == len(v)
+    assert np.array_equal(np.asarray(col), v, equal_nan=True)
+    assert np.array_equal(np.signbit(np.asarray(col)), np.signbit(v))
+    rows = np.array([0, 5, 8, 108, -1, 3])
+    assert np.array_equal(col[rows], v[rows], equal_nan=True)
+    assert col[7] == 0.0 and np.signbit(col[7]) and col[-1] == 3.0
+    assert np.array_equal(col[v > 1.0], v[v > 1.0])
+    assert np.array_equal(col[2:9], v[2:9], equal_nan=True)
+    with pytest.raises(IndexError):
+        col[len(v)]  # noqa: B018
+    plain = RunColumn(np.arange(100), np.int32)
+    assert not plain.is_runs and plain[5] == 5 and plain.nbytes == 400

@@ -1,0 +1,112 @@
+"""Per-block columns kept as runs of equal values: what every rank keeps for every block.
+
+Every rank keeps a few labels of every scene block after set-up (its scene entry, group,
+material, parent, excavation time and stage, a few geometric scalars: pdem.model.build's
+SpecTable), read one block at a time (a message, a selection, a stage's excavations) or
+whole at a stage's start. In the scenes pdem is built for they come in long runs: an
+``array:`` of 10^6 cubes is one entry, one group, one material, one volume. A run costs its
+start (8 bytes) and its value, so such a column is a few hundred bytes at any block count
+instead of 4-8 bytes a block on every rank (the O(N) a rank keeps, docs/parallel.md). A
+column whose values change too often to gain (the volumes of a cut rock mass) stays a plain
+array: :class:`RunColumn` picks the smaller.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# one run costs its start (int64) and its value; a column is kept as runs only when that is
+# at most this fraction of the plain array (else the lookups' searchsorted buys nothing)
+RUNS_WORTH = 0.5
+
+
+def run_starts(values: np.ndarray) -> np.ndarray:
+    """Rows where a new run of equal values begins (row 0 first; bitwise equality, so that
+    NaN runs too and -0.0 is not 0.0)."""
+    n = len(values)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    bits = np.ascontiguousarray(values).view(np.dtype(f"u{values.dtype.itemsize}"))
+    return np.concatenate([[0], np.flatnonzero(bits[1:] != bits[:-1]) + 1]).astype(np.int64)
+
+
+class RunColumn:
+    """A read-only 1-D column of numbers stored as runs of equal values, or plain when runs
+    would not be smaller. Indexing by an int gives the value, by an integer array (or a
+    boolean mask, or a slice) an array; ``np.asarray`` expands it."""
+
+    __slots__ = ("_n", "_starts", "_values", "_plain")
+
+    def __init__(self, values, dtype=None):
+        v = np.ascontiguousarray(np.asarray(values, dtype))
+        if v.ndim != 1:
+            raise ValueError("RunColumn: a 1-D column")
+        self._n = len(v)
+        starts = run_starts(v)
+        if len(starts) * (8 + v.dtype.itemsize) <= RUNS_WORTH * v.nbytes:
+            self._starts, self._values, self._plain = starts, v[starts].copy(), None
+        else:
+            self._starts = self._values = None
+            self._plain = v
+
+    @property
+    def is_runs(self) -> bool:
+        return self._plain is None
+
+    @property
+    def dtype(self) -> np.dtype:
+        return (self._values if self._plain is None else self._plain).dtype
+
+    @property
+    def shape(self) -> tuple[int]:
+        return (self._n,)
+
+    @property
+    def nbytes(self) -> int:
+        if self._plain is not None:
+            return self._plain.nbytes
+        return self._starts.nbytes + self._values.nbytes
+
+    def __len__(self) -> int:
+        return self._n
+
+    def _run_of(self, rows: np.ndarray) -> np.ndarray:
+        return np.searchsorted(self._starts, rows, side="right") - 1
+
+    def __getitem__(self, i):
+        if self._plain is not None:
+            return self._plain[i]
+        if isinstance(i, (int, np.integer)):
+            k = int(i)
+            if k < 0:
+                k += self._n
+            if not 0 <= k < self._n:
+                raise IndexError(f"row {int(i)} of {self._n}")
+            return self._values[int(self._run_of(k))]
+        if isinstance(i, slice):
+            rows = np.arange(self._n)[i]
+        else:
+            rows = np.asarray(i)
+            if rows.dtype == bool:
+                if rows.shape != (self._n,):
+                    raise IndexError(f"a mask of {rows.shape} rows for a column of {self._n}")
+                rows = np.flatnonzero(rows)
+            rows = np.where(rows < 0, rows + self._n, rows)
+            if rows.size and (rows.min() < 0 or rows.max() >= self._n):
+                raise IndexError(f"rows outside a column of {self._n}")
+        return self._values[self._run_of(rows)]
+
+    def __array__(self, dtype=None, copy=None):
+        if self._plain is not None:
+            out = self._plain
+        else:
+            out = np.repeat(self._values, np.diff(self._starts, append=self._n))
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def __iter__(self):
+        return iter(np.asarray(self).tolist())
+
+    def __eq__(self, other):
+        return np.asarray(self) == np.asarray(other)
+
+    __hash__ = None
