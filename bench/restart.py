@@ -9,7 +9,8 @@ restarts from it and takes one step. Each job runs under ``mpiexec -n RANKS``.
     .venv/bin/python bench/restart.py --n 20 40 --ranks 3
 
 Prints per size the restart's seconds to the first step (slowest rank), its peak resident MB
-per rank (getrusage; the largest over the ranks) and the rows of contacts and sub-contacts each
+per rank (getrusage; the largest over the ranks; ``restored``: the peak once the model is
+restored, before the first step's start-up) and the rows of contacts and sub-contacts each
 rank read from the file (the largest over the ranks, and the file's totals). Run it against
 another tree with PYTHONPATH=that/tree to compare. Not a test: timings on shared machines are
 noisy.
@@ -75,6 +76,7 @@ def restart(n: int, steps: int, ck: str) -> None:
     scene = parse_scene(ck_state["attrs"]["scene"])
     sim = Simulation(scene.model_copy(update={"checkpoint": None}), comm, checkpoint=ck_state,
                      output=False)
+    rss_restored = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     sim.run(steps=1)
     elapsed = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -83,13 +85,14 @@ def restart(n: int, steps: int, ck: str) -> None:
     with h5py.File(path, "r") as f:
         totals = (len(f["contacts/nsub"]), len(f["subcontacts/sc_un"]))
     rows = comm.gather((elapsed, rss, rss0, read.get("/contacts/ga", 0),
-                        read.get("/subcontacts/sc_un", 0)), root=0)
+                        read.get("/subcontacts/sc_un", 0), rss_restored), root=0)
     if comm.rank == 0:
         print("RESULT " + json.dumps({
             "n": n, "cubes": n ** 3, "ranks": comm.size, "seconds": max(r[0] for r in rows),
             "peak_mb": max(r[1] for r in rows), "base_mb": max(r[2] for r in rows),
             "contacts_read": max(r[3] for r in rows), "subs_read": max(r[4] for r in rows),
-            "contacts": totals[0], "subs": totals[1]}), flush=True)
+            "contacts": totals[0], "subs": totals[1],
+            "restored_mb": max(r[5] for r in rows)}), flush=True)
 
 
 def main() -> None:
@@ -107,7 +110,7 @@ def main() -> None:
     launch = [str(Path(py).with_name("mpiexec")), "-n", str(args.ranks), py, __file__, "--child"]
     print(f"restart of the cube stack from a checkpoint after {args.steps} steps, "
           f"{args.ranks} rank(s)")
-    print(f"{'cubes':>10} {'seconds':>8} {'peak MB':>8} {'base MB':>8} "
+    print(f"{'cubes':>10} {'seconds':>8} {'peak MB':>8} {'restored':>8} {'base MB':>8} "
           f"{'contacts read / in file':>24} {'sub-contacts read / in file':>28}")
     with tempfile.TemporaryDirectory() as d:
         for n in args.n:
@@ -123,6 +126,7 @@ def main() -> None:
                 line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
                 r = json.loads(line[0][7:])
                 print(f"{r['cubes']:>10,} {r['seconds']:>8.2f} {r['peak_mb']:>8.0f} "
+                      f"{r.get('restored_mb', 0.0):>8.0f} "
                       f"{r['base_mb']:>8.0f} {r['contacts_read']:>11,} / {r['contacts']:<11,}"
                       f" {r['subs_read']:>13,} / {r['subs']:<13,}")
 

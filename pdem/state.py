@@ -35,7 +35,7 @@ from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
 from .parallel.decomposition import make_decomposition
-from .parallel.migrate import rebuild, route_contacts
+from .parallel.migrate import place_contacts, rebuild, route_contacts
 from .parallel.mpi import allgather, allgather_rows, broadcast, configure_waits
 from .timers import Timers
 
@@ -427,44 +427,51 @@ class ModelState:
                     | np.isin(reader.contact_column("gb"), free))[0], path)), path)
 
     def _restore_by_share(self, reader, path):
-        """Each rank reads the rows of its build share's blocks and an even, contiguous share
-        of the contacts (hyperslabs: no rank reads a whole column), then sends each contact
-        to the ranks whose build share holds a free block of it; the rebuild takes both to
-        the owners. What every rank learns of every block is the ``out`` code, gathered from
-        the shares (the catalogue keeps it)."""
+        """Each rank reads the rows of its build share's blocks (a hyperslab: no rank reads a
+        whole column) and the rebuild takes them to their owners at the checkpoint's poses.
+        Then each reads an even, contiguous share of the contacts and sends each contact
+        straight to the ranks that own a free block of it: the contacts are not held while
+        the blocks travel (that was a restart's peak). What every rank learns of every block
+        is its ``out`` code and its owner (1 + 4 bytes a block, gathered from the shares,
+        dropped after)."""
         comm = self.comm
         gids = self.share.gid.copy()
         rows = self._checked(lambda: reader.block_rows(gids, MIGRATE), path)
         out = allgather_rows(comm, rows["out"])
-        c0, c1, nsub = self._checked(lambda: reader.contact_share(comm.rank, comm.size), path)
-        counts = allgather(comm, int(nsub.sum()))
-        if sum(counts) != reader.n_sub:  # every rank alike: the sum is everyone's
-            raise UserError(f"cannot restart from {path}: contacts/nsub counts {sum(counts)} "
-                            f"sub-contacts, the file holds {reader.n_sub}")
-        part = self._checked(lambda: reader.contact_range(c0, c1, nsub, sum(counts[:comm.rank])),
-                             path)
-        self._restore_share(out, None, lambda owned: rows, lambda free: self._route(part), path)
+        owner = allgather_rows(comm, self.decomp.owner_of(rows["x"]).astype(np.int32))
 
-    def _route(self, part: ContactStore) -> ContactStore:
-        """Contacts read by this rank (``part``) to the ranks whose build share holds a free
-        block of theirs (collective); returns those sent here, in file (key) order."""
-        from .io.writer import _share
+        def placed():
+            c0, c1, nsub = self._checked(lambda: reader.contact_share(comm.rank, comm.size),
+                                         path)
+            counts = allgather(comm, int(nsub.sum()))
+            if sum(counts) != reader.n_sub:  # every rank alike: the sum is everyone's
+                raise UserError(f"cannot restart from {path}: contacts/nsub counts "
+                                f"{sum(counts)} sub-contacts, the file holds {reader.n_sub}")
+            part = self._checked(lambda: reader.contact_range(c0, c1, nsub,
+                                                              sum(counts[:comm.rank])), path)
+            return self._route(part, owner)
 
-        comm = self.comm
-        starts = np.array([_share(r, comm.size, self.glob.n)[0] for r in range(comm.size)])
+        self._restore_share(out, None, lambda owned: rows, None, path, placed=placed)
+
+    def _route(self, part: ContactStore, owner: np.ndarray) -> ContactStore:
+        """Contacts read by this rank (``part``) to the ranks that will own a free block of
+        theirs (``owner``: every block's, by gid; collective); returns those sent here, in
+        file (key) order."""
         fixed = self.glob.fixed
-        # the last share starting at or before the block (empty ones are skipped), if free
         ga, gb = part.ga, part.gb
-        to_a = np.where(fixed[ga] == 0, np.searchsorted(starts, ga, side="right") - 1, -1)
-        to_b = np.where(fixed[gb] == 0, np.searchsorted(starts, gb, side="right") - 1, -1)
-        return route_contacts(comm, part, to_a, to_b)
+        to_a = np.where(fixed[ga] == 0, owner[ga], -1)
+        to_b = np.where(fixed[gb] == 0, owner[gb], -1)
+        return route_contacts(self.comm, part, to_a, to_b)
 
-    def _restore_share(self, out, x, block_rows, contacts, path, read: bool = True):
+    def _restore_share(self, out, x, block_rows, contacts, path, read: bool = True,
+                       placed=None):
         """The blocks this rank brings in (its build share, or those it owns at the
         checkpoint's poses) from ``block_rows(gids)``, and the contacts of their free ones,
         ``contacts(gids of those free blocks)``: the rebuild sends both to the owners.
         ``read``: the contacts were read for this (the rebuild drops them as it merges),
-        else they are the caller's (a checkpoint read whole)."""
+        else they are the caller's (a checkpoint read whole). ``placed()`` instead of
+        ``contacts``: read the contacts and send them to the owners of their free blocks
+        (collective), once the blocks are distributed."""
         gone = out > 0  # blocks that left the model domain act as fixed ones
         self.glob.fixed[gone] = 1
         self.glob.out[gone] = out[gone]
@@ -479,8 +486,16 @@ class ModelState:
             self._checked(lambda: self.grids.load(path), path)
         # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
         held = held_width(self.scene.solve.inactive is not None)
-        self.distribute(owned, block_rows(owned), contacts(free).with_held(held), source=source,
-                        consume=source is not self.glob, consume_contacts=read)
+        if placed is not None:
+            self.distribute(owned, block_rows(owned), self.empty_contacts(), source=source,
+                            consume=source is not self.glob)
+            with self.timers.phase("migrate"):
+                self.contacts = place_contacts(self.blocks, self.n_owned, self.glob.fixed,
+                                               placed().with_held(held))
+        else:
+            self.distribute(owned, block_rows(owned), contacts(free).with_held(held),
+                            source=source, consume=source is not self.glob,
+                            consume_contacts=read)
         if self.grids is not None:  # zoned rows and pieces from the stored gridpoints
             b, rows = self.blocks, self.grids.rows
             x_saved = b.x[rows].copy()

@@ -68,6 +68,37 @@ def _merge_contacts(parts: list[ContactStore], free_gids: np.ndarray, drop: list
     return ContactStore(arrays, sub, start)
 
 
+def _number_rows(contacts: ContactStore, blocks: BlockStore) -> None:
+    """Set the contacts' local rows (``ia``, ``ib``: blocks; ``ka``, ``kb``: pieces) from
+    their gids in ``blocks`` (owned and ghosts)."""
+    all_gids = blocks.gid
+    row_of = np.argsort(all_gids, kind="stable")
+    sorted_gids = all_gids[row_of]
+    for side, g in (("ia", "ga"), ("ib", "gb")):
+        pos = np.searchsorted(sorted_gids, contacts.arrays[g])
+        if np.any(pos >= len(sorted_gids)) or np.any(
+                sorted_gids[np.minimum(pos, len(sorted_gids) - 1)] != contacts.arrays[g]):
+            raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
+        contacts.arrays[side] = row_of[pos].astype(contacts.arrays[side].dtype)
+    # the pieces in contact: the same piece ordinal within the block's local pieces
+    for side, piece, pg in (("ia", "ka", "pga"), ("ib", "kb", "pgb")):
+        first = blocks.piece_gid[blocks.piece_start[contacts.arrays[side]]]  # 1st piece
+        ordinal = contacts.arrays[pg] - first
+        contacts.arrays[piece] = (blocks.piece_start[contacts.arrays[side]] + ordinal).astype(
+            contacts.arrays[piece].dtype)
+
+
+def place_contacts(blocks: BlockStore, n_owned: int, fixed: np.ndarray,
+                   placed: ContactStore) -> ContactStore:
+    """Contacts already on the rank that owns a free block of each (a restart's, routed
+    there once its blocks are distributed: pdem.state): those of its free owned blocks, each
+    once, in key order, their rows numbered in ``blocks``; ``placed`` is consumed."""
+    gids = blocks.gid[:n_owned]
+    mine = _merge_contacts([placed], gids[fixed[gids] == 0], [True])
+    _number_rows(mine, blocks)
+    return mine
+
+
 def route_contacts(comm, contacts: ContactStore, to_a: np.ndarray, to_b: np.ndarray
                    ) -> ContactStore:
     """Each contact to rank ``to_a[c]`` and to rank ``to_b[c]`` (-1: none; once if the
@@ -165,6 +196,7 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     mine_store = take_rows(arrived, order, np.ones(len(gids), np.uint8))
     del arrived
     parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
+    drop = [consume_contacts] + [True] * (len(parts) - 1)
     del got
 
     # 2. interest boxes and ghosts
@@ -172,7 +204,7 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     # the contacts this rank computes: those of its free blocks (rows renumbered at 4.)
     # (a restart's contacts, read for this rebuild, and the ones received: their columns
     # dropped as they are merged)
-    mine = _merge_contacts(parts, free_now, [consume_contacts] + [True] * (len(parts) - 1))
+    mine = _merge_contacts(parts, free_now, drop)
     del parts
     if len(free_now):
         sel = ~fixed[gids]
@@ -207,7 +239,6 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
                    else np.zeros((0, *state[k].shape[1:]))) for k in MIGRATE}
 
     # 3. the local store: owned rows first, then ghosts, each in gid order
-    all_gids = np.concatenate([gids, g_gids])
     owned = np.concatenate([np.ones(len(gids), np.uint8), np.zeros(len(g_gids), np.uint8)])
     n_owned = len(gids)
     # each copy of the owned blocks is dropped once the next is made (the rebuild's peak)
@@ -226,20 +257,7 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         getattr(blocks, k)[:] = np.concatenate([new_state[k], g_state[k]])
 
     # 4. the contacts' rows renumbered
-    row_of = np.argsort(all_gids, kind="stable")
-    sorted_gids = all_gids[row_of]
-    for side, g in (("ia", "ga"), ("ib", "gb")):
-        pos = np.searchsorted(sorted_gids, mine.arrays[g])
-        if np.any(pos >= len(sorted_gids)) or np.any(sorted_gids[np.minimum(pos, len(sorted_gids) - 1)]
-                                                     != mine.arrays[g]):
-            raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
-        mine.arrays[side] = row_of[pos].astype(mine.arrays[side].dtype)
-    # the pieces in contact: the same piece ordinal within the block's local pieces
-    for side, piece, pg in (("ia", "ka", "pga"), ("ib", "kb", "pgb")):
-        first = blocks.piece_gid[blocks.piece_start[mine.arrays[side]]]  # the block's 1st piece
-        ordinal = mine.arrays[pg] - first
-        mine.arrays[piece] = (blocks.piece_start[mine.arrays[side]] + ordinal).astype(
-            mine.arrays[piece].dtype)
+    _number_rows(mine, blocks)
 
     # 5. the per-step halo plan (free blocks only; fixed ghosts were sent once, above)
     send = {}

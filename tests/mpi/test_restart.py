@@ -11,6 +11,7 @@ import pytest
 from mpi4py import MPI
 
 import pdem.io.checkpoint as checkpoint_io
+import pdem.state as state_module
 from pdem.config import parse_scene
 from pdem.io.checkpoint import open_checkpoint, read_checkpoint
 from pdem.simulation import Simulation
@@ -68,10 +69,12 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
         r = Simulation(sc, c, checkpoint=state)
         assert r.step == N
         owned = r.n_owned
+        at_start["owned"] = r.state.owned_gids().copy()
         r.run()
         r.close()
         return final_state(out), owned
 
+    at_start = {}
     if comm.rank == 0:  # on 1 rank, the whole file read at once
         (got, step), _ = restart(MPI.COMM_SELF, f"{d}/r1.h5", ck)
         assert step == 2 * N
@@ -86,11 +89,22 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
         read[dset.name] = read.get(dset.name, 0) + len(rows)
         return whole(dset, rows)
 
+    # and the contacts each rank receives from the readers
+    route = state_module.route_contacts
+    routed = []
+
+    def recorded(*args):
+        got = route(*args)
+        routed.append((got.ga.copy(), got.gb.copy()))
+        return got
+
     checkpoint_io._read_rows = counted
+    state_module.route_contacts = recorded
     try:
         (got, step), owned = restart(comm, f"{d}/r{comm.size}.h5", open_checkpoint(ck_path))
     finally:
         checkpoint_io._read_rows = whole
+        state_module.route_contacts = route
     assert step == 2 * N
     for k in FIELDS:
         assert np.array_equal(got[k], ref[k]), k
@@ -105,7 +119,12 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     if comm.size > 1:
         assert owned < n_blocks
     # each contact read once, by one rank, in even shares (its sub-contacts with it); then sent
-    # to the ranks whose share holds one of its free blocks
+    # straight to the ranks that own one of its free blocks (not first to the build shares)
+    (ga, gb), = routed
+    here = np.isin(ga, at_start["owned"]) | np.isin(gb, at_start["owned"])
+    travelled = comm.allgather((len(ga), int(here.sum())))
+    assert all(n == k for n, k in travelled) and sum(n for n, _ in travelled) >= n_contacts, \
+        travelled
     counts = comm.allgather((read.get("/contacts/normal", 0), read.get("/contacts/ga", 0),
                              read.get("/subcontacts/sc_fs", 0)))
     assert [c[0] for c in counts] == [c[1] for c in counts], counts
