@@ -17,7 +17,10 @@ per block it holds (its row and geometry, and its share of the contacts: the sta
 cube). The set-up peak is ``base + s N + h' (owned + ghosts)``: ``s`` what every rank still
 makes for every block at set-up (the specs' names and entries, the gathered per-block
 fields), ``h'`` per block held (a rank builds an even share of the blocks, about what it
-holds, and receives its own). ``a, h, s, h'`` are least-squares fits to the measured runs; owned blocks,
+holds, and receives its own). ``a, h, s, h'`` are least-squares fits to the measured runs,
+``a`` held at what bench/setup.py counts a rank keeps (``scene_b``) and ``s`` at least ``a``;
+the peak is also at least the set-up's gathered catalogue (``catalogue_bytes`` a scene block)
+beside the build share, which binds at many ranks; owned blocks,
 ghosts and halo bytes per rank come from bench/scaling.py's decomposition model (exact for
 the stack's lattice). Strong scaling: N fixed (10^6, 10^7); weak: 10^4 blocks per rank.
 
@@ -77,25 +80,48 @@ def held_per_rank(n: int, size: int):
     return held.mean(), held.max(), m["recv"].mean() / 1e3, m["recv"].max() / 1e3, m["dims"]
 
 
-def fit(runs, key):
-    """Least squares ``mb - base = x0 N + x1 held`` over the runs (MB per block)."""
+def fit(runs, key, per_scene_block=None):
+    """Least squares ``mb - base = x0 N + x1 held`` over the runs (MB per block), ``x0`` at
+    least ``per_scene_block`` (MB; 0 without). With what a rank keeps of every block down to
+    bytes, N and the blocks held are too alike over these runs to split freely: an
+    unconstrained fit gave ``x0`` < 0, and memory < 0 at 4096 ranks."""
     rows, rhs = [], []
     for r in runs:
         _, held, _, _, _ = held_per_rank(r["n"], r["ranks"])
         rows.append([r["cubes"], held])
         rhs.append(r[key] - r["base_mb"])
-    x, *_ = np.linalg.lstsq(np.array(rows, float), np.array(rhs, float), rcond=None)
+    rows, rhs = np.array(rows, float), np.array(rhs, float)
+    x, *_ = np.linalg.lstsq(rows, rhs, rcond=None)
+    floor = per_scene_block or 0.0
+    if x[0] < floor:  # on the bound: the blocks held take the rest
+        h, *_ = np.linalg.lstsq(rows[:, 1:], rhs - floor * rows[:, 0], rcond=None)
+        x = np.array([floor, h[0]])
     return x
+
+
+def catalogue_bytes() -> int:
+    """Bytes a block of the per-block fields every rank gathers at set-up (pdem.state's
+    CATALOGUE and the envelopes), held until the first distribution."""
+    from pdem.model.fields import BLOCK
+    from pdem.state import CATALOGUE
+
+    names = set(CATALOGUE) | {"lo", "hi"}
+    return sum(f.width * np.dtype(f.dtype).itemsize for f in BLOCK if f.name in names)
 
 
 def report_model(runs):
     base = float(np.mean([r["base_mb"] for r in runs]))
-    a, h = fit(runs, "steady_mb")
-    s, hp = fit(runs, "peak_mb")
+    # what a rank keeps of every block, counted by nbytes (bench/setup.py), where measured
+    kept = [r["scene_b"] for r in runs if "scene_b" in r]
+    a, h = fit(runs, "steady_mb", max(kept) / 2**20 if kept else None)
+    s, hp = fit(runs, "peak_mb", a)
+    c = catalogue_bytes() / 2**20
     kb = 1024.0
-    print(f"\nfit over {len(runs)} runs: base {base:.0f} MB; after set-up {a * kb:.2f} KB per "
+    print(f"\nfit over {len(runs)} runs: base {base:.0f} MB; after set-up {a * kb:.3f} KB per "
           f"scene block on every rank + {h * kb:.2f} KB per block held; set-up peak "
-          f"{s * kb:.2f} KB per scene block + {hp * kb:.2f} KB per block held")
+          f"{s * kb:.3f} KB per scene block + {hp * kb:.2f} KB per block held; the set-up's "
+          f"gathered catalogue {c * kb:.3f} KB per scene block until the first distribution "
+          "(peak GB: the larger of the two)")
     print("\nthe fit against the runs (MB per rank, max over ranks):")
     print(f"{'blocks':>10} {'ranks':>5} {'after set-up meas/model':>25} {'peak meas/model':>18}")
     for r in runs:
@@ -114,7 +140,9 @@ def report_model(runs):
         _, held, _, halo, dims = held_per_rank(n, p)
         N = n ** 3
         steady = (base + a * N + h * held) / 1024.0
-        peak = (base + s * N + hp * held) / 1024.0
+        # the peak: the start's first contact update, or the gathered catalogue beside the
+        # build share (about what a rank holds) when the scene is large enough
+        peak = max(base + s * N + hp * held, base + c * N + hp * N / p) / 1024.0
         print(f"{kind:>8} {N:>10.3g} {p:>6} {'x'.join(map(str, dims)):>9} {held:>8.0f} "
               f"{steady:>15.2f} {peak:>8.2f} {halo:>13.1f}")
 
