@@ -101,12 +101,11 @@ def fit(runs, key, per_scene_block=None):
 
 def catalogue_bytes() -> int:
     """Bytes a block of the per-block fields every rank gathers at set-up (pdem.state's
-    CATALOGUE and the envelopes), held until the first distribution."""
+    GATHERED: the catalogue and the envelopes), held until the first distribution."""
     from pdem.model.fields import BLOCK
-    from pdem.state import CATALOGUE
+    from pdem.state import GATHERED
 
-    names = set(CATALOGUE) | {"lo", "hi"}
-    return sum(f.width * np.dtype(f.dtype).itemsize for f in BLOCK if f.name in names)
+    return sum(f.width * np.dtype(f.dtype).itemsize for f in BLOCK if f.name in GATHERED)
 
 
 def report_model(runs):

@@ -55,11 +55,17 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
 
     return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
 
-# the per-block fields of every block each rank keeps after set-up (the scene's store, by gid):
-# what later stages select and set on every rank alike (pdem.stages, pdem.boundary,
-# pdem.domain), the rebuild's ownership and boxes (fixed, radius), a stage's timestep
-CATALOGUE = ("gid", "x", "x0", "v", "w", "L", "mass", "inertia", "mscale", "fixed", "vfix",
-             "out", "material", "group", "applied_force", "radius", "point_area")
+# the per-block fields of every block each rank holds during set-up (the scene's store, by
+# gid): what the resolve and the start checks read (mass, inertia, radius, v, w, applied force,
+# fixed), what the scene's boundary conditions set before the blocks reach their owners (v, w,
+# vfix, fixed; pdem.boundary), the initial decomposition's centroids, the output's initial
+# centroids and groups. Not the angular momentum or the material: nothing reads or sets them
+# before the build share's blocks travel with their own (52 bytes a block of the set-up's
+# transient, with x0 below)
+CATALOGUE = ("gid", "x", "x0", "v", "w", "mass", "inertia", "mscale", "fixed", "vfix", "out",
+             "group", "applied_force", "radius", "point_area")
+# what the ranks gather of it (with the envelopes): x0 is x at set-up, the same array
+GATHERED = tuple(k for k in CATALOGUE if k != "x0") + ("lo", "hi")
 # what of it a rank keeps once the blocks are distributed (ModelState._distributed_from_scene)
 # and the output is open (pdem.simulation): two bytes a scene block, read by the rebuild
 # (which contacts travel: fixed), the checkpoint (which copy of a contact is written: fixed)
@@ -97,9 +103,11 @@ def build_share(comm, n: int) -> tuple[int, int]:
 
 def scene_catalogue(comm, share) -> BlockStore:
     """The :data:`CATALOGUE` fields (and the envelopes ``lo``/``hi``) of every block, gathered
-    from the ranks' build shares (contiguous, in rank order: gid order); no geometry."""
-    return BlockStore.catalogue({k: allgather_rows(comm, getattr(share, k))
-                                 for k in CATALOGUE + ("lo", "hi")})
+    from the ranks' build shares (contiguous, in rank order: gid order); no geometry. The
+    initial centroids are the centroids (one array: nothing moves during set-up)."""
+    arrays = {k: allgather_rows(comm, getattr(share, k)) for k in GATHERED}
+    arrays["x0"] = arrays["x"]
+    return BlockStore.catalogue(arrays)
 
 
 def zoned_grids(scene: Scene, comm, specs, first_gid: int):
