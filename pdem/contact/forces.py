@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from ..jit import inline_kernel, kernel
-from .laws import SLIPPING, apply_law, law_energy
+from .laws import SLIPPING, apply_law, joint_dissipation, law_energy
 from .rigid import (
     add_point_force,
     apply_pair,
@@ -159,12 +159,9 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
             # springs that is exactly zero, so it is evaluated only when the joint yielded
             # (SLIPPING) or changed state or dilation: the common elastic step costs nothing.
             if (st & SLIPPING) or st != st0 or dil != dil0:
-                fn0, e0 = law_energy(joints.laws, slot, j, s, subs.hist, un0, dil0, gx, gy, gz,
-                                     area, st0)
-                _, e1 = law_energy(joints.laws, slot, j, s, subs.hist, un, dil, fx, fy, fz, area,
-                                   st)
-                dissipated += -0.5 * ((fn0 + fn) * dun + (gx + fx) * dsx + (gy + fy) * dsy
-                                      + (gz + fz) * dsz) - (e1 - e0)
+                dissipated += joint_dissipation(joints.laws, slot, j, s, subs.hist, dun, dsx,
+                                                dsy, dsz, area, un0, dil0, gx, gy, gz, st0, un,
+                                                dil, fn, fx, fy, fz, st)
             # force on B (eq. 28 with our sign) at the sub-contact
             acc = add_point_force(acc, rax, ray, raz, fx + fn * nx, fy + fn * ny, fz + fn * nz)
         apply_pair(bodies, a, b, rel, acc, dissipated)

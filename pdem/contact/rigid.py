@@ -80,17 +80,24 @@ def energy_shares(bodies, a, b):
 
 
 @inline_kernel
-def apply_pair(bodies, a, b, rel, acc, dissipated):
-    """Force and moment sums of one contact onto both blocks (eqs. 28-32): the force on A is
-    the opposite of B's; B's moment about its centroid is r_a x f + d x f. The energy the joint
-    dissipated this step is booked on the blocks by :func:`energy_shares`."""
-    force, moment = bodies.force, bodies.moment
+def book_dissipation(bodies, a, b, dissipated):
+    """The energy a contact's joint dissipated this step, on its blocks' ``work`` by
+    :func:`energy_shares`, and in ``WORK_JOINT_MADE`` what it created (negative dissipation)."""
     wa, wb = energy_shares(bodies, a, b)
     bodies.work[a, WORK_JOINT] += wa * dissipated
     bodies.work[b, WORK_JOINT] += wb * dissipated
     made = max(-dissipated, 0.0)
     bodies.work[a, WORK_JOINT_MADE] += wa * made
     bodies.work[b, WORK_JOINT_MADE] += wb * made
+
+
+@inline_kernel
+def apply_pair(bodies, a, b, rel, acc, dissipated):
+    """Force and moment sums of one contact onto both blocks (eqs. 28-32): the force on A is
+    the opposite of B's; B's moment about its centroid is r_a x f + d x f. The energy the joint
+    dissipated this step is booked on the blocks by :func:`energy_shares`."""
+    force, moment = bodies.force, bodies.moment
+    book_dissipation(bodies, a, b, dissipated)
     ddx, ddy, ddz = rel[1]
     fbx, fby, fbz, max_, may, maz = acc
     mbx = max_ + (ddy * fbz - ddz * fby)

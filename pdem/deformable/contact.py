@@ -19,13 +19,11 @@ from collections import namedtuple
 import numpy as np
 
 from ..contact.forces import carry_shear, turn_normal
-from ..contact.laws import SLIPPING, apply_law, law_energy
+from ..contact.laws import SLIPPING, apply_law, joint_dissipation
 from ..contact.rigid import (
-    WORK_JOINT,
-    WORK_JOINT_MADE,
     add_point_force,
     apply_pair,
-    energy_shares,
+    book_dissipation,
     pair_motion,
     point_motion,
 )
@@ -164,10 +162,9 @@ def _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny, nz):
     subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2] = fx, fy, fz
     dissipated = 0.0
     if (st & SLIPPING) or st != st0 or dil != dil0:
-        fn0, e0 = law_energy(joints.laws, slot, j, s, subs.hist, un0, dil0, gx, gy, gz, area, st0)
-        _, e1 = law_energy(joints.laws, slot, j, s, subs.hist, un, dil, fx, fy, fz, area, st)
-        dissipated = -0.5 * ((fn0 + fn) * dun + (gx + fx) * dsx + (gy + fy) * dsy
-                             + (gz + fz) * dsz) - (e1 - e0)
+        dissipated = joint_dissipation(joints.laws, slot, j, s, subs.hist, dun, dsx, dsy, dsz,
+                                       area, un0, dil0, gx, gy, gz, st0, un, dil, fn, fx, fy, fz,
+                                       st)
     return fx + fn * nx, fy + fn * ny, fz + fn * nz, dissipated
 
 
@@ -244,12 +241,7 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
             bodies.moment[a, i] += fa[3 + i]
             bodies.force[b, i] += fb[i]
             bodies.moment[b, i] += fb[3 + i]
-        wa, wb = energy_shares(bodies, a, b)
-        bodies.work[a, WORK_JOINT] += wa * dissipated
-        bodies.work[b, WORK_JOINT] += wb * dissipated
-        made = max(-dissipated, 0.0)
-        bodies.work[a, WORK_JOINT_MADE] += wa * made
-        bodies.work[b, WORK_JOINT_MADE] += wb * made
+        book_dissipation(bodies, a, b, dissipated)
 
 
 @kernel

@@ -24,17 +24,19 @@ dispatch on names, numba's disk cache keyed on that type).
 
 from __future__ import annotations
 
+import functools
 from collections import namedtuple
 
 import numpy as np
 from numba.extending import overload
 
+from ...jit import inline_kernel
 from ...registry import Registry
 from . import continuously_yielding, coulomb
 from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
 
 __all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams", "JointTable",
-           "apply_law", "joint_table", "law_energy"]
+           "apply_law", "joint_dissipation", "joint_table", "law_energy"]
 
 JOINT_LAWS: Registry[JointLaw] = Registry("joint law")
 JOINT_LAWS.register("coulomb", coulomb.LAW)
@@ -98,6 +100,19 @@ def law_energy(laws, slot, j, s, hist, un, dil, fx, fy, fz, area, state):
     raise NotImplementedError("law_energy is only callable from numba kernels")
 
 
+def joint_dissipation(laws, slot, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz,
+                      st0, un, dil, fn, fx, fy, fz, st):
+    """The energy sub-contact s's joint dissipated in a step that took it from the state
+    ``(un0, dil0, g, st0)`` to ``(un, dil, f, st)`` with the normal force ``fn`` (the law's
+    update), the normal and shear displacement increments ``dun`` and ``ds``: the work done on
+    it over the step (trapezoid) less the change of its stored energy."""
+    raise NotImplementedError("joint_dissipation is only callable from numba kernels")
+
+
+_DISSIPATION_ARGS = ("j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz, st0, un, dil, "
+                     "fn, fx, fy, fz, st")
+
+
 def _law_of(table_type) -> JointLaw:
     for registered in JOINT_LAWS.values():
         for law in (registered, *(v for _, v in registered.variants)):
@@ -106,10 +121,31 @@ def _law_of(table_type) -> JointLaw:
     raise KeyError(f"no registered joint law has the table type {table_type}")
 
 
+@functools.cache
+def _energy_difference(energy):
+    """A law's ``dissipation`` from its ``energy`` kernel: the stored energy evaluated before
+    and after the step (for laws without a kernel of their own)."""
+
+    def dissipation(p, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz, st0, un,
+                    dil, fn, fx, fy, fz, st):
+        fn0, e0 = energy(p, j, s, hist, un0, dil0, gx, gy, gz, area, st0)
+        _, e1 = energy(p, j, s, hist, un, dil, fx, fy, fz, area, st)
+        return -0.5 * ((fn0 + fn) * dun + (gx + fx) * dsx + (gy + fy) * dsy
+                       + (gz + fz) * dsz) - (e1 - e0)
+
+    return inline_kernel(dissipation)
+
+
+def _dissipation_of(law):
+    return law.dissipation if law.dissipation is not None else _energy_difference(law.energy)
+
+
 def _dispatch(laws, attr: str, args: str):
-    """``impl(laws, slot, args...)`` calling ``getattr(law, attr)`` of the law in the slot:
-    one branch per used law, resolved at compile time."""
-    kernels = [getattr(_law_of(t), attr) for t in laws.types]
+    """``impl(laws, slot, args...)`` calling ``getattr(law, attr)`` of the law in the slot
+    (``attr`` a callable: ``attr(law)``): one branch per used law, resolved at compile
+    time."""
+    kernels = [attr(_law_of(t)) if callable(attr) else getattr(_law_of(t), attr)
+               for t in laws.types]
     src = [f"def impl(laws, slot, {args}):"]
     for k in range(1, len(kernels)):
         src.append(f"    if slot == {k}:\n        return k{k}(laws[{k}], {args})")
@@ -129,3 +165,9 @@ def _apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux
 @overload(law_energy, inline="always")
 def _law_energy(laws, slot, j, s, hist, un, dil, fx, fy, fz, area, state):
     return _dispatch(laws, "energy", "j, s, hist, un, dil, fx, fy, fz, area, state")
+
+
+@overload(joint_dissipation, inline="always")
+def _joint_dissipation(laws, slot, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz,
+                       st0, un, dil, fn, fx, fy, fz, st):
+    return _dispatch(laws, _dissipation_of, _DISSIPATION_ARGS)

@@ -33,6 +33,9 @@ class JointLaw:
     ``update``: the numba kernel, signature documented in :mod:`pdem.contact.laws`;
     ``energy``: the kernel giving a sub-contact's normal force and stored spring energy in a
     given state (the energy budget, pdem.dynamics.energy);
+    ``dissipation``: optional kernel giving the energy one step of the joint dissipated
+    (signature in :func:`pdem.contact.laws.joint_dissipation`); without one the budget
+    evaluates ``energy`` before and after the step;
     ``variants``: ``(applies, law)`` pairs: when ``applies(params)`` holds for every joint of
     the scene using this law, ``law`` (same name, parameters and history, its own table type
     and kernels doing the same arithmetic without the branches those joints cannot take) is
@@ -46,6 +49,7 @@ class JointLaw:
     update: Any
     energy: Any
     variants: tuple = ()
+    dissipation: Any = None
 
     def specialised(self, params: list) -> JointLaw:
         """The variant for these joints (unless ``PDEM_GENERIC_KERNELS`` is set), else self."""

@@ -144,6 +144,47 @@ def _springs(kn, ks, un, dil, fx, fy, fz, area, fn_min):
                 / (ks * a))
 
 
+@inline_kernel
+def _linear_dissipation(kn, ks, dun, dsx, dsy, dsz, area, fn0, fn1, fn, gx, gy, gz, fx, fy,
+                        fz):
+    """What a step of the joint's two linear springs dissipated: the work over the step
+    (trapezoid, the law's normal force going from ``fn0`` to ``fn``, the shear force from
+    ``g`` to ``f``) less the change of the stored energy ``fn²/(2 kn A) + |f|²/(2 ks A)``
+    (:func:`_springs`, whose normal forces are ``fn0`` and ``fn1``). Written as
+    ``-(fn0 + fn1)/2 (dun + (fn1 - fn0)/(kn A))``, its shear match and ``-(fn - fn1) dun/2``
+    (zero unless the step broke a bond in tension): the same sum regrouped (``fn1² - fn0² =
+    (fn1 + fn0)(fn1 - fn0)``), with two divisions instead of four and without the
+    cancellation of two large terms, so an elastic step books its springs' rounding and a slip
+    the part of the increment that slipped. A sub-contact without positive area stores
+    nothing."""
+    if not area > 0.0:  # nothing stored: the springs' normal force is 0 before
+        return -0.5 * (fn * dun + (gx + fx) * dsx + (gy + fy) * dsy + (gz + fz) * dsz)
+    kna = kn * area
+    ksa = ks * area
+    if fn != fn1:
+        work_n = -0.5 * ((fn0 + fn1) * (dun + (fn1 - fn0) / kna) + (fn - fn1) * dun)
+    else:
+        work_n = -0.5 * (fn0 + fn) * (dun + (fn - fn0) / kna)
+    return work_n - 0.5 * ((gx + fx) * (dsx + (fx - gx) / ksa)
+                           + (gy + fy) * (dsy + (fy - gy) / ksa)
+                           + (gz + fz) * (dsz + (fz - gz) / ksa))
+
+
+@inline_kernel
+def dissipation(p, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz, st0, un, dil,
+                fn, fx, fy, fz, st):
+    """The energy one step of the joint dissipated (pdem.contact.laws.joint_dissipation), the
+    springs' normal forces before and after as :func:`energy` has them (tension only while
+    bonded)."""
+    kna = p.kn[j] * area
+    bonded0 = ((st0 & FAILED) == 0) & (p.tension[j] > 0.0)
+    bonded1 = ((st & FAILED) == 0) & (p.tension[j] > 0.0)
+    fn0 = max(kna * (un0 + dil0), -1e308 * bonded0)
+    fn1 = max(kna * (un + dil), -1e308 * bonded1)
+    return _linear_dissipation(p.kn[j], p.ks[j], dun, dsx, dsy, dsz, area, fn0, fn1, fn, gx, gy,
+                               gz, fx, fy, fz)
+
+
 # Frictional joints (no cohesion, tension or dilation: the common case) compile a law without
 # those branches. Bitwise the same as ``update``/``energy`` with zero strengths and dilation:
 # every term they drop is an exact zero there (0 + x, x * 0 with x finite).
@@ -190,6 +231,18 @@ def friction_energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     return _springs(p.kn[j], p.ks[j], un, dil, fx, fy, fz, area, -0.0)
 
 
-FRICTION_LAW = JointLaw("coulomb", Params, (), friction_table, friction_update, friction_energy)
+@inline_kernel
+def friction_dissipation(p, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz, st0,
+                         un, dil, fn, fx, fy, fz, st):
+    """:func:`dissipation` for a joint without tension (never bonded)."""
+    kna = p.kn[j] * area
+    fn0 = max(kna * (un0 + dil0), -0.0)
+    fn1 = max(kna * (un + dil), -0.0)
+    return _linear_dissipation(p.kn[j], p.ks[j], dun, dsx, dsy, dsz, area, fn0, fn1, fn, gx, gy,
+                               gz, fx, fy, fz)
+
+
+FRICTION_LAW = JointLaw("coulomb", Params, (), friction_table, friction_update, friction_energy,
+                        dissipation=friction_dissipation)
 LAW = JointLaw("coulomb", Params, (), table, update, energy,
-               variants=((is_frictional, FRICTION_LAW),))
+               variants=((is_frictional, FRICTION_LAW),), dissipation=dissipation)
