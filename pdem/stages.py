@@ -64,13 +64,8 @@ def selected(state, sel) -> np.ndarray:
         b, n = state.blocks, state.n_owned
         gids, x, out = b.gid[:n], b.x0[:n], b.out[:n]
     keep = out == 0
-    specs = state.specs
-    if sel.names is not None:
-        want = set(sel.names)
-        keep &= np.array([s.name in want or s.spec.name in want or s.parent in want
-                          for s in (specs[i] for i in gids)], bool)
-    if sel.groups is not None:
-        keep &= np.isin(np.array([specs[i].group for i in gids], object), sel.groups)
+    if sel.names is not None or sel.groups is not None:
+        keep &= state.specs.matching(gids, sel.names, sel.groups)
     if sel.range is not None:
         keep &= np.all((x >= sel.range.box.min) & (x <= sel.range.box.max), axis=1)
     mine = gids[keep].astype(np.int64)

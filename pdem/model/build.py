@@ -218,6 +218,25 @@ class SpecTable:
             return np.zeros(0, np.int64)
         return np.flatnonzero(np.asarray(self.excavate_stage) == k).astype(np.int64)
 
+    def matching(self, gids, names=None, groups=None) -> np.ndarray:
+        """Which of the blocks ``gids`` a selection's ``names`` and ``groups`` take (a mask;
+        None: no condition): a block is named by its own name, its scene entry's or its
+        parent's (the block it was cut from). From the columns, without a name or object a
+        block (a selection over 10^6 blocks: milliseconds, not a second)."""
+        gids = np.asarray(gids, np.int64)
+        keep = np.ones(len(gids), bool)
+        if names is not None:
+            want = set(names)
+            own = np.fromiter(self.names.positions(want).values(), np.int64)
+            entries = [i for i, b in enumerate(self.scene_blocks) if b.name in want]
+            parents = [k for k, p in enumerate(self.parents) if p in want]
+            keep &= (np.isin(gids, own) | np.isin(self.entry[gids], entries)
+                     | np.isin(self.parent[gids], parents))
+        if groups is not None:
+            want = set(groups)
+            keep &= np.isin(self.group[gids], [k for k, g in enumerate(self.labels) if g in want])
+        return keep
+
     @property
     def nbytes(self) -> int:
         """What the table keeps for its blocks (the columns and the names)."""

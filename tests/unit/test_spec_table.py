@@ -159,3 +159,51 @@ def test_run_column_reads_back_as_the_array():
         col[len(v)]  # noqa: B018
     plain = RunColumn(np.arange(100), np.int32)
     assert not plain.is_runs and plain[5] == 5 and plain.nbytes == 400
+
+
+def _named(view, want) -> bool:
+    """A selection's ``names`` taken block by block (the definition)."""
+    return view.name in want or view.spec.name in want or view.parent in want
+
+
+@pytest.mark.parametrize("which", ["tunnel", "l_on_stack", "array"])
+def test_selection_by_names_and_groups_is_the_per_block_one(which):
+    """``SpecTable.matching`` (from the columns) takes exactly the blocks the per-block
+    reading does: own names (plain and run-encoded), scene entries, cut pieces' parents,
+    groups, their intersection, names that match nothing, any subset of gids."""
+    import numpy as np
+
+    from pdem.cases.rock_mass import tunnel_scene
+    from pdem.cases.stacks import cube_stack_scene
+
+    text = {"tunnel": lambda: tunnel_scene(at=1.0, time=0.1), "l_on_stack": l_on_stack_scene,
+            "array": lambda: cube_stack_scene(6, "fast")}[which]()
+    scene = parse_scene(text)
+    specs = expand_blocks(scene, 10**6)
+    for sp in specs:
+        sp.release()
+    for sp in specs[1::7]:  # a parent that is neither an entry's nor a block's name
+        sp.parent = "quarry"
+    table = SpecTable(specs, scene.blocks)
+    n = len(table)
+    rng = np.random.default_rng(3)
+    # own names, every scene entry's (an array's ``cube`` names no block itself) and every
+    # cut piece's parent (``rock[13]`` split into ``rock[13][0]``, ... names no block itself)
+    names = sorted({table.names[int(g)] for g in rng.integers(0, n, 5)}
+                   | set(table.parents) | {b.name for b in scene.blocks}
+                   | {"nothing", "cube[999999]"})
+    entry_only = [b.name for b in scene.blocks if b.name not in table.names.positions([b.name])]
+    parent_only = [p for p in table.parents if p not in table.names.positions([p])]
+    assert "quarry" in parent_only and (entry_only or which != "array")
+    groups = sorted({b.group for b in scene.blocks})
+    subsets = [np.arange(n), np.sort(rng.choice(n, n // 3, replace=False)), np.zeros(0, int)]
+    for want_names in ([names[0]], names, ["nothing"], entry_only, parent_only, None):
+        for want_groups in ([groups[0]], groups, ["none"], None):
+            if want_names is None and want_groups is None:
+                continue
+            for gids in subsets:
+                got = table.matching(gids, want_names, want_groups)
+                ref = np.array([(want_names is None or _named(table[g], set(want_names)))
+                                and (want_groups is None or table[g].group in want_groups)
+                                for g in gids], bool)
+                assert np.array_equal(got, ref), (which, want_names, want_groups)
