@@ -105,7 +105,7 @@ class Boundary:
                 else np.array(cond.velocity, float)
             for c in cond.components:
                 k = "xyz".index(c)
-                for store in (s.glob, s.blocks):
+                for store in (s.glob, s.share, s.blocks):
                     if store is not None and "v" in vars(store):  # see stages._set
                         store.v[np.isin(store.gid, gids), k] = v0[k]
 

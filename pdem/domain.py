@@ -43,10 +43,11 @@ def take_out(state, bodies) -> None:
 
 
 def set_block_fields(state, gids, **values) -> None:
-    """Set block fields of ``gids`` in this rank's rows (if any) and in the scene's store,
-    where it still keeps that field (pdem.state.RUN_CATALOGUE; its rows are the gids)."""
+    """Set block fields of ``gids`` in this rank's rows (if any), in its build share until
+    the first distribution, and in the scene's store where it keeps that field
+    (pdem.state.CATALOGUE at set-up, RUN_CATALOGUE after; its rows are the gids)."""
     gids = np.asarray(gids, np.int64)
-    for store in (state.glob, state.blocks):
+    for store in (state.glob, state.share, state.blocks):
         if store is None:
             continue
         hit = gids if store is state.glob else np.isin(store.gid, gids)

@@ -54,7 +54,7 @@ class Simulation:
                 p.restore(checkpoint["attrs"])
         if release:
             # the output writer has taken its share of the surfaces (it keeps its own copy)
-            self.state.writer_mesh = None
+            self.state.writer_mesh = self.state.writer_static = None
             self.state.release_scene_geometry()
             self.state.release_setup_fields()
         reuse_large_blocks()  # set up: the step's arrays come from the heap (pdem.memory)

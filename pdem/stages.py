@@ -52,14 +52,19 @@ def stage_scene(scene, k: int):
 def selected(state, sel) -> np.ndarray:
     """Gids of the blocks a :class:`pdem.config.schema.Selection` names, in gid order (every
     rank alike; collective once the blocks are distributed). A range selects by the scene's
-    centroids (the blocks' ``x0``): a selection does not depend on the motion. Before the
-    blocks are distributed the scene's store has every block's; after, each rank selects
-    among the blocks it owns and the ranks gather the gids selected (no rank keeps the
-    centroids of blocks it does not hold, pdem.state.RUN_CATALOGUE)."""
+    centroids (the blocks' ``x0``): a selection does not depend on the motion. Each rank
+    selects among the blocks of its build share before they are distributed, among those it
+    owns after, and the ranks gather the gids selected (no rank keeps the centroids of blocks
+    it does not hold, pdem.state.CATALOGUE); a scene built whole on every rank selects
+    among all."""
     g = state.glob
-    if "x" in vars(g):
+    whole = "x" in vars(g)
+    if whole:
         gids = np.arange(g.n)
         x, out = g.x, g.out
+    elif state.share is not None:  # set-up: the build share (its blocks have not moved)
+        sh = state.share
+        gids, x, out = sh.gid, sh.x, sh.out
     else:
         b, n = state.blocks, state.n_owned
         gids, x, out = b.gid[:n], b.x0[:n], b.out[:n]
@@ -69,7 +74,7 @@ def selected(state, sel) -> np.ndarray:
     if sel.range is not None:
         keep &= np.all((x >= sel.range.box.min) & (x <= sel.range.box.max), axis=1)
     mine = gids[keep].astype(np.int64)
-    if "x" in vars(g):
+    if whole:
         return mine
     return np.sort(allgather_rows(state.comm, mine))
 

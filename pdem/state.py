@@ -36,7 +36,7 @@ from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
 from .parallel.decomposition import make_decomposition
 from .parallel.migrate import place_contacts, rebuild, route_contacts
-from .parallel.mpi import allgather, allgather_rows, broadcast, configure_waits
+from .parallel.mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
 from .timers import Timers
 
 # a block may move up to this fraction of the thinnest piece's width in one step (see
@@ -56,16 +56,18 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
     return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
 
 # the per-block fields of every block each rank holds during set-up (the scene's store, by
-# gid): what the resolve and the start checks read (mass, inertia, radius, v, w, applied force,
-# fixed), what the scene's boundary conditions set before the blocks reach their owners (v, w,
-# vfix, fixed; pdem.boundary), the initial decomposition's centroids, the output's initial
-# centroids and groups. Not the angular momentum or the material: nothing reads or sets them
-# before the build share's blocks travel with their own (52 bytes a block of the set-up's
-# transient, with x0 below)
-CATALOGUE = ("gid", "x", "x0", "v", "w", "mass", "inertia", "mscale", "fixed", "vfix", "out",
-             "group", "applied_force", "radius", "point_area")
-# what the ranks gather of it (with the envelopes): x0 is x at set-up, the same array
-GATHERED = tuple(k for k in CATALOGUE if k != "x0") + ("lo", "hi")
+# gid): what the timestep and mass scaling read (mass, inertia, radius, fixed, mscale) and the
+# flags a boundary condition or a stage sets (fixed, vfix, out). The rest each rank reads of
+# its build share: the resolve and the start checks (envelopes, velocities, applied forces,
+# point areas; reduced over the ranks: pdem.config.resolve, pdem.config.preflight), the
+# selections (pdem.stages.selected: gids gathered), the initial decomposition (the shares'
+# centroids), the output's initial centroids and groups (the writer's range is the share:
+# ``writer_static``); a boundary condition sets fields on the share too
+# (pdem.domain.set_block_fields). 59 bytes a block, the set-up's one O(N) transient (215 with
+# the envelopes, velocities, applied forces, point areas, centroids and groups gathered too)
+CATALOGUE = ("gid", "mass", "inertia", "mscale", "fixed", "vfix", "out", "radius")
+# what the ranks gather of it
+GATHERED = CATALOGUE
 # what of it a rank keeps once the blocks are distributed (ModelState._distributed_from_scene)
 # and the output is open (pdem.simulation): two bytes a scene block, read by the rebuild
 # (which contacts travel: fixed), the checkpoint (which copy of a contact is written: fixed)
@@ -77,10 +79,6 @@ GATHERED = tuple(k for k in CATALOGUE if k != "x0") + ("lo", "hi")
 RUN_CATALOGUE = ("fixed", "out")
 # the per-block fields a stage's timestep and mass scaling read (pdem.stages._solve_settings)
 TIMESTEP_FIELDS = ("mass", "inertia", "radius", "fixed", "mscale")
-# and what the output writer reads of every block when it opens (its initial centroids and
-# groups): kept from the first distribution until then (the rest of CATALOGUE is dropped before
-# the start's contact update, the set-up's peak)
-OUTPUT_CATALOGUE = ("x0", "group")
 
 
 def needs_whole_scene(scene: Scene, comm) -> bool:
@@ -102,12 +100,9 @@ def build_share(comm, n: int) -> tuple[int, int]:
 
 
 def scene_catalogue(comm, share) -> BlockStore:
-    """The :data:`CATALOGUE` fields (and the envelopes ``lo``/``hi``) of every block, gathered
-    from the ranks' build shares (contiguous, in rank order: gid order); no geometry. The
-    initial centroids are the centroids (one array: nothing moves during set-up)."""
-    arrays = {k: allgather_rows(comm, getattr(share, k)) for k in GATHERED}
-    arrays["x0"] = arrays["x"]
-    return BlockStore.catalogue(arrays)
+    """The :data:`CATALOGUE` fields of every block, gathered from the ranks' build shares
+    (contiguous, in rank order: gid order); no geometry."""
+    return BlockStore.catalogue({k: allgather_rows(comm, getattr(share, k)) for k in GATHERED})
 
 
 def zoned_grids(scene: Scene, comm, specs, first_gid: int):
@@ -123,7 +118,7 @@ class ModelState:
     """The model on one rank; construct with :meth:`create` (collective)."""
 
     def __init__(self, scene: Scene, comm, specs, glob, group_names, joints, resolved: Resolved,
-                 thinnest: float):
+                 thinnest: float, share=None):
         self.scene = scene
         self.scene_yaml = dump_scene(scene)
         self.comm = comm
@@ -153,7 +148,10 @@ class ModelState:
         self.damping = DAMPING[scene.solve.damping.mode]
         self.scalar_inertia = scene.solve.inertia == "scalar"
         self.algorithm = ALGORITHMS[scene.contact.algorithm](resolved.ctol, resolved.snap_tol)
-        self.decomp = make_decomposition(comm, resolved, scene.parallel, glob.x)
+        # the initial cuts from the build shares' centroids (or every block's, when every rank
+        # built every block)
+        self.decomp = make_decomposition(comm, resolved, scene.parallel,
+                                         glob.x if share is None else share.x, share is not None)
         self.n_rebuilds = 0
         self.blocks = None
         self.n_owned = 0
@@ -167,6 +165,8 @@ class ModelState:
         # keep the whole scene's geometry after set-up (pdem check's report; Simulation)
         self.keep_scene_geometry = False
         self.writer_mesh = None  # the output writer's share of the surfaces (set-up)
+        # and of the initial centroids and groups (its gid range's rows; set-up)
+        self.writer_static = None
         # whether the run writes output: else the writer's surfaces are not taken (Simulation)
         self.output_surfaces = True
         # the largest motion of a block in one step that cannot take it through another block
@@ -221,14 +221,19 @@ class ModelState:
             refresh_pose(share, 0.5 * contact_tolerance(scene, specs))
             glob = scene_catalogue(comm, share)
             verts_max = max(allgather(comm, float(np.abs(share.verts_world).max(initial=1.0))))
-        resolved = resolve(scene, comm.size, specs, glob, joints, verts_max)
+        # the resolve's and the start checks' per-block reads beyond the catalogue (envelopes,
+        # velocities, applied forces) are of this rank's share, reduced over the ranks
+        rows, over = (glob, LOCAL) if whole else (share, comm)
+        resolved = resolve(scene, comm.size, specs, glob, joints, verts_max, rows, over)
         if grids is not None:
             resolved = grids.resolve(scene, resolved, comm)
-        check_derived(scene, specs, glob, joints, group_names, resolved.dt, warn, resolved.ctol)
+        check_derived(scene, specs, rows, joints, group_names, resolved.dt, warn, resolved.ctol,
+                      over)
         thinnest = thinnest_width(share.vert_start, share.verts_local, share.face_start,
                                   share.normals_local, share.offsets_local)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved,
-                           thinnest if whole else min(allgather(comm, thinnest)))
+                           thinnest if whole else min(allgather(comm, thinnest)),
+                           None if whole else share)
         state.share = None if whole else share
         state.grids = grids
         if grids is not None:  # the sub-contacts carry their gridpoints (sc_grid)
@@ -320,10 +325,12 @@ class ModelState:
         from .plugins.output import body_surfaces
 
         if self.glob.has_geometry and self.output_surfaces:  # else from the build share
-            self.writer_mesh = body_surfaces(self.glob, *writer_range(self.comm, self.glob.n))
+            lo, hi = writer_range(self.comm, self.glob.n)
+            self.writer_mesh = body_surfaces(self.glob, lo, hi)
+            self.writer_static = (self.glob.x0[lo:hi].copy(), self.glob.group[lo:hi].copy())
         if not self.keep_scene_geometry:
             self.release_scene_geometry()
-            self.release_setup_fields(OUTPUT_CATALOGUE if self.output_surfaces else ())
+            self.release_setup_fields()
 
     def release_scene_geometry(self):
         """After set-up (blocks distributed, output opened): drop the geometry of the blocks
@@ -338,11 +345,9 @@ class ModelState:
         return_freed_memory()
 
     def release_setup_fields(self, keep: tuple[str, ...] = ()):
-        """Of every scene block keep only :data:`RUN_CATALOGUE` and ``keep`` (about 140 bytes
-        a scene block fewer on every rank): once the blocks are distributed, with
-        :data:`OUTPUT_CATALOGUE` for the output writer still to open, and once the output is
-        open. A run that keeps the whole scene (``pdem check``, a stage's boundary stress)
-        keeps it all."""
+        """Of every scene block keep only :data:`RUN_CATALOGUE` and ``keep``: once the
+        blocks are distributed, and once the output is open. A run that keeps the whole scene
+        (``pdem check``, a stage's boundary stress) keeps it all."""
         if not self.keep_scene_geometry and not self.needs_scene_geometry():
             self.glob.keep_fields(RUN_CATALOGUE + keep)
             return_freed_memory()
@@ -370,10 +375,12 @@ class ModelState:
         from .plugins.output import body_surfaces
 
         s, self.share = self.share, None
-        for k in CATALOGUE:
-            getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
-        if self.output_surfaces:
+        for k in CATALOGUE:  # the rest was set on the share itself
+            if k in vars(self.glob):
+                getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
+        if self.output_surfaces:  # the writer's range is the build share (writer_range)
             self.writer_mesh = body_surfaces(s)
+            self.writer_static = (s.x.copy(), s.group.copy())
         return s
 
     def redistribute(self):

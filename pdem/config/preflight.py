@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..parallel.mpi import LOCAL, allgather
 from .load import ConfigError
 
 log = logging.getLogger("pdem")
@@ -267,12 +268,16 @@ def _warn_ranges(scene) -> None:
         log.warning("gravity: |g| = %.4g m/s2 is more than %g m/s2 (docs/limits.md)", g, GRAVITY_MAX)
 
 
-def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool = True,
-                  ctol: float | None = None) -> None:
+def check_derived(scene, specs, rows, joints, group_names, dt: float, warn: bool = True,
+                  ctol: float | None = None, comm=LOCAL) -> None:
     """Refuse what the built model makes impossible: no usable timestep, an end time that
     double precision cannot reach or a step count beyond ``limits.max_steps``, free blocks
     sinking into their support under gravity, and (given ``ctol``) blocks started so fast that
-    they move more than ``MAX_STEP_MOTION`` x CTOL in one step."""
+    they move more than ``MAX_STEP_MOTION`` x CTOL in one step.
+
+    ``rows``: the blocks checked (their per-block fields and gids): every block, or this
+    rank's build share with ``comm`` the ranks sharing the scene (collective: each rank checks
+    its rows and every rank refuses the worst block of all, the same message)."""
     if not (math.isfinite(dt) and dt > 0.0):
         name = max(scene.joints, key=lambda j: max(scene.joints[j].kn, scene.joints[j].ks))
         j = scene.joints[name]
@@ -292,10 +297,20 @@ def check_derived(scene, specs, glob, joints, group_names, dt: float, warn: bool
                         "solve.max_steps=%d before reaching it", scene.solve.time, dt, steps,
                         scene.solve.max_steps)
     _check_step_count(scene, joints, dt)
-    _check_static_overlap(scene, specs, glob, joints, group_names)
+    _refuse_worst(comm, _check_static_overlap(scene, specs, rows, joints, group_names))
     if ctol is not None:
-        _check_start_speeds(scene, specs, glob, dt, ctol)
-        _check_impact_overlap(scene, specs, glob, joints, group_names)
+        _refuse_worst(comm, _check_start_speeds(scene, specs, rows, dt, ctol))
+        _refuse_worst(comm, _check_impact_overlap(scene, specs, rows, joints, group_names))
+
+
+def _refuse_worst(comm, found: tuple[float, str] | None) -> None:
+    """Refuse the worst of the ranks' findings (``(how bad, message)``, None: nothing wrong
+    among its rows): the first of the worst in rank order, so the first in gid order (the
+    build shares are contiguous gid ranges in rank order), as a check over every block
+    would name it. Every rank raises the same error (no rank left waiting)."""
+    bad = [f for f in allgather(comm, found) if f is not None]
+    if bad:
+        raise ConfigError([max(bad, key=lambda f: f[0])[1]])
 
 
 def _check_step_count(scene, joints, dt: float) -> None:
@@ -321,89 +336,97 @@ def _check_step_count(scene, joints, dt: float) -> None:
             f"ks={j.ks:.4g} Pa/m, and the lightest block; docs/limits.md)"])
 
 
-def _check_start_speeds(scene, specs, glob, dt: float, ctol: float) -> None:
-    """A moving block's start speed (|v| + |w| r) times dt against MAX_STEP_MOTION x CTOL."""
-    moving = np.nonzero(glob.fixed == 0)[0]
+def _check_start_speeds(scene, specs, rows, dt: float, ctol: float):
+    """A moving block's start speed (|v| + |w| r) times dt against MAX_STEP_MOTION x CTOL:
+    the fastest of ``rows`` beyond it, as ``(speed, message)``, else None."""
+    moving = np.nonzero(rows.fixed == 0)[0]
     if len(moving) == 0:
-        return
-    speed = np.linalg.norm(glob.v[moving], axis=1) \
-        + np.linalg.norm(glob.w[moving], axis=1) * glob.radius[moving]
+        return None
+    speed = np.linalg.norm(rows.v[moving], axis=1) \
+        + np.linalg.norm(rows.w[moving], axis=1) * rows.radius[moving]
     k = int(np.argmax(speed))
     step = float(speed[k]) * dt
-    if step > MAX_STEP_MOTION * ctol:
-        b = int(moving[k])
-        dt_max = MAX_STEP_MOTION * ctol / float(speed[k])
-        raise ConfigError([
-            f"blocks[{specs[b].entry}].velocity: block {specs[b].name!r} starts at "
-            f"{float(speed[k]):.4g} m/s and moves {step:.4g} m in one step (dt={dt:.4g} s), "
-            f"more than {MAX_STEP_MOTION:g} x CTOL = {MAX_STEP_MOTION * ctol:.4g} m: it could "
-            f"pass through a thin block before contact detection sees it; give "
-            f"solve.timestep.dt <= {dt_max:.3g} s (or stiffer joints) (docs/limits.md)"])
+    if not step > MAX_STEP_MOTION * ctol:
+        return None
+    b = int(rows.gid[moving[k]])
+    dt_max = MAX_STEP_MOTION * ctol / float(speed[k])
+    return float(speed[k]), (
+        f"blocks[{specs[b].entry}].velocity: block {specs[b].name!r} starts at "
+        f"{float(speed[k]):.4g} m/s and moves {step:.4g} m in one step (dt={dt:.4g} s), "
+        f"more than {MAX_STEP_MOTION:g} x CTOL = {MAX_STEP_MOTION * ctol:.4g} m: it could "
+        f"pass through a thin block before contact detection sees it; give "
+        f"solve.timestep.dt <= {dt_max:.3g} s (or stiffer joints) (docs/limits.md)")
 
 
-def _column(specs, name: str, rows: np.ndarray) -> np.ndarray:
-    """A geometric scalar of blocks ``rows``: the SpecTable's column, or from each spec."""
+def _column(specs, name: str, gids: np.ndarray) -> np.ndarray:
+    """A geometric scalar of blocks ``gids``: the SpecTable's column, or from each spec."""
     if hasattr(specs, name):
-        return getattr(specs, name)[rows]
-    return np.array([getattr(specs[b], name) for b in rows], float)
+        return getattr(specs, name)[gids]
+    return np.array([getattr(specs[b], name) for b in gids], float)
 
 
-def _check_static_overlap(scene, specs, glob, joints, group_names) -> None:
+def _check_static_overlap(scene, specs, rows, joints, group_names):
     """m g / (kn A) of each free block resting on its largest face, with the softest joint its
-    group can touch, against MAX_STATIC_OVERLAP of its size (cube root of the volume)."""
-    free = np.nonzero(glob.fixed == 0)[0]
+    group can touch, against MAX_STATIC_OVERLAP of its size (cube root of the volume): the
+    worst of ``rows`` beyond it, as ``(fraction, message)``, else None."""
+    free = np.nonzero(rows.fixed == 0)[0]
     if len(free) == 0:
-        return
-    load = np.linalg.norm(glob.mass[free, None] * np.array(scene.gravity, float)
-                          + glob.applied_force[free], axis=1)
+        return None
+    load = np.linalg.norm(rows.mass[free, None] * np.array(scene.gravity, float)
+                          + rows.applied_force[free], axis=1)
     if not load.any():
-        return
+        return None
     # softest joint per group: any pair this group is part of (joint_table's rows by group)
     soft = _softest_kn_per_group(scene, joints, group_names)
     # per block, vectorised (a Python loop over the blocks was seconds for 1e5 of them)
-    area, size = _column(specs, "max_face", free), _column(specs, "volume", free) ** (1.0 / 3.0)
-    kn_all = np.array([kn for kn, _ in soft], float)[glob.group[free]]
+    gids = rows.gid[free]
+    area, size = _column(specs, "max_face", gids), _column(specs, "volume", gids) ** (1.0 / 3.0)
+    kn_all = np.array([kn for kn, _ in soft], float)[rows.group[free]]
     overlap = load / (kn_all * area)
     frac = overlap / size
     n = int(np.argmax(np.where(np.isnan(frac), -np.inf, frac)))  # the first largest
     worst = float(frac[n]) if frac[n] > 0.0 else 0.0
-    if worst > MAX_STATIC_OVERLAP:
-        worst_b = free[n]
-        f, kn, area, overlap, size = load[n], kn_all[n], area[n], overlap[n], size[n]
-        jname = soft[int(glob.group[worst_b])][1]
-        raise ConfigError([
-            f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[worst_b].name!r} "
-            f"(blocks[{specs[worst_b].entry}]): its static overlap m g / (kn A) = {f:.4g} N / "
-            f"({kn:.4g} Pa/m x {area:.4g} m2) = {overlap:.4g} m is {worst:.3g} of its size "
-            f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g} (docs/limits.md)"])
+    if not worst > MAX_STATIC_OVERLAP:
+        return None
+    worst_b = int(gids[n])
+    f, kn, area, overlap, size = load[n], kn_all[n], area[n], overlap[n], size[n]
+    jname = soft[int(rows.group[free[n]])][1]
+    return worst, (
+        f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[worst_b].name!r} "
+        f"(blocks[{specs[worst_b].entry}]): its static overlap m g / (kn A) = {f:.4g} N / "
+        f"({kn:.4g} Pa/m x {area:.4g} m2) = {overlap:.4g} m is {worst:.3g} of its size "
+        f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g} (docs/limits.md)")
 
 
-def _check_impact_overlap(scene, specs, glob, joints, group_names) -> None:
+def _check_impact_overlap(scene, specs, rows, joints, group_names):
     """A block started at speed v stops against a fixed support after sinking
     v sqrt(m / (kn A)) into it (the spring takes its kinetic energy, A its largest face, kn the
     softest joint its group can touch): more than MAX_STATIC_OVERLAP of its size and the
-    contact's common plane can end up beyond the block's middle, which pushes it through."""
-    moving = np.nonzero((glob.fixed == 0) & (np.linalg.norm(glob.v, axis=1) > 0.0))[0]
+    contact's common plane can end up beyond the block's middle, which pushes it through.
+    The worst of ``rows`` beyond it, as ``(fraction, message)``, else None."""
+    moving = np.nonzero((rows.fixed == 0) & (np.linalg.norm(rows.v, axis=1) > 0.0))[0]
     if len(moving) == 0:
-        return
+        return None
     soft = _softest_kn_per_group(scene, joints, group_names)
     worst, vals = 0.0, None
-    for b in moving:
-        kn, jname = soft[int(glob.group[b])]
+    for r in moving:
+        b = int(rows.gid[r])
+        kn, jname = soft[int(rows.group[r])]
         area = specs[b].max_face
-        speed = float(np.linalg.norm(glob.v[b]))
-        depth = speed * math.sqrt(float(glob.mass[b]) / (kn * area))
+        speed = float(np.linalg.norm(rows.v[r]))
+        depth = speed * math.sqrt(float(rows.mass[r]) / (kn * area))
         size = specs[b].volume ** (1.0 / 3.0)
         if depth / size > worst:
             worst, vals = depth / size, (b, kn, jname, area, speed, depth, size)
-    if worst > MAX_STATIC_OVERLAP:
-        b, kn, jname, area, speed, depth, size = vals
-        raise ConfigError([
-            f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[b].name!r} "
-            f"(blocks[{specs[b].entry}]) started at {speed:.4g} m/s: an impact sinks it "
-            f"v sqrt(m / (kn A)) = {depth:.4g} m into what it hits, {worst:.3g} of its size "
-            f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g}: it could pass through "
-            f"(docs/limits.md)"])
+    if not worst > MAX_STATIC_OVERLAP:
+        return None
+    b, kn, jname, area, speed, depth, size = vals
+    return worst, (
+        f"{jname}.kn: {kn:.4g} Pa/m is too soft for block {specs[b].name!r} "
+        f"(blocks[{specs[b].entry}]) started at {speed:.4g} m/s: an impact sinks it "
+        f"v sqrt(m / (kn A)) = {depth:.4g} m into what it hits, {worst:.3g} of its size "
+        f"{size:.4g} m, more than {MAX_STATIC_OVERLAP:g}: it could pass through "
+        f"(docs/limits.md)")
 
 
 def _softest_kn_per_group(scene, joints, group_names) -> list[tuple[float, str]]:

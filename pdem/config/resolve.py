@@ -20,6 +20,7 @@ from ..dynamics.timestep import auto_timestep, critical_steps, limiting_block, m
 from ..errors import UserError
 from ..geometry import face_areas
 from ..parallel.decomposition import choose_dims
+from ..parallel.mpi import LOCAL, allgather, allreduce_max_array, exact_mean
 from .schema import MassScaling
 
 log = logging.getLogger("pdem")
@@ -241,26 +242,31 @@ def contact_tolerance(scene, specs) -> float:
     return float(0.02 * block_sizes(specs).min()) if cs.ctol == "auto" else float(cs.ctol)
 
 
-def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None = None
-            ) -> Resolved:
+def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None = None,
+            rows=None, comm=LOCAL) -> Resolved:
     """Resolve the scene's ``auto`` values for the scene's blocks ``glob`` (its per-block
-    fields; ``point_area`` and, with mass scaling, ``mscale`` are set here).
+    fields; with mass scaling ``mscale`` is set here).
 
     ``verts_max``: the largest world vertex coordinate (absolute) of every block, when
-    ``glob`` has the envelopes ``lo``/``hi`` (padded by CTOL/2) but no geometry (each rank
-    built its share, pdem.state); else ``glob`` has the geometry and its poses are refreshed
-    here."""
+    ``glob`` has no geometry (each rank built its share, pdem.state); else ``glob`` has the
+    geometry and its poses are refreshed here. ``rows``: the store whose rows hold the
+    envelopes ``lo``/``hi`` (padded by CTOL/2), velocities and applied forces: this rank's
+    build share, reduced over ``comm`` (maxima, and exact sums for the means, so the same bits
+    on any rank count); default ``glob``, every block. ``point_area`` is set on ``rows``."""
     cs = scene.contact
+    rows = glob if rows is None else rows
     sizes = block_sizes(specs)
     ctol = contact_tolerance(scene, specs)
-    glob.point_area[:] = cs.point_area * sizes**2
+    rows.point_area[:] = (cs.point_area * sizes**2)[rows.gid]
     if verts_max is None:
         refresh_pose(glob, 0.5 * ctol)
         verts_max = float(np.abs(glob.verts_world).max(initial=1.0))
-    lo, hi = glob.lo, glob.hi
-    free = glob.fixed == 0
-    ext = (hi - lo)[free] if free.any() else hi - lo
-    cell_size = float(np.mean(ext.max(axis=1))) if cs.cell_size == "auto" else float(cs.cell_size)
+    lo, hi = rows.lo, rows.hi
+    free = rows.fixed == 0
+    any_free = sum(allgather(comm, int(free.sum()))) > 0
+    ext = (hi - lo)[free] if any_free else hi - lo
+    cell_size = exact_mean(comm, ext.max(axis=1, initial=0.0)) if cs.cell_size == "auto" \
+        else float(cs.cell_size)
     k = _estimated_stiffness(specs, joints)
     # a SpecTable's names column (read by index, in messages), or a list's
     names = specs.names if hasattr(specs, "names") else [sp.name for sp in specs]
@@ -272,18 +278,25 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
     # that is a blow-up, typically a timestep too large for the stiffness.
     gravity = np.array(scene.gravity, float)
     acc = float(np.linalg.norm(gravity))
-    if free.any():
-        acc += float((np.linalg.norm(glob.applied_force[free], axis=1) / glob.mass[free]).max())
-    size = float(np.linalg.norm(hi.max(0) - lo.min(0)))
-    v0 = float((np.linalg.norm(glob.v, axis=1) + np.linalg.norm(glob.w, axis=1) * glob.radius)
-               .max(initial=0.0))
-    if free.any():
-        ref = np.linalg.norm(glob.mass[free, None] * gravity + glob.applied_force[free], axis=1)
-        ref_force = float(ref.mean()) or 1.0
+    # maxima (order-free: the same bits on any rank count) of this rank's rows, then all's;
+    # the box's low corner as the maximum of -lo
+    box = np.concatenate([-lo.min(0, initial=np.inf), hi.max(0, initial=-np.inf)])
+    applied = np.linalg.norm(rows.applied_force[free], axis=1) / rows.mass[free]
+    speed = np.linalg.norm(rows.v, axis=1) + np.linalg.norm(rows.w, axis=1) * rows.radius
+    most = allreduce_max_array(comm, np.concatenate(
+        [box, [applied.max(initial=-np.inf), speed.max(initial=0.0)]]))
+    domain_lo, domain_hi = -most[:3], most[3:6]
+    if any_free:
+        acc += float(most[6])
+    size = float(np.linalg.norm(domain_hi - domain_lo))
+    v0 = float(most[7])
+    if any_free:
+        ref = np.linalg.norm(rows.mass[free, None] * gravity + rows.applied_force[free], axis=1)
+        ref_force = exact_mean(comm, ref) or 1.0
     else:
         ref_force = 1.0
     par = scene.parallel
-    dims = choose_dims(comm_size, hi.max(0) - lo.min(0), gravity) if par.dims == "auto" \
+    dims = choose_dims(comm_size, domain_hi - domain_lo, gravity) if par.dims == "auto" \
         else list(par.dims)
     return Resolved(
         ctol=float(ctol),
@@ -296,8 +309,8 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
         alpha=float(_alpha(scene)),
         margin=cell_size if par.margin == "auto" else float(par.margin),
         dims=tuple(int(d) for d in dims),
-        domain_lo=tuple(float(v) for v in lo.min(0)),
-        domain_hi=tuple(float(v) for v in hi.max(0)),
+        domain_lo=tuple(float(v) for v in domain_lo),
+        domain_hi=tuple(float(v) for v in domain_hi),
         ref_force=ref_force,
         speed_limit=10.0 * (v0 + math.sqrt(2.0 * acc * size)) + 1.0,
         speed_growth=2.0 * acc,

@@ -231,6 +231,9 @@ class OutputWriter:
         Per block in gid order, identical on every rank: the reference centroids ``(n, 3)`` of
         ``displacement`` (default: the first snapshot's), the group index into ``group_names``
         (default: all 0, named ``"default"``), and whether the block is fixed (default: no).
+    ranged
+        ``initial_centroid``, ``group`` and ``fixed`` hold the rows of this rank's gid range
+        only (:func:`writer_range`): no rank needs every block's.
     contacts, joint_names
         Store the joint state (``contacts/``, ``subcontacts/``, sidecars ``-contacts.xdmf``
         and ``-subcontacts.xdmf``): every snapshot then takes the contacts (see
@@ -271,6 +274,7 @@ class OutputWriter:
         contacts: bool = False,
         joint_names: Sequence[str] | None = None,
         zones: Sequence[tuple[int, Any]] | None = None,
+        ranged: bool = False,
     ) -> None:
         self.path = Path(path)
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
@@ -331,7 +335,7 @@ class OutputWriter:
         self._hist_cols: dict[str, int] = {}
         self._my_verts = body_mesh.verts.copy()
         self._my_vblock = np.repeat(np.arange(hi - lo), np.diff(body_mesh.vert_start))
-        self._init_fields(initial_centroid, group, group_names, fixed)
+        self._init_fields(initial_centroid, group, group_names, fixed, ranged)
         self.contacts = bool(contacts)
         self._n_contacts: list[int] = []  # per snapshot, contacts and sub-contacts
         self._n_subs: list[int] = []
@@ -596,24 +600,27 @@ class OutputWriter:
             self._write_xdmf()
 
     # ------------------------------------------------------------------ viewer fields
-    def _init_fields(self, initial_centroid, group, group_names, fixed) -> None:
-        """Check the static per-block data of the viewer fields."""
-        n = self.n_blocks
+    def _init_fields(self, initial_centroid, group, group_names, fixed, ranged: bool) -> None:
+        """Check the static per-block data of the viewer fields: every block's, or with
+        ``ranged`` this rank's gid range's only (``[lo, hi)``, writer_range)."""
+        lo, hi = self._lo, self._hi
+        n = hi - lo if ranged else self.n_blocks
         group = np.zeros(n, np.int32) if group is None else np.asarray(group, np.int64).reshape(-1)
         names = ["default"] if group_names is None else [str(g) for g in group_names]
         fixed = np.zeros(n, bool) if fixed is None else np.asarray(fixed, bool).reshape(-1)
         x0 = None if initial_centroid is None else np.asarray(initial_centroid, np.float64)
         if len(group) != n or len(fixed) != n or (x0 is not None and x0.shape != (n, 3)):
-            raise ValueError(f"OutputWriter: group, fixed and initial_centroid need {n} rows")
-        if group.min() < 0 or group.max() >= len(names):
+            raise ValueError(f"OutputWriter: group, fixed and initial_centroid need {n} rows"
+                             + (" (this rank's range)" if ranged else ""))
+        if len(group) and (group.min() < 0 or group.max() >= len(names)):
             raise ValueError(f"OutputWriter: group ids outside [0, {len(names)}) (group_names)")
         # of every block, only this rank's gid range is kept: group and fixed until they are
         # written (_create_fields), the initial centroids for the displacements (None: the
         # first snapshot's); every rank keeping every block's would be 32 bytes a block
-        lo, hi = self._lo, self._hi
+        rows = slice(None) if ranged else slice(lo, hi)
         self._group_names = names
-        self._group, self._fixed = group[lo:hi].astype(np.int32), fixed[lo:hi].astype(np.int32)
-        self._x0: np.ndarray | None = None if x0 is None else x0[lo:hi].copy()
+        self._group, self._fixed = group[rows].astype(np.int32), fixed[rows].astype(np.int32)
+        self._x0: np.ndarray | None = None if x0 is None else x0[rows].copy()
 
     def _create_fields(self) -> None:
         """Static per-block and per-triangle data, and the per-triangle series (IO ranks)."""

@@ -346,12 +346,14 @@ class RCBDecomposition:
         pass
 
 
-def make_decomposition(comm, resolved, parallel, x: np.ndarray):
+def make_decomposition(comm, resolved, parallel, x: np.ndarray, shared: bool = False):
     """The decomposition ``parallel`` asks for (collective); ``x``: the start's centroids of
-    every block (the same on every rank)."""
+    every block (the same on every rank), or with ``shared`` those of this rank's build share
+    (pdem.state.build_share: the even share taken here of every block's)."""
     lo, hi = np.array(resolved.domain_lo), np.array(resolved.domain_hi)
     if balance_of(parallel) == "uniform":
         return Decomposition(comm, lo, hi, list(resolved.dims))
-    n = len(x)
-    share = slice(n * comm.rank // comm.size, n * (comm.rank + 1) // comm.size)
-    return RCBDecomposition(comm, lo, hi, np.asarray(x, float)[share], parallel.rebalance)
+    if not shared:
+        n = len(x)
+        x = x[n * comm.rank // comm.size: n * (comm.rank + 1) // comm.size]
+    return RCBDecomposition(comm, lo, hi, np.asarray(x, float), parallel.rebalance)

@@ -214,6 +214,28 @@ def exact_sum(comm, values: np.ndarray) -> np.ndarray:
     return out
 
 
+class _Local:
+    """A communicator of this process alone, for reductions over rows that are all here:
+    the reductions below return at once for it (no MPI call)."""
+
+    size = 1
+    rank = 0
+
+    def allgather(self, value) -> list:
+        return [value]
+
+
+# reduce rows every rank holds whole (pdem check, a scene built whole on every rank)
+LOCAL = _Local()
+
+
+def exact_mean(comm, values: np.ndarray) -> float:
+    """The mean of ``values`` over all ranks' rows, correctly rounded sum over the count:
+    the same bits for any distribution of the rows (NaN for none)."""
+    count = sum(allgather(comm, len(values)))
+    return float(exact_sum(comm, values)[0]) / count if count else math.nan
+
+
 def allgather(comm, value) -> list:
     """Every rank's ``value``, in rank order."""
     return comm.allgather(value) if comm.size > 1 else [value]

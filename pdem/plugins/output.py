@@ -12,7 +12,7 @@ from ..config.schema import MassScaling
 from ..contact.laws import FAILED
 from ..errors import writing
 from ..io.checkpoint import written_contacts
-from ..io.writer import BodyMesh, OutputWriter, quat_to_matrix
+from ..io.writer import BodyMesh, OutputWriter, quat_to_matrix, writer_range
 from ..model import csr
 from ..model.fields import OUTPUT
 from .base import Plugin, interval_steps, next_multiple
@@ -43,6 +43,18 @@ def owned_zoned(grids) -> list | None:
         return None
     n = getattr(grids, "n_owned", len(grids.bodies))
     return [(int(grids.gids[d]), grids.bodies[d]) for d in range(n)]
+
+
+def _static_fields(state) -> dict:
+    """The writer's initial centroids, groups and fixed flags: its gid range's, taken at
+    set-up (``ModelState.writer_static``), or every block's from the scene's store."""
+    if state.writer_static is None:
+        g = state.glob
+        return {"initial_centroid": g.x0, "group": g.group, "fixed": g.fixed}
+    lo, hi = writer_range(state.comm, state.glob.n)
+    x0, group = state.writer_static
+    return {"initial_centroid": x0, "group": group, "fixed": state.glob.fixed[lo:hi],
+            "ranged": True}
 
 
 def _mass_scaling_attrs(state) -> dict:
@@ -123,8 +135,8 @@ class Snapshots(Plugin):
             block_parents=state.specs.parent_names(),
             body_mesh=state.writer_mesh if state.writer_mesh is not None
             else body_surfaces(state.glob),
-            scene_yaml=state.scene_yaml, initial_centroid=state.glob.x0, group=state.glob.group,
-            group_names=state.group_names, fixed=state.glob.fixed,
+            scene_yaml=state.scene_yaml, **_static_fields(state),
+            group_names=state.group_names,
             attrs=attrs,
             contacts=self.contacts, joint_names=state.joints.names,
             zones=owned_zoned(state.grids))

@@ -433,18 +433,33 @@ def test_block_leaving_the_domain_matches_one_rank(tmp_path):
 # 6. the build by share (pdem.state.ModelState.create)
 
 
-def test_build_by_share_matches_whole_build():
+# boundary conditions at set-up: they set velocities (on the build shares: the catalogue has
+# none) and fixed/vfix flags of blocks selected by group, name and range
+BOUNDARY = """
+boundary:
+  velocity:
+    - {groups: [stack], range: {box: {min: [-2, -1, 0], max: [-1, 1, 0.5]}},
+       velocity: [0.01, 0, 0]}
+    - {names: ["stack[5]"], components: [z], velocity: [0, 0, -0.02]}
+"""
+
+
+@pytest.mark.parametrize("extra", ["", BOUNDARY], ids=["plain", "boundary"])
+def test_build_by_share_matches_whole_build(extra):
     """Each rank building the store of its share of the gids, gathering the per-block fields
     and sending the blocks to their owners gives every rank bitwise the blocks, catalogue,
     resolved values, spec columns and output surfaces of every rank building every block
-    (a joined block, cut faces with tags and an excavation: pieces numbered across shares)."""
+    (a joined block, cut faces with tags and an excavation: pieces numbered across shares;
+    an applied force, and boundary velocities set on the shares)."""
     from pdem.cases.rock_mass import l_on_stack_scene
     from pdem.config import parse_scene
     from pdem.model.blocks import pack
-    from pdem.state import CATALOGUE, OUTPUT_CATALOGUE, RUN_CATALOGUE, ModelState
+    from pdem.state import CATALOGUE, RUN_CATALOGUE, ModelState
 
     comm = MPI.COMM_WORLD
-    scene = parse_scene(l_on_stack_scene())
+    text = l_on_stack_scene().replace("material: rock, group: stack}",
+                                      "material: rock, group: stack, force: [10, 0, -50]}")
+    scene = parse_scene(text + extra)
     states = []
     for whole in (False, True):
         s = ModelState.create(scene, comm, whole=whole)
@@ -456,6 +471,12 @@ def test_build_by_share_matches_whole_build():
     for s in states:
         s.distribute_initial()
     assert a.resolved == b.resolved and a.max_step == b.max_step
+    owned = a.blocks.n_owned if hasattr(a.blocks, "n_owned") else a.n_owned
+    moving = comm.allreduce(int((np.abs(a.blocks.v[:owned]).max(axis=1) > 0).sum()))
+    pushed = comm.allreduce(int((a.blocks.applied_force[:owned, 2] == -50.0).sum()))
+    # the 8 stack pieces pushed; the spinning L, and with the boundary one piece in the range
+    # and stack[5]
+    assert pushed == 8 and moving == (3 if extra else 1), (moving, pushed)
     assert a.n_owned == b.n_owned and np.array_equal(a.blocks.gid, b.blocks.gid)
     assert a.blocks.n_pieces == b.blocks.n_pieces and a.blocks.n_pieces > a.blocks.n
     rows = np.arange(a.blocks.n)
@@ -463,11 +484,57 @@ def test_build_by_share_matches_whole_build():
     assert pa.keys() == pb.keys()
     for k in pa:
         assert np.array_equal(pa[k], pb[k]), k
-    for k in RUN_CATALOGUE + OUTPUT_CATALOGUE:
+    for k in RUN_CATALOGUE:
         assert np.array_equal(getattr(a.glob, k), getattr(b.glob, k)), k
+    # the output's initial centroids and groups: the writer's range of them, taken from the
+    # build share (no rank gathers every block's)
+    assert "x" not in vars(a.glob) and "group" not in vars(a.glob)
+    for x, y in zip(a.writer_static, b.writer_static, strict=True):
+        assert np.array_equal(x, y)
     for k in ("volume", "surface", "max_face", "n_pieces", "entry", "group"):
         assert np.array_equal(getattr(a.specs, k), getattr(b.specs, k)), k
     assert a.specs.names == b.specs.names and list(a.specs.names) == list(b.specs.names)
     for x, y in zip(a.writer_mesh, b.writer_mesh, strict=True):
         assert np.array_equal(x, y)
     assert not a.glob.has_geometry and a.share is None
+
+
+ROW = """
+name: row
+materials: {{rock: {{density: 2500.0}}}}
+joints: {{default: {{kn: {kn}, ks: 1.0e9, friction: 30.0}}}}
+blocks:
+  - {{name: floor, box: {{min: [-1, -1, -1], max: [12, 2, 0]}}, material: rock, fixed: true}}
+  - name: cube
+    array: {{box: {{min: [0, 0, 0], max: [1, 1, 1]}}, count: [8, 1, 1], spacing: [1.2, 0, 0]}}
+    material: rock
+  - {{name: bullet, box: {{min: [10, 0, 0], max: [11, 1, 1]}}, material: rock,
+     velocity: [{speed}, 0, 0]}}
+solve: {{steps: 1}}
+"""
+
+
+@pytest.mark.parametrize("kn, speed, words", [
+    (1.0e9, 5.0e3, ["blocks[2].velocity", "'bullet'"]),  # too fast: the last share's block
+    (1.0e2, 0.0, ["joints.default.kn", "'cube[0]'"]),  # too soft: the first of equal ones
+], ids=["start-speed", "static-overlap"])
+def test_start_checks_on_shares_refuse_the_worst_block_on_every_rank(kn, speed, words):
+    """The start checks read each rank's build share; every rank refuses with the message a
+    build of every block on one process gives (the worst block, the first of equal ones)."""
+    from pdem.config import ConfigError, parse_scene
+    from pdem.state import ModelState
+
+    comm = MPI.COMM_WORLD
+    scene = parse_scene(ROW.format(kn=kn, speed=speed))
+
+    def refused(c):
+        try:
+            ModelState.create(scene, c)
+        except ConfigError as e:
+            return str(e)
+        return None
+
+    alone = refused(MPI.COMM_SELF)
+    mine = refused(comm)
+    assert mine is not None and all(w in mine for w in words), mine
+    assert mine == alone and len(set(comm.allgather(mine))) == 1
