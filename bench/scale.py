@@ -20,7 +20,9 @@ fields), ``h'`` per block held (a rank builds an even share of the blocks, about
 holds, and receives its own). ``a, h, s, h'`` are least-squares fits to the measured runs,
 ``a`` held at what bench/setup.py counts a rank keeps (``scene_b``) and ``s`` at least ``a``;
 the peak is also at least the set-up's gathered catalogue (``catalogue_bytes`` a scene block)
-beside the build share, which binds at many ranks; owned blocks,
+and the specs every rank makes of every block (``spec_bytes``, measured in a process of its
+own: at 2 ranks the fit cannot tell them from the blocks held) beside the build share, which
+bind at many ranks; owned blocks,
 ghosts and halo bytes per rank come from bench/scaling.py's decomposition model (exact for
 the stack's lattice). Strong scaling: N fixed (10^6, 10^7); weak: 10^4 blocks per rank.
 
@@ -108,6 +110,27 @@ def catalogue_bytes() -> int:
     return sum(f.width * np.dtype(f.dtype).itemsize for f in BLOCK if f.name in GATHERED)
 
 
+def spec_bytes(n: int = 60) -> float:
+    """Bytes a block of the specs every rank makes at set-up (pdem.model.build.expand_blocks:
+    a Python object with a name for every member of a family, outside its share too), held
+    until the spec table is built: measured on the n^3 cube stack with a share of one block
+    (resident growth, a fresh process)."""
+    code = "\n".join([
+        "import sys", f"sys.path.insert(0, {str(HERE.parent)!r})",
+        "from pdem.cases.stacks import cube_stack_scene",
+        "from pdem.config import parse_scene",
+        "from pdem.model.build import expand_blocks",
+        "def rss():",
+        "    return int(open('/proc/self/statm').read().split()[1]) * 4096",
+        f"scene = parse_scene(cube_stack_scene({n}, 'fast'))",
+        "r0 = rss()",
+        "specs = expand_blocks(scene, 10**7, lambda n: (0, 1))",
+        "print((rss() - r0) / len(specs))"])
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    return float(out.stdout.split()[-1])
+
+
 def report_model(runs):
     base = float(np.mean([r["base_mb"] for r in runs]))
     # what a rank keeps of every block, counted by nbytes (bench/setup.py), where measured
@@ -115,12 +138,14 @@ def report_model(runs):
     a, h = fit(runs, "steady_mb", max(kept) / 2**20 if kept else None)
     s, hp = fit(runs, "peak_mb", a)
     c = catalogue_bytes() / 2**20
+    sp = spec_bytes() / 2**20
     kb = 1024.0
     print(f"\nfit over {len(runs)} runs: base {base:.0f} MB; after set-up {a * kb:.3f} KB per "
           f"scene block on every rank + {h * kb:.2f} KB per block held; set-up peak "
           f"{s * kb:.3f} KB per scene block + {hp * kb:.2f} KB per block held; the set-up's "
-          f"gathered catalogue {c * kb:.3f} KB per scene block until the first distribution "
-          "(peak GB: the larger of the two)")
+          f"gathered catalogue {c * kb:.3f} KB per scene block until the first distribution; "
+          f"the specs of every block {sp * kb:.3f} KB per scene block until the spec table "
+          "(measured; peak GB: the largest of the three)")
     print("\nthe fit against the runs (MB per rank, max over ranks):")
     print(f"{'blocks':>10} {'ranks':>5} {'after set-up meas/model':>25} {'peak meas/model':>18}")
     for r in runs:
@@ -141,7 +166,7 @@ def report_model(runs):
         steady = (base + a * N + h * held) / 1024.0
         # the peak: the start's first contact update, or the gathered catalogue beside the
         # build share (about what a rank holds) when the scene is large enough
-        peak = max(base + s * N + hp * held, base + c * N + hp * N / p) / 1024.0
+        peak = max(base + s * N + hp * held, base + max(c, sp) * N + hp * N / p) / 1024.0
         print(f"{kind:>8} {N:>10.3g} {p:>6} {'x'.join(map(str, dims)):>9} {held:>8.0f} "
               f"{steady:>15.2f} {peak:>8.2f} {halo:>13.1f}")
 

@@ -23,6 +23,7 @@ from .domain import DELETED, remove_blocks
 from .domain import set_block_fields as _set
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
+from .model.blocks import BlockStore
 from .parallel.mpi import allgather_rows
 from .state import TIMESTEP_FIELDS
 
@@ -152,23 +153,34 @@ def apply_stage(run, k: int) -> None:
     run.stepper.refresh(all_contacts=False)
 
 
+def timestep_rows(s):
+    """``(rows, n)``: the blocks whose timestep fields (pdem.state.TIMESTEP_FIELDS, and gid)
+    this rank reads and sets, its own (reduced over the ranks) the first ``n``: the blocks it
+    holds, owned first (views: a mass scale set on them is the blocks'), or before the first
+    distribution its build share (or every block, when every rank built every block)."""
+    b = s.blocks
+    if b is not None:
+        return BlockStore.catalogue({k: getattr(b, k)[:b.n]
+                                     for k in ("gid", *TIMESTEP_FIELDS)}), s.n_owned
+    rows = s.share if s.share is not None else s.glob
+    return rows, len(rows.gid)
+
+
 def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     """Timestep, mass scaling and damping of a stage (every rank alike). The mass-scale
     factors are recomputed from the stage's joints and fixed/free blocks, on every rank
     alike; a restart replays this (:func:`replay_stages`), so they need no checkpoint."""
-    g = s.scene_fields(TIMESTEP_FIELDS)  # gathered from the owners once distributed
-    g.mscale[:] = 1.0
-    stiffness = _estimated_stiffness(s.specs, s.joints)
+    rows, n = timestep_rows(s)
+    rows.mscale[:] = 1.0
+    stiffness = _estimated_stiffness(s.specs, s.joints, rows.gid)
     names = s.specs.names  # read by index, in messages
     st = s.scene.stages[k].solve
     key = s.scene.at("stages", k, "solve", "mass_scaling", "timestep") \
         if st is not None and st.mass_scaling is not None else "solve.mass_scaling.timestep"
-    s.dt = _timestep(staged, g, stiffness, names, key)
+    s.dt = _timestep(staged, rows, stiffness, names, key, s.comm, n)
     if report:
-        for line in timestep_report(staged, g, stiffness, s.dt, names):
+        for line in timestep_report(staged, rows, stiffness, s.dt, names, s.comm, n):
             log.info("stage %d: %s", k + 1, line)
-    if s.blocks is not None:
-        s.blocks.mscale[:] = g.mscale[s.blocks.gid]
     d = staged.solve.damping
     s.damping = DAMPING[d.mode]
     default = DAMPING[d.mode].default_alpha

@@ -56,28 +56,30 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
     return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
 
 # the per-block fields of every block each rank holds during set-up (the scene's store, by
-# gid): what the timestep and mass scaling read (mass, inertia, radius, fixed, mscale) and the
-# flags a boundary condition or a stage sets (fixed, vfix, out). The rest each rank reads of
-# its build share: the resolve and the start checks (envelopes, velocities, applied forces,
-# point areas; reduced over the ranks: pdem.config.resolve, pdem.config.preflight), the
-# selections (pdem.stages.selected: gids gathered), the initial decomposition (the shares'
-# centroids), the output's initial centroids and groups (the writer's range is the share:
-# ``writer_static``); a boundary condition sets fields on the share too
-# (pdem.domain.set_block_fields). 59 bytes a block, the set-up's one O(N) transient (215 with
-# the envelopes, velocities, applied forces, point areas, centroids and groups gathered too)
-CATALOGUE = ("gid", "mass", "inertia", "mscale", "fixed", "vfix", "out", "radius")
+# gid, its rows: no gid column): the flags a boundary condition or a stage sets (fixed,
+# vfix, out). The
+# rest each rank reads of its build share: the resolve, the timestep and mass scaling and the
+# start checks (envelopes, velocities, applied forces, mass, inertia, radius; reduced over the
+# ranks: maxima and minima, exact sums, an exact distributed median for the log;
+# pdem.config.resolve, pdem.config.preflight), the selections (pdem.stages.selected: gids
+# gathered), the initial decomposition (the shares' centroids), the output's initial
+# centroids and groups (the writer's range is the share: ``writer_static``); a boundary
+# condition or a stage sets fields on the share too (pdem.domain.set_block_fields), and the
+# mass scaling its factors. 3 bytes a block, the set-up's one O(N) transient (215 with every
+# field the set-up read gathered)
+CATALOGUE = ("fixed", "vfix", "out")
 # what the ranks gather of it
 GATHERED = CATALOGUE
 # what of it a rank keeps once the blocks are distributed (ModelState._distributed_from_scene)
 # and the output is open (pdem.simulation): two bytes a scene block, read by the rebuild
 # (which contacts travel: fixed), the checkpoint (which copy of a contact is written: fixed)
-# and the excavations (out). The rest was read by the set-up only, or is read again at a
-# stage's start (its selections and its timestep and mass scaling), which asks the blocks'
-# owners for it (ModelState.scene_fields, ModelState.select); a stage, a boundary condition or
-# the domain sets fields on the blocks a rank holds (pdem.domain.set_block_fields). The
-# store's rows stay by gid (``glob.n`` is the scene's block count).
+# and the excavations (out). A stage's start reads the blocks each rank holds (its
+# selections: gids gathered; its timestep and mass scaling: reduced over the ranks); a stage,
+# a boundary condition or the domain sets fields on the blocks a rank holds
+# (pdem.domain.set_block_fields). The store's rows stay by gid (``glob.n`` is the scene's
+# block count).
 RUN_CATALOGUE = ("fixed", "out")
-# the per-block fields a stage's timestep and mass scaling read (pdem.stages._solve_settings)
+# the per-block fields the timestep and mass scaling read (pdem.stages.timestep_rows)
 TIMESTEP_FIELDS = ("mass", "inertia", "radius", "fixed", "mscale")
 
 

@@ -16,11 +16,25 @@ import numpy as np
 
 from ..dynamics.damping import DAMPING
 from ..dynamics.kinematics import refresh_pose
-from ..dynamics.timestep import auto_timestep, critical_steps, limiting_block, mass_scale_factors
+from ..dynamics.timestep import (
+    critical_steps,
+    limiting_block,
+    mass_scale_factors,
+    timestep_extremes,
+    timestep_from_extremes,
+)
 from ..errors import UserError
 from ..geometry import face_areas
 from ..parallel.decomposition import choose_dims
-from ..parallel.mpi import LOCAL, allgather, allreduce_max_array, exact_mean
+from ..parallel.mpi import (
+    LOCAL,
+    allgather,
+    allreduce_max_array,
+    exact_mean,
+    exact_sum,
+    first_extreme,
+    kth_smallest,
+)
 from .schema import MassScaling
 
 log = logging.getLogger("pdem")
@@ -93,44 +107,51 @@ def surface_areas(specs) -> np.ndarray:
     return surf
 
 
-def _estimated_stiffness(specs, joints) -> np.ndarray:
+def _estimated_stiffness(specs, joints, gids=None) -> np.ndarray:
     """Per block, the stiffness of contacts on a third of its surface (top and bottom of a
     cube): the timestep must be stable before the first contact forms, and must not depend
-    on which contacts a rank holds."""
+    on which contacts a rank holds. ``gids``: of these blocks only (a SpecTable's)."""
     kmax = float(np.maximum(joints.kn, joints.ks).max())
-    surf = surface_areas(specs)
+    surf = surface_areas(specs) if gids is None else np.asarray(specs.surface[gids], float)
     # an absurd stiffness overflows to inf (dt = 0), refused by preflight.check_derived with
     # the joint named; numpy's warning would only add noise before that message
     with np.errstate(over="ignore"):
         return kmax * surf / 3.0
 
 
-def _timestep(scene, glob, k, names=None, key: str = "solve.mass_scaling.timestep") -> float:
-    """The step (eq. 87 + rotational bound); with mass scaling, sets ``glob.mscale`` (eq. 89;
+def _timestep(scene, rows, k, names=None, key: str = "solve.mass_scaling.timestep",
+              comm=LOCAL, n: int | None = None) -> float:
+    """The step (eq. 87 + rotational bound); with mass scaling, sets ``rows.mscale`` (eq. 89;
     partial: only the blocks whose own critical step is below ``timestep``).
 
-    The factors come from ``k``, the stiffness estimate of :func:`_estimated_stiffness` (from
-    the blocks' surfaces and the stiffest joint, not from the contacts of the moment): they
-    are the same on every rank and after a restart, which recomputes them from the scene
-    (the scene's, and each stage's at its start, see pdem.stages)."""
+    ``rows``: the per-block fields (gid, mass, inertia, radius, fixed, mscale) of the blocks
+    this rank holds, ``k`` their stiffness estimates (:func:`_estimated_stiffness`, from the
+    blocks' surfaces and the stiffest joint, not from the contacts of the moment: the same on
+    every rank and after a restart, which recomputes them from the scene, and each stage's at
+    its start, see pdem.stages). The first ``n`` rows (default all) are this rank's own, the
+    blocks no other rank counts (its build share, or the blocks it owns): the step is reduced
+    over theirs on ``comm`` (minima and maxima, exact sums for the means: the same bits on any
+    rank count). Every row's ``mscale`` is set."""
     ts = scene.solve.timestep
     ms = scene.solve.mass_scaling
+    n = len(rows.mass) if n is None else n
     if isinstance(ms, MassScaling):
         # partial (dynamic) scaling: the light blocks are made heavy enough for `timestep`
         dt = ms.timestep
-        glob.mscale[:] = mass_scale_factors(glob.mass, k, dt, ts.frac, glob.inertia, glob.radius)
-        _check_partial(glob, dt, names, key)
+        rows.mscale[:] = mass_scale_factors(rows.mass, k, dt, ts.frac, rows.inertia, rows.radius)
+        _check_partial(rows, dt, names, key, comm, n)
     elif ms:
         # static solve: every block gets the critical step of the mean block (eq. 89)
-        free = glob.fixed == 0
+        free = rows.fixed[:n] == 0
         dt = ts.dt or ts.frac * 2.0 * math.sqrt(
-            float(np.mean(glob.mass[free])) / float(np.mean(k[free])))
-        glob.mscale[:] = mass_scale_factors(glob.mass, k, dt, ts.frac, glob.inertia, glob.radius)
+            exact_mean(comm, rows.mass[:n][free]) / exact_mean(comm, k[:n][free]))
+        rows.mscale[:] = mass_scale_factors(rows.mass, k, dt, ts.frac, rows.inertia, rows.radius)
     elif ts.dt is not None:
         dt = ts.dt
     else:
-        dt = auto_timestep(glob.mass, k, ts.frac, glob.inertia, glob.radius, glob.fixed,
-                           glob.mscale)
+        dt = timestep_from_extremes(ts.frac, allreduce_max_array(comm, timestep_extremes(
+            rows.mass[:n], k[:n], rows.inertia[:n], rows.radius[:n], rows.fixed[:n],
+            rows.mscale[:n])))
     if not math.isfinite(dt):
         raise UserError("solve.timestep: no free block, cannot choose a timestep; give dt")
     return float(dt)
@@ -140,50 +161,78 @@ def _name(names, g: int) -> str:
     return repr(names[g]) if names is not None else f"#{g}"
 
 
-def _check_partial(glob, dt: float, names, key: str) -> None:
+def _count(comm, mask) -> int:
+    return sum(allgather(comm, int(np.count_nonzero(mask))))
+
+
+def _largest_factor(rows, free, comm, n: int):
+    """``(factor, gid)`` of the free block with the largest mass scale (the first in gid
+    order of equal ones), over every rank's own rows; None without a free block."""
+    msc = rows.mscale[:n]
+    local = None
+    if free.any():
+        r = int(np.argmax(np.where(free, msc, -np.inf)))
+        local = (-float(msc[r]), int(rows.gid[r]))
+    found = first_extreme(comm, local)
+    return None if found is None else (-found[0], found[1])
+
+
+def _check_partial(rows, dt: float, names, key: str, comm=LOCAL, n: int | None = None) -> None:
     """Refuse partial scaling that would scale most of the model (by mass)."""
-    free = glob.fixed == 0
-    if not np.isfinite(glob.mscale).all():
+    n = len(rows.mass) if n is None else n
+    free = rows.fixed[:n] == 0
+    mass, msc = rows.mass[:n], rows.mscale[:n]
+    if not all(allgather(comm, bool(np.isfinite(msc).all()))):
         raise UserError(f"{key}: the blocks' stiffness estimate overflows, so no mass scale "
                         "makes them stable: a joint's kn or ks is far outside the usual range "
                         "(docs/limits.md)")
-    total = float(glob.mass[free].sum())
-    scaled = free & (glob.mscale > 1.0)
-    share = float(glob.mass[scaled].sum()) / total if total > 0.0 else 0.0
+    scaled = free & (msc > 1.0)
+    total, heavy = exact_sum(comm, np.stack([np.where(free, mass, 0.0),
+                                             np.where(scaled, mass, 0.0)], axis=1))
+    share = float(heavy) / float(total) if total > 0.0 else 0.0
     if share > MAX_SCALED_MASS_FRACTION:
-        g = int(np.argmax(np.where(free, glob.mscale, 0.0)))
+        factor, g = _largest_factor(rows, free, comm, n)
         raise UserError(
-            f"{key}: {dt:.4g} s would scale {int(scaled.sum())} of {int(free.sum())} free "
-            f"blocks, {100.0 * share:.3g} % of the free mass (more than "
-            f"{100.0 * MAX_SCALED_MASS_FRACTION:g} %; largest factor {glob.mscale[g]:.4g} on "
+            f"{key}: {dt:.4g} s would scale {_count(comm, scaled)} of {_count(comm, free)} "
+            f"free blocks, {100.0 * share:.3g} % of the free mass (more than "
+            f"{100.0 * MAX_SCALED_MASS_FRACTION:g} %; largest factor {factor:.4g} on "
             f"block {_name(names, g)}): that is no longer partial scaling; give a smaller "
             "timestep, or mass_scaling: true for a static solve")
 
 
-def mass_scaling_summary(glob) -> dict:
+def mass_scaling_summary(rows, comm=LOCAL, n: int | None = None) -> dict:
     """The inertia partial mass scaling added (free blocks): how many blocks, the added mass
-    (kg and % of the free mass), the largest factor and its block (gid)."""
-    free = glob.fixed == 0
-    scaled = free & (glob.mscale > 1.0)
-    added = float((glob.mass * (glob.mscale - 1.0))[scaled].sum())
-    total = float(glob.mass[free].sum())
-    g = int(np.argmax(np.where(free, glob.mscale, 0.0))) if free.any() else -1
-    return {"blocks": int(scaled.sum()), "free_blocks": int(free.sum()), "added_mass": added,
+    (kg and % of the free mass), the largest factor and its block (gid). ``rows``: mass,
+    mscale, fixed and gid of this rank's blocks, its own the first ``n`` (default all),
+    reduced over ``comm`` (exact sums)."""
+    n = len(rows.mass) if n is None else n
+    free = rows.fixed[:n] == 0
+    mass, msc = rows.mass[:n], rows.mscale[:n]
+    scaled = free & (msc > 1.0)
+    added, total = (float(v) for v in exact_sum(comm, np.stack(
+        [np.where(scaled, mass * (msc - 1.0), 0.0), np.where(free, mass, 0.0)], axis=1)))
+    largest = _largest_factor(rows, free, comm, n)
+    return {"blocks": _count(comm, scaled), "free_blocks": _count(comm, free),
+            "added_mass": added,
             "added_percent": 100.0 * added / total if total > 0.0 else 0.0,
-            "model_mass": total, "max_factor": float(glob.mscale[g]) if g >= 0 else 1.0,
-            "max_block": g}
+            "model_mass": total, "max_factor": largest[0] if largest else 1.0,
+            "max_block": largest[1] if largest else -1}
 
 
-def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
+def timestep_report(scene, rows, k, dt: float, names, comm=LOCAL,
+                    n: int | None = None) -> list[str]:
     """The start-up log lines about the step: which block limits it and by how much (no mass
-    scaling or a fixed dt), or the inertia partial mass scaling added."""
+    scaling or a fixed dt), or the inertia partial mass scaling added. ``rows``, ``k``,
+    ``comm``, ``n``: as :func:`_timestep`'s (the median of the blocks' critical steps by an
+    exact distributed selection, pdem.parallel.mpi.kth_smallest)."""
     ts = scene.solve.timestep
     ms = scene.solve.mass_scaling
-    free = np.nonzero(glob.fixed == 0)[0]
-    if not len(free) or not (math.isfinite(dt) and dt > 0.0):
+    n = len(rows.mass) if n is None else n
+    free = rows.fixed[:n] == 0
+    if not _count(comm, free) or not (math.isfinite(dt) and dt > 0.0):
         return []  # refused by preflight.check_derived, naming the joint
     if isinstance(ms, MassScaling):
-        r = mass_scaling_summary(glob)
+        r = mass_scaling_summary(rows, comm, n)
         if not r["blocks"]:
             return [f"partial mass scaling to dt = {dt:.3g} s: no block needed it"]
         return [f"partial mass scaling to dt = {dt:.3g} s: {r['blocks']} of {r['free_blocks']} "
@@ -194,15 +243,21 @@ def timestep_report(scene, glob, k, dt: float, names) -> list[str]:
                 "ring sqrt(factor) times slower on their contacts)"]
     if ms:
         return []
-    own = critical_steps(glob.mass, k, ts.frac, glob.inertia, glob.radius, glob.mscale)[free]
+    mass, kk, inertia, radius, msc = (rows.mass[:n], k[:n], rows.inertia[:n], rows.radius[:n],
+                                      rows.mscale[:n])
+    steps = critical_steps(mass, kk, ts.frac, inertia, radius, msc)
+    own = steps[free]
     own = own[np.isfinite(own)]
-    g = limiting_block(glob.mass, k, ts.frac, glob.inertia, glob.radius, glob.fixed,
-                       glob.mscale)
-    if g < 0 or not len(own):
+    n_own = _count(comm, np.ones(len(own), bool))
+    k_max = float(allreduce_max_array(comm, np.array([kk[free].max(initial=-np.inf)]))[0])
+    local = limiting_block(mass, kk, ts.frac, inertia, radius, rows.fixed[:n], msc, k_max)
+    if local is not None:  # its own critical step rides along
+        local = (local[0], int(rows.gid[local[1]]), float(steps[local[1]]))
+    found = first_extreme(comm, local)
+    if found is None or not n_own:
         return []
-    mine = float(critical_steps(glob.mass[g:g + 1], k[g:g + 1], ts.frac, glob.inertia[g:g + 1],
-                                glob.radius[g:g + 1], glob.mscale[g:g + 1])[0])
-    median = float(np.sort(own)[len(own) // 2])
+    _, g, mine = found
+    median = kth_smallest(comm, own, n_own // 2)
     if not mine > 0.0:
         return []
     if ts.dt is None:
@@ -244,15 +299,16 @@ def contact_tolerance(scene, specs) -> float:
 
 def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None = None,
             rows=None, comm=LOCAL) -> Resolved:
-    """Resolve the scene's ``auto`` values for the scene's blocks ``glob`` (its per-block
-    fields; with mass scaling ``mscale`` is set here).
+    """Resolve the scene's ``auto`` values for the scene's blocks (with mass scaling
+    ``mscale`` is set here, on ``rows``).
 
     ``verts_max``: the largest world vertex coordinate (absolute) of every block, when
     ``glob`` has no geometry (each rank built its share, pdem.state); else ``glob`` has the
     geometry and its poses are refreshed here. ``rows``: the store whose rows hold the
-    envelopes ``lo``/``hi`` (padded by CTOL/2), velocities and applied forces: this rank's
-    build share, reduced over ``comm`` (maxima, and exact sums for the means, so the same bits
-    on any rank count); default ``glob``, every block. ``point_area`` is set on ``rows``."""
+    per-block fields read (envelopes ``lo``/``hi`` padded by CTOL/2, velocities, applied
+    forces, mass, inertia, radius, fixed): this rank's build share, reduced over ``comm``
+    (maxima and minima, and exact sums for the means, so the same bits on any rank count);
+    default ``glob``, every block. ``point_area`` and ``mscale`` are set on ``rows``."""
     cs = scene.contact
     rows = glob if rows is None else rows
     sizes = block_sizes(specs)
@@ -267,11 +323,12 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
     ext = (hi - lo)[free] if any_free else hi - lo
     cell_size = exact_mean(comm, ext.max(axis=1, initial=0.0)) if cs.cell_size == "auto" \
         else float(cs.cell_size)
-    k = _estimated_stiffness(specs, joints)
+    # the timestep's reads of this rank's rows (mass, inertia, radius, fixed; mscale set)
+    k = _estimated_stiffness(specs, joints, rows.gid if hasattr(specs, "surface") else None)
     # a SpecTable's names column (read by index, in messages), or a list's
     names = specs.names if hasattr(specs, "names") else [sp.name for sp in specs]
-    dt = _timestep(scene, glob, k, names)
-    for line in timestep_report(scene, glob, k, dt, names):
+    dt = _timestep(scene, rows, k, names, comm=comm)
+    for line in timestep_report(scene, rows, k, dt, names, comm):
         log.info("%s", line)
     # Runaway threshold: no block can honestly move faster than its start speed plus a fall
     # across the whole model (or what gravity and applied loads add over time); ten times

@@ -66,25 +66,39 @@ def auto_timestep(
     moments, radii (n,) bounding radii, fixed (n,) flags of blocks to ignore, mass_scale (n,)
     inertial scale factors (multiply masses and inertias).
     """
+    return timestep_from_extremes(frac, timestep_extremes(masses, stiffnesses, inertias, radii,
+                                                          fixed, mass_scale))
+
+
+def timestep_extremes(masses, stiffnesses, inertias=None, radii=None, fixed=None,
+                      mass_scale=None) -> np.ndarray:
+    """What :func:`auto_timestep` takes of the blocks, as maxima: ``(K_max, -M_min,
+    -min I_min / (K r^2))`` over the free blocks (-inf where there is none). Maxima are exact
+    in any order, so the blocks may be split over ranks (the element-wise maximum of the
+    ranks' arrays is the whole's)."""
     m = np.asarray(masses, dtype=np.float64)
     k = np.asarray(stiffnesses, dtype=np.float64)
     n = len(m)
     ms = np.ones(n) if mass_scale is None else np.asarray(mass_scale, dtype=np.float64)
     free = _free(n, fixed)
-    if not free.any():
-        return np.inf
-    k_max = k[free].max()
-    if k_max <= 0.0:
-        return np.inf
-    m_min = (m * ms)[free].min()
-    dt = frac * 2.0 * np.sqrt(m_min / k_max)
+    out = np.array([k[free].max(initial=-np.inf), -(m * ms)[free].min(initial=np.inf), -np.inf])
     if inertias is not None and radii is not None:
-        i_min = np.asarray(inertias, dtype=np.float64).min(axis=1) * ms
+        i_min = np.asarray(inertias, dtype=np.float64).min(axis=1, initial=np.inf) * ms
         r = np.asarray(radii, dtype=np.float64)
         kr = k * r * r
         sel = free & (kr > 0.0)
-        if sel.any():
-            dt = min(dt, frac * 2.0 * float(np.sqrt((i_min[sel] / kr[sel]).min())))
+        out[2] = -(i_min[sel] / kr[sel]).min(initial=np.inf)
+    return out
+
+
+def timestep_from_extremes(frac: float, extremes) -> float:
+    """:func:`auto_timestep` from :func:`timestep_extremes` (of every block)."""
+    k_max, m_min, rot_min = float(extremes[0]), -float(extremes[1]), -float(extremes[2])
+    if not k_max > 0.0:  # no free block, or none with stiffness
+        return np.inf
+    dt = frac * 2.0 * np.sqrt(m_min / k_max)
+    if rot_min < np.inf:
+        dt = min(dt, frac * 2.0 * float(np.sqrt(rot_min)))
     return float(dt)
 
 
@@ -159,16 +173,22 @@ def _rotational(step, k, ms, inertias, radii) -> np.ndarray:
 
 
 def limiting_block(masses, stiffnesses, frac: float = 0.1, inertias=None, radii=None,
-                   fixed=None, mass_scale=None) -> int:
+                   fixed=None, mass_scale=None, k_max: float | None = None):
     """The free block that sets :func:`auto_timestep`'s step (-1 if none): the lightest block
     when eq. 87 (its mass against the stiffest block's K) governs, else the block with the
-    smallest rotational bound."""
+    smallest rotational bound. ``k_max``: the stiffest free block's K of every block (when
+    these are some of them); then returns ``(its step measure, row)`` of the first such row
+    here, or None, for the caller to compare over all."""
     m = np.asarray(masses, dtype=np.float64)
     k = np.asarray(stiffnesses, dtype=np.float64)
     n = len(m)
     ms = np.ones(n) if mass_scale is None else np.asarray(mass_scale, dtype=np.float64)
     free = np.nonzero(_free(n, fixed))[0]
-    if not len(free) or k[free].max() <= 0.0:
-        return -1
-    step = _rotational(np.sqrt(m * ms / k[free].max()), k, ms, inertias, radii)
-    return int(free[np.argmin(step[free])])
+    part = k_max is not None
+    if not part:
+        k_max = k[free].max() if len(free) else 0.0
+    if not len(free) or not k_max > 0.0:
+        return None if part else -1
+    step = _rotational(np.sqrt(m * ms / k_max), k, ms, inertias, radii)
+    best = int(np.argmin(step[free]))
+    return (float(step[free][best]), int(free[best])) if part else int(free[best])

@@ -236,6 +236,35 @@ def exact_mean(comm, values: np.ndarray) -> float:
     return float(exact_sum(comm, values)[0]) / count if count else math.nan
 
 
+def kth_smallest(comm, values: np.ndarray, k: int) -> float:
+    """The ``k``-th smallest (from 0) of all ranks' ``values`` (finite, non-negative), exactly
+    and without gathering them: a bisection over the doubles' bit patterns (in the order of
+    the values for non-negative ones), one integer reduction a step (at most 64)."""
+    values = np.asarray(values, np.float64) + 0.0  # -0.0 -> +0.0: its bits sort first
+    if comm.size == 1:
+        return float(np.partition(values, k)[k])
+    from mpi4py import MPI
+
+    keys = values.view(np.int64)
+    lo = comm.allreduce(int(keys.min(initial=np.iinfo(np.int64).max)), op=MPI.MIN)
+    hi = comm.allreduce(int(keys.max(initial=0)), op=MPI.MAX)
+    while lo < hi:  # the smallest key with more than k keys at or below it
+        mid = lo + (hi - lo) // 2
+        if comm.allreduce(int((keys <= mid).sum()), op=MPI.SUM) > k:
+            hi = mid
+        else:
+            lo = mid + 1
+    return float(np.array([lo], np.int64).view(np.float64)[0])
+
+
+def first_extreme(comm, found):
+    """The first of the ranks' ``(value, gid, ...)`` tuples with the smallest value (None:
+    the rank has none): smallest value, then smallest gid, as an argmin over every block in
+    gid order gives; None if no rank has one."""
+    cands = [f for f in allgather(comm, found) if f is not None]
+    return min(cands, key=lambda f: (f[0], f[1])) if cands else None
+
+
 def allgather(comm, value) -> list:
     """Every rank's ``value``, in rank order."""
     return comm.allgather(value) if comm.size > 1 else [value]

@@ -65,7 +65,10 @@ def _mass_scaling_attrs(state) -> dict:
     ms = state.scene.solve.mass_scaling
     if not isinstance(ms, MassScaling) or state.scene.stages:
         return {}
-    r = mass_scaling_summary(state.scene_fields(("mass", "mscale", "fixed")))
+    from ..stages import timestep_rows
+
+    rows, n = timestep_rows(state)  # each rank its own blocks', summed over the ranks
+    r = mass_scaling_summary(rows, state.comm, n)
     g = r["max_block"]
     return {"mass_scaling_timestep": ms.timestep, "mass_scaled_blocks": r["blocks"],
             "mass_scaling_added_mass": r["added_mass"],
