@@ -20,9 +20,10 @@ fields), ``h'`` per block held (a rank builds an even share of the blocks, about
 holds, and receives its own). ``a, h, s, h'`` are least-squares fits to the measured runs,
 ``a`` held at what bench/setup.py counts a rank keeps (``scene_b``) and ``s`` at least ``a``;
 the peak is also at least the set-up's gathered catalogue (``catalogue_bytes`` a scene block)
-and the specs every rank makes of every block (``spec_bytes``, measured in a process of its
-own: at 2 ranks the fit cannot tell them from the blocks held) beside the build share, which
-bind at many ranks; owned blocks,
+and what every rank makes of every block at set-up (the specs, the gathered geometric scalars
+and the spec table: ``spec_bytes``, measured in a process of its own: at 2 ranks the fit
+cannot tell them from the blocks held) beside the build share, which bind at many ranks;
+owned blocks,
 ghosts and halo bytes per rank come from bench/scaling.py's decomposition model (exact for
 the stack's lattice). Strong scaling: N fixed (10^6, 10^7); weak: 10^4 blocks per rank.
 
@@ -111,21 +112,39 @@ def catalogue_bytes() -> int:
 
 
 def spec_bytes(n: int = 60) -> float:
-    """Bytes a block of the specs every rank makes at set-up (pdem.model.build.expand_blocks:
-    a Python object with a name for every member of a family, outside its share too), held
-    until the spec table is built: measured on the n^3 cube stack with a share of one block
-    (resident growth, a fresh process)."""
+    """Bytes a block of what every rank makes of every scene block at set-up, at its peak:
+    the specs (pdem.model.build.expand_blocks), the gathered geometric scalars (as runs: the
+    other rank's run of cubes stood in) and the spec table made from them, with a build
+    share of two blocks (peak resident growth, in a process of its own, of the n^3 cube
+    stack)."""
     code = "\n".join([
         "import sys", f"sys.path.insert(0, {str(HERE.parent)!r})",
+        "import numpy as np",
         "from pdem.cases.stacks import cube_stack_scene",
         "from pdem.config import parse_scene",
-        "from pdem.model.build import expand_blocks",
-        "def rss():",
-        "    return int(open('/proc/self/statm').read().split()[1]) * 4096",
+        "from pdem.model.build import SpecTable, expand_blocks",
+        "def hwm():",
+        "    for line in open('/proc/self/status'):",
+        "        if line.startswith('VmHWM'):",
+        "            return int(line.split()[1]) * 1024",
         f"scene = parse_scene(cube_stack_scene({n}, 'fast'))",
-        "r0 = rss()",
-        "specs = expand_blocks(scene, 10**7, lambda n: (0, 1))",
-        "print((rss() - r0) / len(specs))"])
+        "r0 = hwm()",
+        "from pdem.model.build import geometry_columns",
+        "from pdem.model.runs import RunColumn",
+        "specs = expand_blocks(scene, 10**7, lambda n: (0, 2))",
+        "n = len(specs)",
+        # the share (the floor and one cube) gathers the other rank's runs: the other cubes
+        "class Ranks:",
+        "    size = 2",
+        "    def __init__(self, cube):",
+        "        self.cube = cube",
+        "    def allgather(self, value):",
+        "        return [value, (n - 2, np.zeros(1, np.int64), self.cube)]",
+        "mine = geometry_columns(specs[0:2])",
+        "cols = {k: RunColumn.gathered(Ranks(v[1:2]), v) for k, v in mine.items()}",
+        "table = SpecTable(specs, scene.blocks, cols)",
+        "del cols",
+        "print((hwm() - r0) / n)"])
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     return float(out.stdout.split()[-1])
@@ -144,8 +163,8 @@ def report_model(runs):
           f"scene block on every rank + {h * kb:.2f} KB per block held; set-up peak "
           f"{s * kb:.3f} KB per scene block + {hp * kb:.2f} KB per block held; the set-up's "
           f"gathered catalogue {c * kb:.3f} KB per scene block until the first distribution; "
-          f"the specs of every block {sp * kb:.3f} KB per scene block until the spec table "
-          "(measured; peak GB: the largest of the three)")
+          f"the specs, geometric scalars and spec table made of every block {sp * kb:.3f} KB "
+          "per scene block (measured; peak GB: the largest of the three)")
     print("\nthe fit against the runs (MB per rank, max over ranks):")
     print(f"{'blocks':>10} {'ranks':>5} {'after set-up meas/model':>25} {'peak meas/model':>18}")
     for r in runs:

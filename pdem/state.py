@@ -34,6 +34,7 @@ from .model.build import SpecTable, block_store, expand_blocks, geometry_columns
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
+from .model.runs import RunColumn
 from .parallel.decomposition import make_decomposition
 from .parallel.migrate import place_contacts, rebuild, route_contacts
 from .parallel.mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
@@ -210,8 +211,8 @@ class ModelState:
         share, group_names = block_store(scene, specs, lo, hi)
         grids = zoned_grids(scene, comm, specs[lo:hi], lo)
         columns = geometry_columns(specs[lo:hi])
-        if not whole:
-            columns = {k: allgather_rows(comm, v) for k, v in columns.items()}
+        if not whole:  # as runs where they run (an array's), else every block's rows
+            columns = {k: RunColumn.gathered(comm, v) for k, v in columns.items()}
         # the shapes are in the stores now (the output's surfaces too): the specs keep names
         # and scalars, as columns (every rank keeps them for every block)
         specs = SpecTable(specs, scene.blocks, columns)

@@ -25,6 +25,7 @@ from .blocks import VERT_ROW, BlockStore
 from .fields import BLOCK, allocate
 from .names import NameColumn
 from .runs import RunColumn
+from .speclist import SpecList, UnbuiltRun, spec_parts
 
 
 @dataclass
@@ -161,6 +162,24 @@ class SpecView:
         return None if k < 0 else int(k)
 
 
+def _names(parts):
+    """Every block's name, part by part (an unbuilt run's made as they are read)."""
+    for part in parts:
+        if isinstance(part, UnbuiltRun):
+            yield from (part.name(j) for j in range(part.count))
+        else:
+            yield from (sp.name for sp in part)
+
+
+def _column(parts, of_spec, of_run, dtype) -> np.ndarray:
+    """A per-block column, part by part: ``of_spec(spec)`` of each built spec, ``of_run(run)``
+    for every member of an unbuilt run (the same for all of them)."""
+    return np.concatenate(
+        [np.full(part.count, of_run(part), dtype) if isinstance(part, UnbuiltRun)
+         else np.fromiter((of_spec(sp) for sp in part), dtype, len(part)) for part in parts]
+        or [np.zeros(0, dtype)])
+
+
 class SpecTable:
     """The blocks' specs after set-up, as columns by gid instead of one Python object each:
     every rank keeps them for every block (names in messages, selections by name, group or
@@ -176,29 +195,36 @@ class SpecTable:
         columns were gathered, pdem.state); else read from the released specs."""
         self.scene_blocks = scene_blocks
         n = len(specs)
-        self.names = NameColumn(sp.name for sp in specs)
+        parts = [part for _, part in spec_parts(specs)]
+        self.names = NameColumn(_names(parts))
         # a block's parent (the scene block it was cut from): -1 for its own name (every
         # uncut block), else its row in ``parents`` (the few names that differ)
         parents: dict[str, int] = {}
-        self.parent = RunColumn(np.fromiter(
-            (-1 if sp.parent == sp.name else parents.setdefault(sp.parent, len(parents))
-             for sp in specs), np.int32, n))
+        self.parent = RunColumn(_column(
+            parts, lambda sp: -1 if sp.parent == sp.name
+            else parents.setdefault(sp.parent, len(parents)), lambda run: -1, np.int32))
         self.parents = list(parents)
         labels: dict[str, int] = {}
-        self.group = RunColumn(np.fromiter((labels.setdefault(sp.group, len(labels))
-                                            for sp in specs), np.int32, n))
-        self.material = RunColumn(np.fromiter((labels.setdefault(sp.material, len(labels))
-                                               for sp in specs), np.int32, n))
+        self.group = RunColumn(_column(
+            parts, lambda sp: labels.setdefault(sp.group, len(labels)),
+            lambda run: labels.setdefault(run.block.group, len(labels)), np.int32))
+        self.material = RunColumn(_column(
+            parts, lambda sp: labels.setdefault(sp.material, len(labels)),
+            lambda run: labels.setdefault(run.block.material, len(labels)), np.int32))
         self.labels = list(labels)
-        self.entry = RunColumn(np.fromiter((sp.entry for sp in specs), np.int32, n))
+        self.entry = RunColumn(_column(parts, lambda sp: sp.entry, lambda run: run.entry,
+                                       np.int32))
         if columns is None:
             columns = {k: np.fromiter((getattr(sp, k) for sp in specs), dt, n)
                        for k, dt in GEOMETRY_COLUMNS.items()}
-        for k in GEOMETRY_COLUMNS:
-            setattr(self, k, RunColumn(columns[k]))
-        # excavation times and stages: columns only in scenes that excavate
+        for k in GEOMETRY_COLUMNS:  # gathered as runs already (RunColumn.gathered), or rows
+            c = columns[k]
+            setattr(self, k, c if isinstance(c, RunColumn) else RunColumn(c))
+        # excavation times and stages: columns only in scenes that excavate (unbuilt family
+        # members never are: a scene that excavates builds every block)
         self.excavate_at = self.excavate_stage = None
-        if any(sp.excavate_at is not None or sp.excavate_stage is not None for sp in specs):
+        if any(sp.excavate_at is not None or sp.excavate_stage is not None
+               for part in parts if isinstance(part, list) for sp in part):
             self.excavate_at = RunColumn(np.fromiter(
                 (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float,
                 n))
@@ -473,10 +499,11 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
     known without building them: no cuts, joins, excavations or meshes (:func:`lazy_scene`).
     ``comm``: the ranks share the work of the cuts (collective; every rank gets every block,
     pdem.model.rockmass.build_rock_mass)."""
-    out: list[BlockSpec] = []
     errors: list[str] = []
     lo, hi = share(sum(_family_size(b) or 1 for b in scene.blocks)) \
         if share is not None and lazy_scene(scene) else (0, None)
+    # with a share, the family members outside it are runs, not an object each
+    out = SpecList() if hi is not None else []
     for i, b in enumerate(scene.blocks):
         kind = b.shape_kind
         if kind == "mesh":
@@ -493,12 +520,12 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
         # random sequence) and those outside the share are dropped as they come
         members = built if kind == "array" and built is not None else None
         if members is not None:
-            out.extend(_unbuilt(b, i, k) for k in range(members.start))
+            out.append_unbuilt(b, i, 0, members.start)
         try:
             args = (getattr(b, kind),) if members is None else (b.array, members)
             for k, shape in SHAPES[kind](*args):
                 if built is not None and k not in built:  # drawn for the sequence only
-                    out.append(_unbuilt(b, i, k))
+                    out.append_unbuilt(b, i, k, 1)
                     continue
                 name = b.name if k is None else f"{b.name}[{k}]"
                 pieces = shape if isinstance(shape, list) else [shape]
@@ -507,7 +534,7 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
             errors.append(f"blocks[{i}] ({b.name!r}).{kind}: {exc}")
             continue
         if members is not None:
-            out.extend(_unbuilt(b, i, k) for k in range(members.stop, size))
+            out.append_unbuilt(b, i, members.stop, size - members.stop)
     if errors:
         raise ConfigError(errors)
     from .rockmass import build_rock_mass
@@ -528,7 +555,7 @@ def lazy_scene(scene: Scene) -> bool:
                 or any(b.mesh is not None for b in scene.blocks))
 
 
-def _unbuilt(b: Block, entry: int, k: int) -> BlockSpec:
+def unbuilt_spec(b: Block, entry: int, k: int) -> BlockSpec:
     """Member ``k`` of family entry ``b`` outside this rank's build share: no pieces (one
     convex piece when built; its geometric scalars come from the rank that builds it)."""
     name = f"{b.name}[{k}]"
@@ -574,10 +601,12 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
     of the time for a large model."""
     hi = len(specs) if hi is None else hi
     mats = {m: i for i, m in enumerate(scene.materials)}
-    groups = sorted({b.group for b in scene.blocks if b.mesh is None} | {s.group for s in specs})
+    runs = isinstance(specs, SpecList)
+    groups = sorted({b.group for b in scene.blocks if b.mesh is None}
+                    | (specs.groups() if runs else {s.group for s in specs}))
     group_index = {g: i for i, g in enumerate(groups)}
     # the global ordinal of the share's first piece (contact keys name pieces by it)
-    first_piece = sum(s.n_pieces for s in specs[:lo])
+    first_piece = specs.n_pieces_before(lo) if runs else sum(s.n_pieces for s in specs[:lo])
     specs = specs[lo:hi]
     n = len(specs)
     arr = allocate(BLOCK, n)

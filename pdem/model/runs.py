@@ -49,6 +49,32 @@ class RunColumn:
             self._starts = self._values = None
             self._plain = v
 
+    @classmethod
+    def gathered(cls, comm, values) -> RunColumn:
+        """The column of every rank's ``values`` in rank order (collective): the ranks
+        gather their runs, not their rows, when runs are worth keeping (an ``array:``'s
+        volumes: a few runs, not 8 bytes of every block on every rank); the same column as
+        ``RunColumn`` of the rows gathered."""
+        from ..parallel.mpi import allgather, allgather_rows
+
+        v = np.ascontiguousarray(np.asarray(values))
+        starts = run_starts(v)
+        parts = allgather(comm, (len(v), starts, v[starts]))
+        n = sum(p[0] for p in parts)
+        offset = np.cumsum([0] + [p[0] for p in parts[:-1]])
+        g_starts = np.concatenate([p[1] + o for p, o in zip(parts, offset, strict=True)]
+                                  + [np.zeros(0, np.int64)]).astype(np.int64)
+        g_values = np.concatenate([p[2] for p in parts] + [np.zeros(0, v.dtype)])
+        if len(g_values):  # a run that continues across a rank's boundary is one run
+            bits = g_values.view(np.dtype(f"u{g_values.dtype.itemsize}"))
+            keep = np.concatenate([[True], bits[1:] != bits[:-1]])
+            g_starts, g_values = g_starts[keep], g_values[keep]
+        if len(g_starts) * (8 + v.dtype.itemsize) <= RUNS_WORTH * n * v.dtype.itemsize:
+            col = cls.__new__(cls)
+            col._n, col._starts, col._values, col._plain = n, g_starts, g_values.copy(), None
+            return col
+        return cls(allgather_rows(comm, v))
+
     @property
     def is_runs(self) -> bool:
         return self._plain is None

@@ -233,3 +233,26 @@ def test_share_builds_only_its_members_bitwise(share):
         assert _bits(cols["volume"][r]) == _bits(s.volume)
         assert _bits(cols["surface"][r]) == _bits(float(s.face_areas.sum()))
         assert _bits(cols["max_face"][r]) == _bits(float(s.face_areas.max()))
+
+
+@pytest.mark.parametrize("share", [(0, 71), (30, 71), (1, 2), (5, 5), (70, 71)])
+def test_unbuilt_members_are_runs_and_read_as_specs(share):
+    """A share's unbuilt family members are runs (pdem.model.speclist), not an object each:
+    the spec table made from them is the whole build's, column by column."""
+    from pdem.model.build import SpecTable, geometry_columns
+    from pdem.model.speclist import SpecList, UnbuiltRun
+
+    scene = parse_scene(SHARE_SCENE)
+    whole = expand_blocks(scene)
+    lazy = expand_blocks(scene, share=lambda n: share)
+    assert isinstance(lazy, SpecList) and len(lazy) == len(whole)
+    runs = [p for _, p in lazy.parts() if isinstance(p, UnbuiltRun)]
+    assert sum(r.count for r in runs) == sum(s.pieces is None for s in lazy)
+    assert len(runs) <= 4  # at most before and after the share, in each family
+    assert [lazy[g].name for g in range(len(lazy))] == [s.name for s in whole]
+    assert [s.name for s in lazy[3:40]] == [s.name for s in whole[3:40]]
+    columns = geometry_columns(whole)
+    a, b = SpecTable(lazy, scene.blocks, columns), SpecTable(whole, scene.blocks, columns)
+    assert list(a.names) == list(b.names) and a.parents == b.parents and a.labels == b.labels
+    for k in ("parent", "group", "material", "entry", "volume"):
+        assert np.array_equal(np.asarray(getattr(a, k)), np.asarray(getattr(b, k))), k
