@@ -111,7 +111,7 @@ def catalogue_bytes() -> int:
     return sum(f.width * np.dtype(f.dtype).itemsize for f in BLOCK if f.name in GATHERED)
 
 
-def spec_bytes(n: int = 60) -> float:
+def spec_bytes(n: int = 100) -> float:
     """Bytes a block of what every rank makes of every scene block at set-up, at its peak:
     the specs (pdem.model.build.expand_blocks), the gathered geometric scalars (as runs: the
     other rank's run of cubes stood in) and the spec table made from them, with a build

@@ -79,11 +79,21 @@ class Resolved:
         return Resolved(**d)
 
 
-def block_sizes(specs) -> np.ndarray:
-    """Equivalent size (cube root of the volume) of every block, gid order."""
+def block_sizes(specs, gids=None) -> np.ndarray:
+    """Equivalent size (cube root of the volume) of every block, gid order, or of blocks
+    ``gids`` (a SpecTable's)."""
     if hasattr(specs, "volume"):  # a SpecTable (after set-up): the column
-        return np.asarray(specs.volume) ** (1.0 / 3.0)
+        return np.asarray(specs.volume if gids is None else specs.volume[gids],
+                          float) ** (1.0 / 3.0)
     return np.array([s.volume for s in specs]) ** (1.0 / 3.0)
+
+
+def smallest_size(specs) -> float:
+    """The smallest block's equivalent size: over the distinct volumes of a SpecTable's
+    column (one a run: the same value as over every block, without a per-block array)."""
+    if hasattr(specs, "volume"):
+        return float((specs.volume.run_values() ** (1.0 / 3.0)).min())
+    return float(block_sizes(specs).min())
 
 
 def surface_areas(specs) -> np.ndarray:
@@ -294,7 +304,7 @@ def _alpha(scene) -> float:
 def contact_tolerance(scene, specs) -> float:
     """CTOL: ``contact.ctol``, or 2% of the smallest block's equivalent size."""
     cs = scene.contact
-    return float(0.02 * block_sizes(specs).min()) if cs.ctol == "auto" else float(cs.ctol)
+    return float(0.02 * smallest_size(specs)) if cs.ctol == "auto" else float(cs.ctol)
 
 
 def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None = None,
@@ -311,9 +321,11 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
     default ``glob``, every block. ``point_area`` and ``mscale`` are set on ``rows``."""
     cs = scene.contact
     rows = glob if rows is None else rows
-    sizes = block_sizes(specs)
     ctol = contact_tolerance(scene, specs)
-    rows.point_area[:] = (cs.point_area * sizes**2)[rows.gid]
+    has_table = hasattr(specs, "volume")
+    sizes = block_sizes(specs, rows.gid if has_table else None)
+    rows.point_area[:] = cs.point_area * sizes**2 if has_table \
+        else (cs.point_area * sizes**2)[rows.gid]
     if verts_max is None:
         refresh_pose(glob, 0.5 * ctol)
         verts_max = float(np.abs(glob.verts_world).max(initial=1.0))

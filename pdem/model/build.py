@@ -171,13 +171,13 @@ def _names(parts):
             yield from (sp.name for sp in part)
 
 
-def _column(parts, of_spec, of_run, dtype) -> np.ndarray:
+def _column(parts, of_spec, of_run, dtype) -> RunColumn:
     """A per-block column, part by part: ``of_spec(spec)`` of each built spec, ``of_run(run)``
-    for every member of an unbuilt run (the same for all of them)."""
-    return np.concatenate(
-        [np.full(part.count, of_run(part), dtype) if isinstance(part, UnbuiltRun)
-         else np.fromiter((of_spec(sp) for sp in part), dtype, len(part)) for part in parts]
-        or [np.zeros(0, dtype)])
+    for every member of an unbuilt run (one run: not expanded)."""
+    return RunColumn.from_parts(
+        [(part.count, of_run(part)) if isinstance(part, UnbuiltRun)
+         else np.fromiter((of_spec(sp) for sp in part), dtype, len(part)) for part in parts],
+        dtype)
 
 
 class SpecTable:
@@ -200,20 +200,19 @@ class SpecTable:
         # a block's parent (the scene block it was cut from): -1 for its own name (every
         # uncut block), else its row in ``parents`` (the few names that differ)
         parents: dict[str, int] = {}
-        self.parent = RunColumn(_column(
+        self.parent = _column(
             parts, lambda sp: -1 if sp.parent == sp.name
-            else parents.setdefault(sp.parent, len(parents)), lambda run: -1, np.int32))
+            else parents.setdefault(sp.parent, len(parents)), lambda run: -1, np.int32)
         self.parents = list(parents)
         labels: dict[str, int] = {}
-        self.group = RunColumn(_column(
+        self.group = _column(
             parts, lambda sp: labels.setdefault(sp.group, len(labels)),
-            lambda run: labels.setdefault(run.block.group, len(labels)), np.int32))
-        self.material = RunColumn(_column(
+            lambda run: labels.setdefault(run.block.group, len(labels)), np.int32)
+        self.material = _column(
             parts, lambda sp: labels.setdefault(sp.material, len(labels)),
-            lambda run: labels.setdefault(run.block.material, len(labels)), np.int32))
+            lambda run: labels.setdefault(run.block.material, len(labels)), np.int32)
         self.labels = list(labels)
-        self.entry = RunColumn(_column(parts, lambda sp: sp.entry, lambda run: run.entry,
-                                       np.int32))
+        self.entry = _column(parts, lambda sp: sp.entry, lambda run: run.entry, np.int32)
         if columns is None:
             columns = {k: np.fromiter((getattr(sp, k) for sp in specs), dt, n)
                        for k, dt in GEOMETRY_COLUMNS.items()}

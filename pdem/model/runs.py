@@ -60,20 +60,59 @@ class RunColumn:
         v = np.ascontiguousarray(np.asarray(values))
         starts = run_starts(v)
         parts = allgather(comm, (len(v), starts, v[starts]))
-        n = sum(p[0] for p in parts)
-        offset = np.cumsum([0] + [p[0] for p in parts[:-1]])
-        g_starts = np.concatenate([p[1] + o for p, o in zip(parts, offset, strict=True)]
-                                  + [np.zeros(0, np.int64)]).astype(np.int64)
-        g_values = np.concatenate([p[2] for p in parts] + [np.zeros(0, v.dtype)])
-        if len(g_values):  # a run that continues across a rank's boundary is one run
-            bits = g_values.view(np.dtype(f"u{g_values.dtype.itemsize}"))
-            keep = np.concatenate([[True], bits[1:] != bits[:-1]])
-            g_starts, g_values = g_starts[keep], g_values[keep]
-        if len(g_starts) * (8 + v.dtype.itemsize) <= RUNS_WORTH * n * v.dtype.itemsize:
-            col = cls.__new__(cls)
-            col._n, col._starts, col._values, col._plain = n, g_starts, g_values.copy(), None
+        col = cls._from_runs(parts, v.dtype)
+        return col if col is not None else cls(allgather_rows(comm, v))
+
+    @classmethod
+    def from_parts(cls, parts, dtype) -> RunColumn:
+        """The column of ``parts`` in order, each an array of values or ``(count, value)``
+        (a run made as such: an unbuilt family's members, pdem.model.speclist): the same
+        column as ``RunColumn`` of them expanded, without expanding them when runs are worth
+        keeping."""
+        dtype = np.dtype(dtype)
+        runs = []
+        for p in parts:
+            if isinstance(p, tuple):
+                count, value = p
+                runs.append((count, np.zeros(1 if count else 0, np.int64),
+                             np.full(1 if count else 0, value, dtype)))
+            else:
+                v = np.ascontiguousarray(np.asarray(p, dtype))
+                starts = run_starts(v)
+                runs.append((len(v), starts, v[starts]))
+        col = cls._from_runs(runs, dtype)
+        if col is not None:
             return col
-        return cls(allgather_rows(comm, v))
+        return cls(np.concatenate([np.full(p[0], p[1], dtype) if isinstance(p, tuple)
+                                   else np.asarray(p, dtype) for p in parts]
+                                  or [np.zeros(0, dtype)]))
+
+    @classmethod
+    def _from_runs(cls, parts, dtype) -> RunColumn | None:
+        """The column of consecutive pieces ``(rows, run starts, run values)``, runs that
+        continue across a piece's end merged (bitwise equal values); None when runs are not
+        worth keeping (the caller makes it plain)."""
+        dtype = np.dtype(dtype)
+        n = sum(p[0] for p in parts)
+        offset = np.cumsum([0] + [p[0] for p in parts])[:-1]
+        starts = np.concatenate([p[1] + o for p, o in zip(parts, offset, strict=True)]
+                                + [np.zeros(0, np.int64)]).astype(np.int64)
+        values = np.concatenate([np.asarray(p[2], dtype) for p in parts]
+                                + [np.zeros(0, dtype)])
+        if len(values):
+            bits = values.view(np.dtype(f"u{dtype.itemsize}"))
+            keep = np.concatenate([[True], bits[1:] != bits[:-1]])
+            starts, values = starts[keep], values[keep]
+        if len(starts) * (8 + dtype.itemsize) > RUNS_WORTH * n * dtype.itemsize:
+            return None
+        col = cls.__new__(cls)
+        col._n, col._starts, col._values, col._plain = n, starts, values.copy(), None
+        return col
+
+    def run_values(self) -> np.ndarray:
+        """The values, one per run (every row's when plain): what a minimum, a maximum or a
+        set of the column's values needs."""
+        return self._values if self._plain is None else self._plain
 
     @property
     def is_runs(self) -> bool:

@@ -3,6 +3,7 @@ released spec it came from, and a run keeps no shapes in them."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -207,3 +208,28 @@ def test_selection_by_names_and_groups_is_the_per_block_one(which):
                                 and (want_groups is None or table[g].group in want_groups)
                                 for g in gids], bool)
                 assert np.array_equal(got, ref), (which, want_names, want_groups)
+
+
+@pytest.mark.parametrize("parts", [
+    [(5, 3), np.array([3, 3, 4]), (0, 9), (2, 4), np.array([4])],  # runs across the parts
+    [np.arange(50.0)],  # too varied: plain
+    [(1000, np.nan), np.array([np.nan, -0.0, 0.0]), (10, -0.0)],
+    [],
+], ids=["merged", "plain", "nan-zero", "empty"])
+def test_run_column_from_parts_is_the_expanded_column(parts):
+    """``RunColumn.from_parts`` (a spec table's column made from an unbuilt family's runs
+    without expanding them) is bitwise ``RunColumn`` of the parts expanded."""
+    import numpy as np
+
+    from pdem.model.runs import RunColumn
+
+    dtype = np.float64 if any(isinstance(p, np.ndarray) and p.dtype.kind == "f" for p in parts) \
+        or any(isinstance(p, tuple) and isinstance(p[1], float) for p in parts) else np.int32
+    rows = np.concatenate([np.full(p[0], p[1], dtype) if isinstance(p, tuple)
+                           else np.asarray(p, dtype) for p in parts] or [np.zeros(0, dtype)])
+    got, ref = RunColumn.from_parts(parts, dtype), RunColumn(rows)
+    bits = np.dtype(f"u{np.dtype(dtype).itemsize}")
+    assert got.is_runs == ref.is_runs and len(got) == len(rows)
+    assert np.array_equal(np.asarray(got).view(bits), rows.view(bits))
+    if got.is_runs:
+        assert np.array_equal(got._starts, ref._starts)
