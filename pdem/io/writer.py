@@ -378,7 +378,10 @@ class OutputWriter:
         g = f.create_group("blocks")
         for key, texts in (("name", block_names), ("parent", block_parents or block_names)):
             self._write_texts(g, key, texts)
-        self._write_static(g.create_dataset("gid", (n,), dtype=np.int64), np.arange(n))
+        # gid and block_id from the rank's rows alone: an arange of every block was the
+        # writer's one O(N) array on every rank (8 bytes a block)
+        lo, hi = _share(self.comm.rank, self.comm.size, n) if self.parallel else (0, n)
+        self._write(g.create_dataset("gid", (n,), dtype=np.int64), (lo,), np.arange(lo, hi))
         self._series = {fd.output: series(f"blocks/{fd.output}", (n, *fd.shape), fd.dtype)
                         for fd in OUTPUT}
         for fd in OUTPUT:
@@ -388,7 +391,7 @@ class OutputWriter:
         self._write(s.create_dataset("connectivity", (self.n_tri, 3), np.int64), (self._tlo, 0),
                     self._conn if len(self._conn) else None)
         self._write_triangles(s.create_dataset("block_id", (self.n_tri,), np.int64),
-                              np.arange(n))
+                              np.arange(self._lo, self._hi), self._lo)
         self._points = series("surface/points", (self.n_points, 3), np.float64)
         self._points.attrs["units"] = "m"
         f.create_group("histories")
