@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..jit import inline_kernel, kernel
+from ..jit import force_kernel, inline_kernel, kernel
 from .laws import SLIPPING, apply_law, joint_dissipation, law_energy
 from .rigid import (
     add_point_force,
@@ -78,7 +78,7 @@ def carry_shear(fx, fy, fz, nx, ny, nz):
     return fx, fy, fz
 
 
-@kernel
+@force_kernel
 def contact_forces(dt, bodies, pairs, subs, joints, still):
     """Advance every sub-contact by one step and add the contact forces to the blocks.
 

@@ -27,7 +27,7 @@ from ..contact.rigid import (
     pair_motion,
     point_motion,
 )
-from ..jit import inline_kernel, kernel
+from ..jit import force_kernel, inline_kernel, kernel
 
 # dindex (rows,): zoned-block index of each block row, -1 for rigid; vel, force (N, 3): the
 # flat gridpoint velocities and contact forces; sc_node (S, 2, 3) gridpoints of sub-contact s
@@ -135,7 +135,7 @@ def _grid_force(grid, s, side, fx, fy, fz):
         f[g, 2] += w[s, side, i] * fz
 
 
-@kernel  # a call, not inlined: numba's IR inlining of the inlined joint law inside it warns
+@force_kernel  # a call, not inlined: numba's IR inlining of the inlined joint law inside it warns
 def _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny, nz):
     """One sub-contact's joint update from the relative velocity (as in contact_forces):
     returns the force on B and the energy the joint dissipated."""
@@ -168,7 +168,7 @@ def _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny, nz):
     return fx + fn * nx, fy + fn * ny, fz + fn * nz, dissipated
 
 
-@kernel
+@force_kernel
 def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
     """:func:`pdem.contact.forces.contact_forces` for a scene with zoned blocks (no held
     inactive contacts: ``solve.inactive`` is refused with zones). A zoned side's velocity and
