@@ -2,6 +2,7 @@
 in face contact from step 0. Prints block-steps/s and sub-contact-steps/s on one core.
 
     .venv/bin/python bench/cube_stack.py [n=10] [steps=500] [--algorithm fast|cundall]
+                                         [--repeat R]
 
 Issue floor 2e5 block-steps/s, target 1e6. Not a test: timings on shared machines are noisy.
 Measured (2026-11-23, 2 shared cores under load, alternating with the tree before):
@@ -18,6 +19,7 @@ Later: the force loop's roots near 1 by series (docs/validation.md): defaults (n
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 
 from mpi4py import MPI
@@ -27,30 +29,46 @@ from pdem.config import parse_scene
 from pdem.simulation import Simulation
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("n", type=int, nargs="?", default=10)
-    ap.add_argument("steps", type=int, nargs="?", default=500)
-    ap.add_argument("--algorithm", default="fast")
-    args = ap.parse_args()
+def one_run(args):
+    """Set up the stack and time ``args.steps`` steps after a 20-step warm-up: (set-up s, wall
+    s, CPU s, the solver)."""
     t0 = time.perf_counter()
-    solver = Simulation(parse_scene(cube_stack_scene(args.n, args.algorithm)), MPI.COMM_SELF, output=False)
+    solver = Simulation(parse_scene(cube_stack_scene(args.n, args.algorithm)), MPI.COMM_SELF,
+                        output=False)
     t_setup = time.perf_counter() - t0
     solver.run(steps=20)  # warm-up (compilation is cached after the first run)
     solver.state.timers.reset()
     t0, c0 = time.perf_counter(), time.process_time()
     solver.run(steps=args.steps)
-    el, cpu = time.perf_counter() - t0, time.process_time() - c0
-    nb = solver.blocks.n - 1
-    nsub = solver.contacts.n_sub
-    print(f"cube stack {args.n}^3 = {nb} cubes, {solver.contacts.n} contacts, {nsub} sub-contacts, "
-          f"algorithm={args.algorithm}")
-    print(f"set-up {t_setup:.2f} s; {args.steps} steps in {el:.3f} s ({cpu:.3f} s CPU)")
-    print(f"block-steps/s      {nb * args.steps / el:12.4g}")
-    # on a shared host the wall clock counts the other tenants' turns too
-    print(f"block-steps/CPU-s  {nb * args.steps / cpu:12.4g}")
-    print(f"sub-contact-steps/s {nsub * args.steps / el:12.4g}")
-    print(solver.state.timers.report())
+    return t_setup, time.perf_counter() - t0, time.process_time() - c0, solver
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("n", type=int, nargs="?", default=10)
+    ap.add_argument("steps", type=int, nargs="?", default=500)
+    ap.add_argument("--algorithm", default="fast")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="the same run this many times: prints each, then the best and median")
+    args = ap.parse_args()
+    rates = []
+    for _ in range(args.repeat):
+        t_setup, el, cpu, solver = one_run(args)
+        nb = solver.blocks.n - 1
+        nsub = solver.contacts.n_sub
+        print(f"cube stack {args.n}^3 = {nb} cubes, {solver.contacts.n} contacts, {nsub} "
+              f"sub-contacts, algorithm={args.algorithm}")
+        print(f"set-up {t_setup:.2f} s; {args.steps} steps in {el:.3f} s ({cpu:.3f} s CPU)")
+        print(f"block-steps/s      {nb * args.steps / el:12.4g}")
+        # on a shared host the wall clock counts the other tenants' turns too
+        print(f"block-steps/CPU-s  {nb * args.steps / cpu:12.4g}")
+        print(f"sub-contact-steps/s {nsub * args.steps / el:12.4g}")
+        print(solver.state.timers.report())
+        rates.append(nb * args.steps / cpu)
+    if args.repeat > 1:
+        # the same work each time: the spread is the host's (shared cores, frequency)
+        print(f"block-steps/CPU-s over {args.repeat} runs: best {max(rates):.4g}, median "
+              f"{statistics.median(rates):.4g}, worst {min(rates):.4g}")
 
 
 if __name__ == "__main__":
