@@ -6,19 +6,24 @@ of one spacing (pdem.model.rockmass: the cuts, then sliver joining), set up to t
 
 Prints, per spacing and rank count, the blocks made, the seconds of the build (the cuts and
 sliver joining: every rank gets every block) and of the whole set-up to the first step (the
-slowest rank). Run it against another tree with PYTHONPATH=that/tree to compare. Not a test:
-timings on shared machines are noisy.
+slowest rank), and the largest rank's resident memory before the set-up (kernels loaded) and
+at its peak, with what the model added per block. Run it against another tree with
+PYTHONPATH=that/tree to compare. Not a test: timings on shared machines are noisy.
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from pdem.memory import resident_mb
 
 SCENE = """
 name: jointed-{spacing}
@@ -57,18 +62,29 @@ def child(spacing: float) -> None:
             build[0] += time.perf_counter() - t0
 
     st.expand_blocks = timed
+    # the kernels loaded on a small rock mass first: the memory figures are the model's
+    Simulation(parse_scene(SCENE.format(spacing=20.0)), comm, output=False).run(steps=1)
+    build[0] = 0.0
+    gc.collect()
+    before = resident_mb()
     scene = parse_scene(SCENE.format(spacing=spacing))
     comm.Barrier()
     t0 = time.perf_counter()
     sim = Simulation(scene, comm, output=False)
     sim.run(steps=1)
     total = time.perf_counter() - t0
-    rows = comm.gather((build[0], total), root=0)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    gc.collect()
+    after = resident_mb()
+    rows = comm.gather((build[0], total, before, peak, after), root=0)
     if comm.rank == 0:
         print("RESULT " + json.dumps({"spacing": spacing, "ranks": comm.size,
                                       "blocks": sim.state.glob.n,
                                       "build": max(r[0] for r in rows),
-                                      "total": max(r[1] for r in rows)}), flush=True)
+                                      "total": max(r[1] for r in rows),
+                                      "before": max(r[2] for r in rows),
+                                      "peak": max(r[3] for r in rows),
+                                      "after": max(r[4] for r in rows)}), flush=True)
 
 
 def main() -> None:
@@ -82,7 +98,8 @@ def main() -> None:
         return
     py = sys.executable
     mpiexec = Path(py).with_name("mpiexec")
-    print(f"{'spacing':>8} {'ranks':>6} {'blocks':>8} {'build s':>9} {'set-up s':>9}")
+    print(f"{'spacing':>8} {'ranks':>6} {'blocks':>8} {'build s':>9} {'set-up s':>9} "
+          f"{'MB before':>10} {'peak MB':>8} {'after MB':>9} {'kB/block':>9} {'after':>6}")
     for spacing in args.spacing:
         for ranks in args.ranks:
             cmd = [str(mpiexec), "-n", str(ranks), py, __file__, "--child", str(spacing)]
@@ -93,8 +110,13 @@ def main() -> None:
                       f"{proc.stderr[-2000:]}")
                 continue
             r = json.loads(line[0][7:])
+            # kB/block: what the model added to a rank's resident memory (at the peak and
+            # after set-up), per block of the scene
+            per = 1024.0 * (r["peak"] - r["before"]) / r["blocks"]
+            kept = 1024.0 * (r["after"] - r["before"]) / r["blocks"]
             print(f"{spacing:>8g} {ranks:>6} {r['blocks']:>8} {r['build']:>9.2f} "
-                  f"{r['total']:>9.2f}", flush=True)
+                  f"{r['total']:>9.2f} {r['before']:>10.0f} {r['peak']:>8.0f} "
+                  f"{r['after']:>9.0f} {per:>9.2f} {kept:>6.2f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -11,8 +11,10 @@ made by a cut gets the tag passed with that cut (e.g. the joint set's index), so
 properties can later be chosen per joint set.
 
 Conventions: x = east, y = north, z = up; dip in degrees below horizontal, dip direction in
-degrees clockwise from north. These functions run once at model build, so they are plain
-per-block numpy/Python.
+degrees clockwise from north. These functions run once at model build, per block, in numpy and
+Python, except the clipping of a piece's faces (``_clip_kernel``), its half-edges and mass
+properties (pdem.geometry.topology, .mass): compiled, as a rock mass makes thousands of pieces
+a second through them.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from pdem.geometry.builders import _BOX_NORMALS
 from pdem.geometry.errors import GeometryError
 from pdem.geometry.hull import _hull_faces, default_tolerance
 from pdem.geometry.polyhedron import ConvexPolyhedron
+from pdem.jit import kernel
 
 from .vector import cross
 
@@ -170,73 +173,18 @@ class _Cut:
             return self._clip_hull(side, n, d)
 
     # -------------------------------------------------------------- direct face clipping
-    def _edge_point(self, p: int, q: int) -> int:
-        nv = self.poly.n_vertices
-        key = min(p, q) * nv + max(p, q)
-        return nv + int(np.searchsorted(self.edge_key, key))
-
-    def _clip_face(self, ids: np.ndarray, side: np.ndarray) -> list[int]:
-        """Sutherland-Hodgman clip of one face polygon to ``side <= 0`` (global point ids)."""
-        out = []
-        k = len(ids)
-        for i in range(k):
-            p, q = int(ids[i]), int(ids[(i + 1) % k])
-            if side[p] <= 0:
-                out.append(p)
-            if side[p] * side[q] < 0:
-                out.append(self._edge_point(p, q))
-        return out
-
-    def _on_plane(self, ids, side) -> list[int]:
-        nv = self.poly.n_vertices
-        return [i for i in ids if i >= nv or side[i] == 0]
-
     def _clip_faces(self, side: np.ndarray, n: np.ndarray, d: float) -> ConvexPolyhedron:
         poly = self.poly
-        tags = face_tags(poly)
-        faces, normals, offsets, ftags = [], [], [], []
-        for f in range(poly.n_faces):
-            ids = self._clip_face(poly.face_vertex_ids(f), side)
-            if len(ids) >= 3 and len(self._on_plane(ids, side)) < len(ids):
-                faces.append(ids)
-                normals.append(poly.normals[f])
-                offsets.append(poly.offsets[f])
-                ftags.append(tags[f])
-        cap_ids = sorted({i for ids in faces for i in self._on_plane(ids, side)})
-        remap = self._merge_close(cap_ids)
-        faces = [_drop_repeats([remap.get(i, i) for i in ids]) for ids in faces]
-        keep = [k for k, ids in enumerate(faces) if len(ids) >= 3]
-        cap = self._cap_ring(sorted(set(remap.values())), n)
-        faces = [faces[k] for k in keep] + [cap]
-        normals = np.array([normals[k] for k in keep] + [n])
-        offsets = np.array([offsets[k] for k in keep] + [d])
-        ftags = np.array([ftags[k] for k in keep] + [self.tag], dtype=np.int64)
-        used = np.array(sorted({i for ids in faces for i in ids}), dtype=np.int64)
-        local = {int(g): k for k, g in enumerate(used)}
-        faces = [[local[i] for i in ids] for ids in faces]
-        piece = ConvexPolyhedron.from_faces(self.points[used], faces, normals, offsets)
-        return piece.with_face_tag(ftags)
-
-    def _merge_close(self, ids: list[int]) -> dict[int, int]:
-        """Map each on-plane point id to the smallest id within round-off of it."""
-        p = self.points[ids]
-        close = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2) <= self.snap
-        rep = {}
-        for k, i in enumerate(ids):
-            rep[i] = ids[int(np.argmax(close[k]))]  # first True: the smallest close id
-        return rep
-
-    def _cap_ring(self, ids: list[int], n: np.ndarray) -> list[int]:
-        """Cap polygon through the on-plane points, counter-clockwise seen along ``n``."""
-        if len(ids) < 3:
+        ok, start, verts, kept, used = _clip_kernel(
+            self.points, poly.n_vertices, poly.face_start, poly.face_verts, side,
+            self.edge_key, self.snap, n)
+        if not ok:
             raise GeometryError("cut section has fewer than 3 distinct corners")
-        p = self.points[ids]
-        u = cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-        u /= np.linalg.norm(u)
-        w = cross(n, u)  # (u, w, n) right-handed: increasing angle is CCW seen along n
-        q = p - p.mean(axis=0)
-        order = np.argsort(np.arctan2(q @ w, q @ u), kind="stable")
-        return [ids[k] for k in order]
+        normals = np.concatenate([poly.normals[kept], n[None, :]])
+        offsets = np.concatenate([poly.offsets[kept], [d]])
+        ftags = np.concatenate([face_tags(poly)[kept], [self.tag]]).astype(np.int64)
+        return ConvexPolyhedron.from_csr(self.points[used], start, verts, normals, offsets,
+                                         ftags)
 
     # -------------------------------------------------------------- fallback: hull
     def _clip_hull(self, side: np.ndarray, n: np.ndarray, d: float) -> ConvexPolyhedron:
@@ -256,11 +204,6 @@ class _Cut:
         )
 
 
-def _drop_repeats(ids: list[int]) -> list[int]:
-    """Remove cyclically consecutive repeated ids from a polygon."""
-    return [i for k, i in enumerate(ids) if i != ids[k - 1]] if len(ids) > 1 else ids
-
-
 def _match_plane(face_pts: np.ndarray, cand_n: np.ndarray, cand_d: np.ndarray) -> int:
     """Index of the candidate plane that a face polygon lies on (smallest distance)."""
     area = cross(face_pts - face_pts[0], np.roll(face_pts, -1, axis=0) - face_pts[0]).sum(axis=0)
@@ -271,6 +214,135 @@ def _match_plane(face_pts: np.ndarray, cand_n: np.ndarray, cand_d: np.ndarray) -
     if not np.isfinite(err[k]):
         raise GeometryError("a cut piece's face lies on none of the cutting planes")
     return k
+
+
+# ---------------------------------------------------------------------------- the face clip
+@kernel
+def _clip_kernel(points, nv, face_start, face_verts, side, edge_key, snap, n):
+    """One piece of a plane cut, compiled (every cut piece of a rock mass is made here: in
+    Python, per face and per point, it was most of a rock mass's build).
+
+    Each face polygon is clipped to ``side <= 0`` (Sutherland-Hodgman; a crossing edge's point
+    is ``nv +`` its index in ``edge_key``); a face left with 3 or more points not all on the
+    plane is kept. The points on the plane (cut points and vertices with ``side == 0``) within
+    ``snap`` of a smaller one become it; repeats in a face are dropped; the cap is the merged
+    points on the plane, counter-clockwise seen along ``n``. Returns ``(ok, face_start,
+    face_verts, kept, used)``: the faces (the kept ones, then the cap) over the local ids
+    ``0..len(used)``, ``kept`` the parent's indices of the kept faces, ``used`` the points
+    used; ``ok`` False when the cap has fewer than 3 distinct corners."""
+    nf = face_start.shape[0] - 1
+    cap_total = face_verts.shape[0] * 2 + 2
+    start = np.zeros(nf + 2, np.int64)
+    ids = np.empty(cap_total + points.shape[0], np.int64)
+    kept = np.empty(nf, np.int64)
+    nk = 0
+    pos = 0
+    for f in range(nf):
+        f0 = face_start[f]
+        k = face_start[f + 1] - f0
+        p0 = pos
+        on = 0
+        for i in range(k):
+            p = face_verts[f0 + i]
+            q = face_verts[f0 + (i + 1) % k]
+            if side[p] <= 0:
+                ids[pos] = p
+                pos += 1
+                on += 1 if side[p] == 0 else 0
+            if side[p] * side[q] < 0:
+                key = min(p, q) * nv + max(p, q)
+                ids[pos] = nv + np.searchsorted(edge_key, key)
+                pos += 1
+                on += 1
+        if pos - p0 >= 3 and on < pos - p0:
+            kept[nk] = f
+            nk += 1
+            start[nk] = pos
+        else:
+            pos = p0
+    # the points on the plane, sorted, and each merged into the smallest one within snap
+    on_plane = np.zeros(points.shape[0], np.bool_)
+    for j in range(pos):
+        i = ids[j]
+        if i >= nv or side[i] == 0:
+            on_plane[i] = True
+    cap_ids = np.nonzero(on_plane)[0]
+    rep = np.arange(points.shape[0])
+    for a in range(cap_ids.shape[0]):
+        i = cap_ids[a]
+        for b in range(cap_ids.shape[0]):
+            g = cap_ids[b]
+            dx = points[i, 0] - points[g, 0]
+            dy = points[i, 1] - points[g, 1]
+            dz = points[i, 2] - points[g, 2]
+            if np.sqrt(dx * dx + dy * dy + dz * dz) <= snap:
+                rep[i] = g
+                break
+    # the kept faces remapped, their cyclic repeats dropped; faces left with < 3 points go
+    out = np.empty_like(ids)
+    ostart = np.zeros(nk + 2, np.int64)
+    okept = np.empty(nk, np.int64)
+    no = 0
+    opos = 0
+    for m in range(nk):
+        s0 = start[m]
+        s1 = start[m + 1]
+        k = s1 - s0
+        o0 = opos
+        for j in range(k):
+            cur = rep[ids[s0 + j]]
+            prev = rep[ids[s0 + (j - 1) % k]]
+            if k <= 1 or cur != prev:
+                out[opos] = cur
+                opos += 1
+        if opos - o0 >= 3:
+            okept[no] = kept[m]
+            no += 1
+            ostart[no] = opos
+        else:
+            opos = o0
+    # the cap ring: the distinct merged points, by angle about their mean seen along n
+    is_rep = np.zeros(points.shape[0], np.bool_)
+    for a in range(cap_ids.shape[0]):
+        is_rep[rep[cap_ids[a]]] = True
+    ring = np.nonzero(is_rep)[0]
+    kr = ring.shape[0]
+    if kr < 3:
+        return False, ostart, out, okept, ring
+    ax = np.argmin(np.abs(n))
+    e = np.zeros(3)
+    e[ax] = 1.0
+    u = np.array([n[1] * e[2] - n[2] * e[1], n[2] * e[0] - n[0] * e[2], n[0] * e[1] - n[1] * e[0]])
+    u /= np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    w = np.array([n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]])
+    mean = np.zeros(3)
+    for a in range(kr):
+        for c in range(3):
+            mean[c] += points[ring[a], c]
+    mean /= kr
+    angle = np.empty(kr)
+    for a in range(kr):
+        qx = points[ring[a], 0] - mean[0]
+        qy = points[ring[a], 1] - mean[1]
+        qz = points[ring[a], 2] - mean[2]
+        angle[a] = np.arctan2(qx * w[0] + qy * w[1] + qz * w[2], qx * u[0] + qy * u[1] + qz * u[2])
+    order = np.argsort(angle, kind="mergesort")
+    for a in range(kr):
+        out[opos] = ring[order[a]]
+        opos += 1
+    ostart[no + 1] = opos
+    # local ids: the used points in increasing order
+    used_mask = np.zeros(points.shape[0], np.bool_)
+    for j in range(opos):
+        used_mask[out[j]] = True
+    used = np.nonzero(used_mask)[0]
+    local = np.full(points.shape[0], -1, np.int64)
+    for a in range(used.shape[0]):
+        local[used[a]] = a
+    verts = np.empty(opos, np.int64)
+    for j in range(opos):
+        verts[j] = local[out[j]]
+    return True, ostart[:no + 2], verts, okept[:no], used
 
 
 # ---------------------------------------------------------------------------- joint sets

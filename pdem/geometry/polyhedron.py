@@ -155,6 +155,15 @@ class ConvexPolyhedron:
             if faces
             else np.empty(0, dtype=np.int64)
         )
+        return cls.from_csr(v, face_start, face_verts, normals, offsets)
+
+    @classmethod
+    def from_csr(cls, v, face_start, face_verts, normals=None, offsets=None,
+                 face_tag=None) -> ConvexPolyhedron:
+        """:meth:`from_faces` with the faces in CSR form (``face_start``, ``face_verts``,
+        int64) and ``v`` a finite (nv, 3) float64 array; ``face_tag``: one int64 per face
+        (:meth:`with_face_tag` without the copy)."""
+        faces = range(len(face_start) - 1)  # the face count, for the offsets below
         if face_verts.size and (face_verts.min() < 0 or face_verts.max() >= len(v)):
             raise GeometryError("face vertex id out of range")
         he = build_half_edges(len(v), face_start, face_verts)
@@ -194,6 +203,7 @@ class ConvexPolyhedron:
             volume=volume,
             centroid=_readonly(centroid, np.float64),
             inertia=_readonly(inertia, np.float64),
+            face_tag=None if face_tag is None else _readonly(face_tag, np.int64),
         )
 
     def with_face_tag(self, face_tag) -> ConvexPolyhedron:
