@@ -5,8 +5,7 @@ and ``block excavate``.
 Applied in that order to the blocks the ``blocks:`` entries make (pdem.model.build). Everything
 here runs once at model build, on every rank alike, so it is plain numpy (the geometry it
 calls per piece is compiled: the clips, the touch areas of pdem.geometry.intersection); the
-order of the
-resulting blocks (their gids) depends only on the scene.
+order of the resulting blocks (their gids) depends only on the scene.
 
 * A cut splits every selected one-piece block by each plane of its set; faces made by cut ``i``
   carry face tag ``i`` (the contact between two faces of one set uses the set's joint,
