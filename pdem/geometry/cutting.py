@@ -29,6 +29,7 @@ from pdem.geometry.hull import _hull_faces, default_tolerance
 from pdem.geometry.polyhedron import ConvexPolyhedron
 from pdem.jit import kernel
 
+from .intersection import ring_order
 from .vector import cross
 
 #: Tag of a face that no cut has labelled (the original model surface).
@@ -309,24 +310,7 @@ def _clip_kernel(points, nv, face_start, face_verts, side, edge_key, snap, n):
     kr = ring.shape[0]
     if kr < 3:
         return False, ostart, out, okept, ring
-    ax = np.argmin(np.abs(n))
-    e = np.zeros(3)
-    e[ax] = 1.0
-    u = np.array([n[1] * e[2] - n[2] * e[1], n[2] * e[0] - n[0] * e[2], n[0] * e[1] - n[1] * e[0]])
-    u /= np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-    w = np.array([n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]])
-    mean = np.zeros(3)
-    for a in range(kr):
-        for c in range(3):
-            mean[c] += points[ring[a], c]
-    mean /= kr
-    angle = np.empty(kr)
-    for a in range(kr):
-        qx = points[ring[a], 0] - mean[0]
-        qy = points[ring[a], 1] - mean[1]
-        qz = points[ring[a], 2] - mean[2]
-        angle[a] = np.arctan2(qx * w[0] + qy * w[1] + qz * w[2], qx * u[0] + qy * u[1] + qz * u[2])
-    order = np.argsort(angle, kind="mergesort")
+    order = ring_order(points[ring], n)
     for a in range(kr):
         out[opos] = ring[order[a]]
         opos += 1

@@ -17,7 +17,33 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import kernel
+from ..jit import inline_kernel, kernel
+
+
+@inline_kernel
+def ring_order(xyz, n):
+    """The order of the points ``xyz`` (k, 3) of a convex polygon in the plane of unit normal
+    ``n`` counter-clockwise seen along ``n``: by angle about their mean, in the basis ``u = n x
+    e`` (e the axis least along n), ``w = n x u``, (u, w, n) right-handed. A cap of a cut is
+    then outward for the piece whose side the normal leaves."""
+    e = np.zeros(3)
+    e[np.argmin(np.abs(n))] = 1.0
+    u = np.array([n[1] * e[2] - n[2] * e[1], n[2] * e[0] - n[0] * e[2], n[0] * e[1] - n[1] * e[0]])
+    u /= np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    w = np.array([n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]])
+    k = xyz.shape[0]
+    mean = np.zeros(3)
+    for a in range(k):
+        for c in range(3):
+            mean[c] += xyz[a, c]
+    mean /= k
+    angle = np.empty(k)
+    for a in range(k):
+        qx = xyz[a, 0] - mean[0]
+        qy = xyz[a, 1] - mean[1]
+        qz = xyz[a, 2] - mean[2]
+        angle[a] = np.arctan2(qx * w[0] + qy * w[1] + qz * w[2], qx * u[0] + qy * u[1] + qz * u[2])
+    return np.argsort(angle, kind="mergesort")
 
 
 @kernel
@@ -77,36 +103,12 @@ def _clip_soup(pts, start, n_faces, n, d, tol, scratch_pts, scratch_start):
             scratch_start[nf] = out
         else:
             out = o0
-    if ncap >= 3 and nf > 0:
-        # the cap: its points by angle about their mean, counter-clockwise seen along n
-        ax = np.argmin(np.abs(n))
-        e = np.zeros(3)
-        e[ax] = 1.0
-        u = np.array([n[1] * e[2] - n[2] * e[1], n[2] * e[0] - n[0] * e[2],
-                      n[0] * e[1] - n[1] * e[0]])
-        u /= np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-        w = np.array([n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2],
-                      n[0] * u[1] - n[1] * u[0]])
-        mean = np.zeros(3)
+    if ncap >= 3 and nf > 0:  # the cap, counter-clockwise seen along n (outward)
+        cap = scratch_pts[cap0 - ncap + 1:cap0 + 1][::-1].copy()
+        order = ring_order(cap, n)
         for a in range(ncap):
             for c in range(3):
-                mean[c] += scratch_pts[cap0 - a, c]
-        mean /= ncap
-        angle = np.empty(ncap)
-        for a in range(ncap):
-            qx = scratch_pts[cap0 - a, 0] - mean[0]
-            qy = scratch_pts[cap0 - a, 1] - mean[1]
-            qz = scratch_pts[cap0 - a, 2] - mean[2]
-            angle[a] = np.arctan2(qx * w[0] + qy * w[1] + qz * w[2],
-                                  qx * u[0] + qy * u[1] + qz * u[2])
-        order = np.argsort(angle, kind="mergesort")
-        cap = np.empty((ncap, 3))
-        for a in range(ncap):
-            for c in range(3):
-                cap[a, c] = scratch_pts[cap0 - order[a], c]
-        for a in range(ncap):
-            for c in range(3):
-                scratch_pts[out, c] = cap[a, c]
+                scratch_pts[out, c] = cap[order[a], c]
             out += 1
         nf += 1
         scratch_start[nf] = out
