@@ -77,7 +77,9 @@ class ConvexPolyhedron:
     edges : (ne, 2) int64
         Unique edges ``(i, j)`` with ``i < j``, sorted lexicographically.
     he_origin, he_twin, he_next, he_face : (sum,) int64
-        Half-edge start vertex, opposite half-edge, next half-edge around the same face, face.
+        Half-edge start vertex, opposite half-edge, next half-edge around the same face, face
+        (properties: made on first use and kept; a rock mass holds every cut piece on every
+        rank at set-up, and their five arrays were ~40 % of a piece).
     vert_he : (nv,) int64
         One outgoing half-edge per vertex; ``he_next[he_twin[h]]`` is the next outgoing
         half-edge around the vertex, so faces/edges at a vertex cost O(degree).
@@ -100,11 +102,6 @@ class ConvexPolyhedron:
     normals: np.ndarray
     offsets: np.ndarray
     edges: np.ndarray
-    he_origin: np.ndarray
-    he_twin: np.ndarray
-    he_next: np.ndarray
-    he_face: np.ndarray
-    vert_he: np.ndarray
     volume: float
     centroid: np.ndarray
     inertia: np.ndarray
@@ -195,11 +192,6 @@ class ConvexPolyhedron:
             normals=_readonly(n, np.float64),
             offsets=_readonly(d, np.float64),
             edges=_readonly(he.edges, np.int64),
-            he_origin=_readonly(he.origin, np.int64),
-            he_twin=_readonly(he.twin, np.int64),
-            he_next=_readonly(he.next, np.int64),
-            he_face=_readonly(he.face, np.int64),
-            vert_he=_readonly(he.vert_he, np.int64),
             volume=volume,
             centroid=_readonly(centroid, np.float64),
             inertia=_readonly(inertia, np.float64),
@@ -271,6 +263,36 @@ class ConvexPolyhedron:
             face_areas([self])
             areas = self.__dict__["_face_areas"]
         return areas
+
+    # ------------------------------------------------------------------ half-edges
+    def _half_edges(self):
+        he = self.__dict__.get("_he")
+        if he is None:  # checked when the polyhedron was made: the same arrays again
+            he = build_half_edges(self.n_vertices, self.face_start, self.face_verts)
+            for a in (he.origin, he.twin, he.next, he.face, he.vert_he):
+                a.flags.writeable = False
+            self.__dict__["_he"] = he
+        return he
+
+    @property
+    def he_origin(self) -> np.ndarray:
+        return self._half_edges().origin
+
+    @property
+    def he_twin(self) -> np.ndarray:
+        return self._half_edges().twin
+
+    @property
+    def he_next(self) -> np.ndarray:
+        return self._half_edges().next
+
+    @property
+    def he_face(self) -> np.ndarray:
+        return self._half_edges().face
+
+    @property
+    def vert_he(self) -> np.ndarray:
+        return self._half_edges().vert_he
 
     def vertex_half_edges(self, v: int) -> np.ndarray:
         """Outgoing half-edges of vertex ``v``, walking clockwise seen from outside."""
