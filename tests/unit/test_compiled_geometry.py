@@ -114,3 +114,16 @@ def test_topology_errors_name_the_fault(nv, faces, msg):
     start, verts = _faces(faces)
     with pytest.raises(GeometryError, match=msg):
         build_half_edges(nv, start, verts)
+
+
+def test_half_edges_of_a_hull_of_many_points():
+    """A scanned boulder's hull (2,000 points on a sphere, ~12,000 half-edges): the compiled
+    build equals the definition, with the twins found by sorted keys."""
+    rng = np.random.default_rng(7)
+    p = rng.normal(size=(2000, 3))
+    poly = convex_hull(p / np.linalg.norm(p, axis=1)[:, None])
+    he = build_half_edges(len(poly.vertices), poly.face_start, poly.face_verts)
+    nxt, twin, edges = reference_edges(poly.face_start, poly.face_verts)
+    assert len(twin) > 10_000
+    assert np.array_equal(he.twin, twin) and np.array_equal(he.next, nxt)
+    assert np.array_equal(he.edges, edges)
