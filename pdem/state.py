@@ -465,21 +465,26 @@ class ModelState:
             if sum(counts) != reader.n_sub:  # every rank alike: the sum is everyone's
                 raise UserError(f"cannot restart from {path}: contacts/nsub counts "
                                 f"{sum(counts)} sub-contacts, the file holds {reader.n_sub}")
-            part = self._checked(lambda: reader.contact_range(c0, c1, nsub,
-                                                              sum(counts[:comm.rank])), path)
-            return self._route(part, owner)
+            s0 = sum(counts[:comm.rank])
+            known = self._checked(lambda: reader.contact_blocks(c0, c1), path)
+            ga, gb = known["ga"], known["gb"]
+            fixed = self.glob.fixed  # to the owners of their free blocks
 
-        self._restore_share(out, None, lambda owned: rows, None, path, placed=placed)
+            def keys(lo, hi):
+                return known["pga"][lo:hi].astype(np.int64) * KEY_SHIFT + known["pgb"][lo:hi]
 
-    def _route(self, part: ContactStore, owner: np.ndarray) -> ContactStore:
-        """Contacts read by this rank (``part``) to the ranks that will own a free block of
-        theirs (``owner``: every block's, by gid; collective); returns those sent here, in
-        file (key) order."""
-        fixed = self.glob.fixed
-        ga, gb = part.ga, part.gb
-        to_a = np.where(fixed[ga] == 0, owner[ga], -1)
-        to_b = np.where(fixed[gb] == 0, owner[gb], -1)
-        return route_contacts(self.comm, part, to_a, to_b)
+            def read(lo, hi):
+                return self._checked(lambda: reader.contact_range(
+                    c0 + lo, c0 + hi, nsub[lo:hi], s0 + int(nsub[:lo].sum()),
+                    known={k: v[lo:hi] for k, v in known.items()}), path)
+
+            return route_contacts(comm, np.where(fixed[ga] == 0, owner[ga], -1),
+                                  np.where(fixed[gb] == 0, owner[gb], -1), nsub, keys,
+                                  reader.contact_batches(nsub), read)
+
+        held = [rows]  # given to the rebuild, then dropped: not kept while the contacts come
+        del rows
+        self._restore_share(out, None, lambda owned: held.pop(), None, path, placed=placed)
 
     def _restore_share(self, out, x, block_rows, contacts, path, read: bool = True,
                        placed=None):

@@ -169,6 +169,9 @@ def _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s) -> None:
         d[off_c:off_c + counts[0]] = nsub
 
 
+# bytes (as stored) of a batch of contacts that a restart reads and sends before the next
+READ_BATCH = 8 << 20
+
 # rows between two wanted ones that a read takes along rather than starting a new read
 READ_GAP = 256
 
@@ -180,6 +183,8 @@ def _read_rows(dset, rows: np.ndarray) -> np.ndarray:
         return np.zeros((0, *dset.shape[1:]), dset.dtype)
     if len(rows) == dset.shape[0]:
         return dset[()]
+    if int(rows[-1]) - int(rows[0]) + 1 == len(rows):  # a range: one slice, not copied again
+        return dset[int(rows[0]):int(rows[-1]) + 1]
     breaks = np.nonzero(np.diff(rows) > READ_GAP)[0] + 1
     parts = []
     for chunk in np.split(rows, breaks):
@@ -329,12 +334,51 @@ class CheckpointReader:
         c0, c1 = _share(rank, size, self.n_contacts)
         return c0, c1, self._counts(c0, c1)
 
-    def contact_range(self, c0: int, c1: int, nsub: np.ndarray, s0: int) -> ContactStore:
+    def contact_blocks(self, c0: int, c1: int) -> dict[str, np.ndarray]:
+        """The blocks and pieces of contacts ``c0:c1`` (``ga gb pga pgb``), the blocks checked
+        to be the model's: what decides where the contacts go, and their order there, before
+        the rest is read (:meth:`contact_range`)."""
+        rows = np.arange(c0, c1)
+        out = {}
+        for fd in CONTACT_CK:
+            if fd.name in ("ga", "gb", "pga", "pgb") and f"contacts/{fd.name}" in self.f:
+                out[fd.name] = self._declared(f"contacts/{fd.name}", fd,
+                                              _read_rows(self.f[f"contacts/{fd.name}"], rows))
+        for k in ("ga", "gb"):
+            a = out[k]
+            if len(a) and not ((a >= 0) & (a < self.n_blocks)).all():
+                raise ValueError(f"{self.path}: contacts/{k} names blocks outside "
+                                 f"0..{self.n_blocks - 1}")
+        for piece, block in (("pga", "ga"), ("pgb", "gb")):
+            if piece not in out:  # format <= 2: every block one piece
+                out[piece] = out[block].copy()
+        return out
+
+    def contact_batches(self, nsub: np.ndarray, budget: int | None = None) -> np.ndarray:
+        """Batches of a share of contacts (sub-contact counts ``nsub``) of about ``budget``
+        bytes each as stored: their first rows and the end (a restart reads and sends its
+        share batch by batch, pdem.parallel.migrate.route_contacts)."""
+        def row_bytes(group, fields):
+            return sum(self.f[f"{group}/{fd.name}"].dtype.itemsize
+                       * int(np.prod(self.f[f"{group}/{fd.name}"].shape[1:], dtype=np.int64))
+                       for fd in fields if f"{group}/{fd.name}" in self.f)
+
+        budget = budget or READ_BATCH
+        per = row_bytes("contacts", CONTACT_CK) + row_bytes("subcontacts", SUB_CK + (SUB_GRID,)
+                                                            ) * nsub.astype(np.int64)
+        end = np.cumsum(per)
+        k = max(1, -(-int(end[-1]) // budget)) if len(end) else 1
+        cuts = np.searchsorted(end, budget * np.arange(1, k), side="right")
+        return np.concatenate([[0], cuts, [len(nsub)]]).astype(np.int64)
+
+    def contact_range(self, c0: int, c1: int, nsub: np.ndarray, s0: int,
+                      known: dict | None = None) -> ContactStore:
         """Contacts ``c0:c1`` (sub-contact counts ``nsub``, the first of their sub-contacts at
-        row ``s0``): one slice of each dataset; their blocks are checked to be the model's."""
+        row ``s0``): one slice of each dataset; their blocks are checked to be the model's.
+        ``known``: columns already read (:meth:`contact_blocks`), not read again."""
         rows = np.arange(c0, c1)
         start = csr.starts(nsub)
-        part = self._contact_store(rows, np.arange(s0, s0 + int(start[-1])), start)
+        part = self._contact_store(rows, np.arange(s0, s0 + int(start[-1])), start, known)
         for k in ("ga", "gb"):
             a = part.arrays[k]
             if len(a) and not ((a >= 0) & (a < self.n_blocks)).all():
@@ -342,10 +386,12 @@ class CheckpointReader:
                                  f"0..{self.n_blocks - 1}")
         return part
 
-    def _contact_store(self, rows, sub_rows, start) -> ContactStore:
+    def _contact_store(self, rows, sub_rows, start, known=None) -> ContactStore:
         f = self.f
-        arrays = {fd.name: self._declared(f"contacts/{fd.name}", fd,
-                                          _read_rows(f[f"contacts/{fd.name}"], rows))
+        known = known or {}
+        arrays = {fd.name: known[fd.name] if fd.name in known else
+                  self._declared(f"contacts/{fd.name}", fd,
+                                 _read_rows(f[f"contacts/{fd.name}"], rows))
                   for fd in CONTACT_CK if f"contacts/{fd.name}" in f}
         for piece, block in (("pga", "ga"), ("pgb", "gb")):
             if piece not in arrays:  # format <= 2: every block one piece

@@ -343,21 +343,31 @@ def allgather_rows(comm, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def alltoall_rows(comm, values: np.ndarray, counts) -> np.ndarray:
+def alltoall_rows(comm, values: np.ndarray, counts, out: np.ndarray | None = None
+                  ) -> np.ndarray:
     """Rows of ``values``, grouped by destination (``counts[r]`` rows, in order, to rank r),
-    sent to their ranks; returns the rows received, in rank order. One Alltoallv of the raw
-    bytes, not a pickle of each part: a restart's contacts (hundreds of MB at 10^6 blocks)."""
+    sent to their ranks; returns the rows received, in rank order (into ``out`` if given: it
+    must hold exactly the rows received). One Alltoallv of the raw bytes, not a pickle of
+    each part: a restart's contacts (hundreds of MB at 10^6 blocks)."""
     values = np.ascontiguousarray(values)
     if comm.size == 1:
-        return values
+        if out is None:
+            return values
+        out[...] = values
+        return out
     from mpi4py import MPI
 
     counts = np.asarray(counts, np.int64)
     got = np.empty(comm.size, np.int64)
     comm.Alltoall(counts, got)
-    out = np.empty((int(got.sum()), *values.shape[1:]), values.dtype)
+    shape = (int(got.sum()), *values.shape[1:])
+    if out is None:
+        out = np.empty(shape, values.dtype)
+    elif out.shape != shape or out.dtype != values.dtype or not out.flags.c_contiguous:
+        raise ValueError(f"alltoall_rows: out is {out.dtype}{out.shape}, the rows received "
+                         f"{values.dtype}{shape}")
     row_bytes = values.dtype.itemsize * int(np.prod(values.shape[1:], dtype=np.int64))
-    if row_bytes == 0:  # columns of zero width (a law without history)
+    if row_bytes == 0:  # the same column on every rank: all skip alike
         return out
     send, recv = counts * row_bytes, got * row_bytes
     comm.Alltoallv([values.view(np.uint8).reshape(-1), send,

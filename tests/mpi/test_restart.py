@@ -207,3 +207,68 @@ def test_restart_with_the_whole_scene_on_every_rank_is_bitwise(tmp_path):
         assert step == 2 * half
         for k in FIELDS:
             assert np.array_equal(got[k], ref[k]), (release, k)
+
+
+@pytest.mark.mpi(min_size=2)
+def test_restart_read_in_small_batches_and_from_format_2_is_bitwise(tmp_path, monkeypatch):
+    """Each rank reads and sends its share of the contacts in batches (pdem.io.checkpoint
+    READ_BATCH, here a contact or two each, so the ranks read different numbers of batches),
+    from the current format and from one in format 2's layout (no piece columns, int64
+    state bits, int32 types, 6 held columns, a stored normal force): the restart continues
+    bitwise as the straight run, with its contacts in key order."""
+    comm = MPI.COMM_WORLD
+    d = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
+    os.makedirs(d, exist_ok=True)
+    half = 400
+    text = SCENE.format(steps=2 * half, half=half, out=f"{d}/straight.h5", ck=f"{d}/ck")
+    s = Simulation(parse_scene(text), comm)
+    s.run()
+    s.close()
+    ref, _ = final_state(f"{d}/straight.h5")
+    good = f"{d}/ck-{half:09d}.h5"
+    old = f"{d}/old.h5"
+    if comm.rank == 0:
+        import shutil
+
+        shutil.copy(good, old)
+        with h5py.File(old, "a") as f:
+            for name, dtype in (("subcontacts/sc_state", np.int64),
+                                ("contacts/ctype", np.int32)):
+                data = f[name][()].astype(dtype)
+                del f[name]
+                f.create_dataset(name, data=data)
+            n = len(f["contacts/nsub"])
+            del f["contacts/held"], f["contacts/pga"], f["contacts/pgb"]
+            f.create_dataset("contacts/held", data=np.zeros((n, 6)))
+            f.create_dataset("subcontacts/sc_fn", data=np.full(len(f["subcontacts/sc_un"]),
+                                                               -1e9))
+            f.attrs["format_version"] = 2
+    comm.Barrier()
+    monkeypatch.setattr(checkpoint_io, "READ_BATCH", 300)  # bytes: a contact or two
+    read = []
+    ranged = checkpoint_io.CheckpointReader.contact_range
+
+    def counted(self, c0, c1, *args, **kwargs):
+        read.append(c1 - c0)
+        return ranged(self, c0, c1, *args, **kwargs)
+
+    monkeypatch.setattr(checkpoint_io.CheckpointReader, "contact_range", counted)
+    for path in (good, old):
+        read.clear()
+        sc = parse_scene(text)
+        sc = sc.model_copy(update={"output": sc.output.model_copy(update={"file": f"{d}/r.h5"}),
+                                   "checkpoint": None})
+        r = Simulation(sc, comm, checkpoint=open_checkpoint(path))
+        keys = r.contacts.keys()
+        assert np.all(keys[1:] > keys[:-1]) and r.contacts.held.shape[1] == 0
+        with h5py.File(path, "r") as f:
+            n_file = len(f["contacts/nsub"])
+        # every contact read once, one or two a batch (the ranks pad with empty batches)
+        assert sum(comm.allgather(sum(read))) == n_file and max(read) <= 2, read
+        assert len([n for n in read if n]) >= sum(read) / 2, read
+        r.run()
+        r.close()
+        got, step = final_state(f"{d}/r.h5")
+        assert step == 2 * half
+        for k in FIELDS:
+            assert np.array_equal(got[k], ref[k]), (path, k)
