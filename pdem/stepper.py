@@ -193,13 +193,20 @@ class Stepper:
 
             sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
         c.frozen[todo != 0] = 0  # new sub-contacts: held forces are void
-        refreshed = ContactStore(c.arrays, sub, start)
         # the common case deletes no contact: no need to copy every contact field (a select is
         # a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts), nor any
         # per-contact array below (the start's first update is the set-up's peak)
         all_kept = bool(keep.all())
         kept = None if all_kept else keep.astype(bool)
-        s.contacts = refreshed if all_kept else refreshed.select(kept)
+        ia, ib = c.ia, c.ib  # the deleted contacts' energy is booked on their blocks
+        del planes, a, res, pa, area, un, fs, us, dil, state, hist
+        if all_kept:
+            s.contacts = ContactStore(c.arrays, sub, start)
+        elif s.grids is None:  # column by column, each dropped once taken (c is not read)
+            s.contacts = ContactStore(c.arrays, sub, start).take_consumed(np.nonzero(kept)[0])
+        else:  # the zoned blocks' regrid reads the contacts before the update
+            s.contacts = ContactStore(c.arrays, sub, start).select(kept)
+        del sub
         todo_kept = todo if all_kept else todo[kept]
         if s.grids is not None:  # zoned blocks: sub-contacts at their surface gridpoints
             s.contacts = s.grids.regrid(c, s.contacts, todo_kept, b, TOUCH_FRACTION * s.ctol)
@@ -211,9 +218,9 @@ class Stepper:
             return
         after = contact_energies(s.contacts.pairs(), s.contacts.subs(), joints, todo_kept)
         if not all_kept:  # a deleted contact's energy after is 0
-            after, kept_after = np.zeros(c.n), after
+            after, kept_after = np.zeros(len(ia)), after
             after[kept] = kept_after
-        forces.book_contact_energy(self.bodies(), c.ia, c.ib,
+        forces.book_contact_energy(self.bodies(), ia, ib,
                                    after if before is None else after - before,
                                    motion.WORK_GEOMETRY)
 

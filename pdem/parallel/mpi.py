@@ -289,8 +289,9 @@ def weighted_share(rank: int, size: int, weights) -> tuple[int, int]:
 def shared_work(comm, weights, work) -> list:
     """Items of a deterministic computation split over the ranks: each rank runs ``work(lo,
     hi)`` (a list of ``hi - lo`` results) on its contiguous share (:func:`weighted_share`), and
-    every rank gets all the results in item order (a pickled allgather), the same as one rank
-    running ``work(0, n)``. ``comm`` None: this process does it all.
+    every rank gets all the results in item order (each rank's pickled and broadcast in
+    turn; a rank keeps its own as they are), the same as one rank running ``work(0, n)``.
+    ``comm`` None: this process does it all.
 
     An exception on any rank is raised on every rank (that of the lowest rank that failed), so
     no rank is left waiting in the next collective: where it was raised as itself, elsewhere
@@ -310,7 +311,16 @@ def shared_work(comm, weights, work) -> list:
             sent = ("raised", pickle.dumps(exc), str(exc))
         except Exception:  # noqa: BLE001 - an unpicklable exception: its text
             sent = ("raised", None, f"{type(exc).__name__}: {exc}")
-    parts = comm.allgather(mine if failure is None else sent)
+    # one rank's results at a time (a broadcast from each in turn, not one allgather): a
+    # rank holds its own results and one other rank's pickle beyond what it keeps, not every
+    # rank's pickles at once and an unpickled copy of its own (a cut rock mass's set-up peak)
+    parts = []
+    for r in range(comm.size):
+        if r == comm.rank:
+            comm.bcast(mine if failure is None else sent, root=r)
+            parts.append(mine if failure is None else sent)
+        else:
+            parts.append(comm.bcast(None, root=r))
     for r, part in enumerate(parts):
         if isinstance(part, tuple) and part and part[0] == "raised":
             if r == comm.rank:
