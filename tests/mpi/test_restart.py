@@ -40,6 +40,29 @@ def final_state(path):
         return {k: f[f"blocks/{k}"][-1] for k in FIELDS}, int(f["step"][-1])
 
 
+def _straight_run(comm, tmp_path, half):
+    """The pile run 2 ``half`` steps on every rank, checkpointed at ``half``: its folder,
+    scene text and final state."""
+    d = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
+    os.makedirs(d, exist_ok=True)
+    text = SCENE.format(steps=2 * half, half=half, out=f"{d}/straight.h5", ck=f"{d}/ck")
+    s = Simulation(parse_scene(text), comm)
+    s.run()
+    s.close()
+    return d, text, final_state(f"{d}/straight.h5")[0]
+
+
+def _continues_bitwise(sim, out, end, ref, label):
+    """Run the restarted ``sim`` to its end: its last output frame is step ``end`` and bitwise
+    ``ref``."""
+    sim.run()
+    sim.close()
+    got, step = final_state(out)
+    assert step == end
+    for k in FIELDS:
+        assert np.array_equal(got[k], ref[k]), (label, k)
+
+
 @pytest.mark.mpi(min_size=2)
 def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
     comm = MPI.COMM_WORLD
@@ -186,14 +209,8 @@ def test_restart_with_the_whole_scene_on_every_rank_is_bitwise(tmp_path):
     each rank takes the blocks it owns and reads the contacts of its free ones. It continues
     bitwise as the straight run and as the restart by shares."""
     comm = MPI.COMM_WORLD
-    d = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
-    os.makedirs(d, exist_ok=True)
     half = 400
-    text = SCENE.format(steps=2 * half, half=half, out=f"{d}/straight.h5", ck=f"{d}/ck")
-    s = Simulation(parse_scene(text), comm)
-    s.run()
-    s.close()
-    ref, _ = final_state(f"{d}/straight.h5")
+    d, text, ref = _straight_run(comm, tmp_path, half)
     for release in (True, False):
         sc = parse_scene(text)
         sc = sc.model_copy(update={"output": sc.output.model_copy(update={"file": f"{d}/r.h5"}),
@@ -201,12 +218,7 @@ def test_restart_with_the_whole_scene_on_every_rank_is_bitwise(tmp_path):
         r = Simulation(sc, comm, checkpoint=open_checkpoint(f"{d}/ck-{half:09d}.h5"),
                        release=release)
         assert comm.allreduce(r.contacts.n) > 0  # the history matters
-        r.run()
-        r.close()
-        got, step = final_state(f"{d}/r.h5")
-        assert step == 2 * half
-        for k in FIELDS:
-            assert np.array_equal(got[k], ref[k]), (release, k)
+        _continues_bitwise(r, f"{d}/r.h5", 2 * half, ref, release)
 
 
 @pytest.mark.mpi(min_size=2)
@@ -217,14 +229,8 @@ def test_restart_read_in_small_batches_and_from_format_2_is_bitwise(tmp_path, mo
     state bits, int32 types, 6 held columns, a stored normal force): the restart continues
     bitwise as the straight run, with its contacts in key order."""
     comm = MPI.COMM_WORLD
-    d = comm.bcast(str(tmp_path) if comm.rank == 0 else None, root=0)
-    os.makedirs(d, exist_ok=True)
     half = 400
-    text = SCENE.format(steps=2 * half, half=half, out=f"{d}/straight.h5", ck=f"{d}/ck")
-    s = Simulation(parse_scene(text), comm)
-    s.run()
-    s.close()
-    ref, _ = final_state(f"{d}/straight.h5")
+    d, text, ref = _straight_run(comm, tmp_path, half)
     good = f"{d}/ck-{half:09d}.h5"
     old = f"{d}/old.h5"
     if comm.rank == 0:
@@ -266,9 +272,4 @@ def test_restart_read_in_small_batches_and_from_format_2_is_bitwise(tmp_path, mo
         # every contact read once, one or two a batch (the ranks pad with empty batches)
         assert sum(comm.allgather(sum(read))) == n_file and max(read) <= 2, read
         assert len([n for n in read if n]) >= sum(read) / 2, read
-        r.run()
-        r.close()
-        got, step = final_state(f"{d}/r.h5")
-        assert step == 2 * half
-        for k in FIELDS:
-            assert np.array_equal(got[k], ref[k]), (path, k)
+        _continues_bitwise(r, f"{d}/r.h5", 2 * half, ref, path)
