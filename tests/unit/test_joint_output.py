@@ -182,19 +182,17 @@ PROBE = Path(__file__).with_name("pv_contacts_probe.py")
 def test_paraview_reads_the_contact_grids(which, request, tmp_path):
     """The cube: every reader; the lifted cube (snapshots without contacts): the Xdmf3 readers
     (the legacy one cannot read an empty grid, docs/output.md)."""
-    from test_paraview import BAD_LOG, pvbatch_command
+    from test_paraview import BAD_LOG, pvbatch_command, run_pvbatch
 
+    pvbatch_command()  # skip (or fail in CI) before the run
     out = request.getfixturevalue(which)
     readers = ("S", "T", "legacy") if which == "cube" else ("S", "T")
-    cmd = pvbatch_command()
     report = tmp_path / "report.json"
-    proc = subprocess.run(
-        [*cmd, str(PROBE), str(contacts_path(out.with_suffix(".xdmf"))),
+    code, log = run_pvbatch(
+        [str(PROBE), str(contacts_path(out.with_suffix(".xdmf"))),
          str(subcontacts_path(out.with_suffix(".xdmf"))), str(report), str(tmp_path),
-         ",".join(readers)],
-        capture_output=True, text=True, timeout=600)
-    log = proc.stdout + proc.stderr
-    assert proc.returncode == 0, log
+         ",".join(readers)], timeout=600)
+    assert code == 0, log
     bad = [line for line in log.splitlines() if any(b in line for b in BAD_LOG)]
     assert not bad, "\n".join(bad)
     got = json.loads(report.read_text())

@@ -55,6 +55,22 @@ def pvbatch_command() -> list[str]:
     return [xvfb, "-a", "-n", str(random.randint(100, 30000)), pvbatch]
 
 
+def run_pvbatch(args: list[str], timeout: float = 300) -> tuple[int, str]:
+    """``pvbatch`` on ``args``: its exit code and log. Without a display, another job's X
+    server can take the display between xvfb-run's check and its start (the tests run two at
+    a time): only that is retried, on another display."""
+    command = pvbatch_command()
+    for attempt in range(3):
+        run = subprocess.run([*command, *args], capture_output=True, text=True,
+                             timeout=timeout)
+        log = run.stdout + run.stderr
+        lost_display = "Xvfb failed to start" in log or "bad X server connection" in log
+        if run.returncode == 0 or not lost_display or attempt == 2:
+            return run.returncode, log
+        command = pvbatch_command()
+    raise AssertionError("unreachable")
+
+
 def box(half):
     v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * half
     return v, [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
@@ -84,23 +100,13 @@ def write_scene(path: Path, n_snap: int = 4) -> None:
 
 @pytest.fixture(scope="module")
 def probed(tmp_path_factory):
-    command = pvbatch_command()
+    pvbatch_command()  # skip (or fail in CI) before writing anything
     d = tmp_path_factory.mktemp("paraview")
     write_scene(d / "run.h5")
     out = d / "probe.json"
-    for attempt in range(3):
-        run = subprocess.run(
-            [*command, str(PROBE), str(d / "run.xdmf"), str(d / "run-centroids.xdmf"), str(out), str(d)],
-            capture_output=True, text=True, timeout=300,
-        )
-        log = run.stdout + run.stderr
-        # Another job's X server can take the display between xvfb-run's check and its start;
-        # only that is worth a retry (on another display).
-        lost_display = "Xvfb failed to start" in log or "bad X server connection" in log
-        if run.returncode == 0 or not lost_display or attempt == 2:
-            break
-        command = pvbatch_command()
-    assert run.returncode == 0, f"pvbatch failed ({run.returncode}):\n{log[-4000:]}"
+    code, log = run_pvbatch(
+        [str(PROBE), str(d / "run.xdmf"), str(d / "run-centroids.xdmf"), str(out), str(d)])
+    assert code == 0, f"pvbatch failed ({code}):\n{log[-4000:]}"
     print(f"ParaView renderings: {d}/{{S,T,legacy}}.png", file=sys.stderr)
     return json.loads(out.read_text()), log, d / "run.h5"
 
