@@ -51,6 +51,14 @@ class BlockSpec:
     # a zoned block's (TetMesh, surface node ids), pdem.deformable.store.zone_specs
     zoning: tuple | None = None
 
+    def drop_pieces(self) -> None:
+        """Drop the pieces unmeasured, keeping their count: a block outside this rank's build
+        share in a scene whose cuts, joins, excavations or meshes made every block on every
+        rank (pdem.state); its scalars are then the gathered columns' (:class:`SpecTable`)."""
+        if self.pieces is not None:
+            self._n_pieces = len(self.pieces)
+            self.pieces = None
+
     def release(self) -> None:
         """Drop the pieces (after set-up their geometry lives with the blocks' owners, see
         pdem.state.ModelState.release_scene_geometry), keeping the scalars later stages
