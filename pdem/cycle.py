@@ -17,8 +17,6 @@ halo and reductions run every step (docs/architecture.md).
 
 from __future__ import annotations
 
-import numpy as np
-
 from .contact.forces import contact_forces
 from .contact.staleness import stale_contacts
 from .dynamics import motion
@@ -29,6 +27,9 @@ from .jit import kernel
 # why a compiled run of steps returned (the stepper finishes the last step in Python)
 DONE = 0  # the step budget, a plugin's event step or time, or the ratio target was reached
 NEEDS_PYTHON = 1  # a search, a contact update with work, or a bad state
+# a periodic contact update with work: ``todo`` and ``c_moved`` hold what
+# pdem.contact.staleness.stale_contacts found, for the stepper's update to reuse
+STALE_FOUND = 2
 
 
 @kernel
@@ -49,7 +50,8 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
                 m_true, calm, still,
                 speed, sleep_steps, force_frac, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
-                step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step):
+                step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step,
+                todo):
     """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max)``, the
     last two from the last step's :func:`pdem.dynamics.motion.motion_bookkeeping`.
 
@@ -62,6 +64,8 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
     ``NEEDS_PYTHON``. ``stop_at_update``: every periodic update goes to Python
     (the model domain is checked there). ``m_true``: the record with the true ``fixed`` flags
     when inactive blocks are held (``m``'s are ``still``; pdem.dynamics.inactive), else None.
+    ``todo`` (uint8, one per contact): where a periodic update's staleness marks are written;
+    valid when the call returns :data:`STALE_FOUND`.
     """
     n_steps = 0
     while True:
@@ -94,7 +98,6 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
             return n_steps, step, time, DONE, bad, u_mig_max
         # second half, when it is only bookkeeping
         if periodic:
-            todo = np.empty(pairs.ia.shape[0], np.uint8)
             if not _noop_refresh(bodies.x, q, R, radius_all, pairs, rel_x, rel_q, gap, c_moved,
                                  c_warm, subs.un, u_geo, refresh_tolerance, todo):
-                return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
+                return n_steps, step, time, STALE_FOUND, bad, u_mig_max

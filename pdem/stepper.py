@@ -25,7 +25,7 @@ from .contact.forces import contact_energies, contact_forces
 from .contact.joint_sets import set_joints
 from .contact.rigid import Bodies
 from .contact.staleness import mark_fresh, stale_contacts
-from .cycle import fused_steps
+from .cycle import STALE_FOUND, fused_steps
 from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
@@ -62,6 +62,9 @@ class Stepper:
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
         self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
+        # the contacts a compiled run of steps found stale at its last step's periodic update
+        # (pdem.cycle.STALE_FOUND), for that update to use instead of looking again; else None
+        self._stale = None
 
     @property
     def holds(self) -> bool:
@@ -140,11 +143,13 @@ class Stepper:
                                                gb=b.gid[ib], pga=pga, pgb=pgb, joint=joint)
         return s.contacts.n - before
 
-    def refresh(self, all_contacts: bool, periodic: bool = False):
+    def refresh(self, all_contacts: bool, periodic: bool = False, stale=None):
         """Geometry update of contacts: all, or those not yet detected plus (periodically) those
         whose blocks moved more than the refresh tolerance since their last update. Like 3DEC's
         "no time wasted on relatively inactive blocks": a resting contact keeps its plane and
-        sub-contacts (its overlaps still follow the motion every step)."""
+        sub-contacts (its overlaps still follow the motion every step). ``stale``: the marks
+        :func:`pdem.contact.staleness.stale_contacts` wrote for this state's contacts (with
+        their ``moved``), when a compiled run of steps has just looked."""
         s = self.s
         b = s.blocks
         c = s.contacts
@@ -155,10 +160,12 @@ class Stepper:
         if c.n == 0:
             return
         if periodic and s.grids is None:  # motion of B relative to A (pdem.contact.staleness)
-            todo = np.empty(c.n, np.uint8)
-            stale_contacts(b.x, b.q, b.R, b.radius, c.ia, c.ib, c.arrays["rel_x"],
-                           c.arrays["rel_q"], c.gap, c.warm, c.sc_start, c.sub["sc_un"],
-                           s.resolved.refresh_tolerance, c.moved, todo)
+            todo = stale
+            if todo is None or len(todo) != c.n:
+                todo = np.empty(c.n, np.uint8)
+                stale_contacts(b.x, b.q, b.R, b.radius, c.ia, c.ib, c.arrays["rel_x"],
+                               c.arrays["rel_q"], c.gap, c.warm, c.sc_start, c.sub["sc_un"],
+                               s.resolved.refresh_tolerance, c.moved, todo)
             todo = todo.astype(bool) | all_contacts
         else:
             todo = (c.warm == 0) | all_contacts
@@ -179,8 +186,10 @@ class Stepper:
         before = contact_energies(c.pairs(), c.subs(), joints, todo) if c.n_sub else None
         new = (c.warm == 0).astype(np.uint8) if s.joints.by_set else None
         # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
+        # in place unless the zoned blocks' regrid reads the rows before the update
         res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(), todo,
-                               s.ctol, TOUCH_FRACTION, s.algorithm, not large_blocks_mapped())
+                               s.ctol, TOUCH_FRACTION, s.algorithm, not large_blocks_mapped(),
+                               s.grids is None)
         keep, start, pa, area, un, fs, us, dil, state, hist = res
         if s.joints.by_set and new.any():  # a new contact on a joint plane: the set's joint
             set_joints(new & keep, c.ia, c.ib, c.ka, c.kb, c.normal, b.x, b.R, b.face_start,
@@ -288,8 +297,9 @@ class Stepper:
             stop_step = nxt if stop_step is None else min(stop_step, nxt)
         self.stats[:] = 0.0
         speed, sleep_steps, frac = inactive_args(s.scene)
+        todo = np.empty(c.n, np.uint8)
         with s.timers.phase("fused"):
-            steps, s.step, s.time, _, self._bad, self._u_mig_max = fused_steps(
+            steps, s.step, s.time, why, self._bad, self._u_mig_max = fused_steps(
                 motion_record(b, n, self.holds), s.gravity, s.dt, s.damping_args(),
                 s.scalar_inertia, self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n], b.q,
                 b.R, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args, c.moved,
@@ -300,8 +310,12 @@ class Stepper:
                 r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,
                 s.step, s.time, max_steps, NO_STEP if stop_step is None else stop_step,
                 math.inf if stop_time is None else stop_time,
-                -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step)
-        self._second_half()
+                -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step, todo)
+        self._stale = todo if why == STALE_FOUND else None
+        try:
+            self._second_half()
+        finally:
+            self._stale = None
         return steps
 
     def _first_half(self):
@@ -359,8 +373,9 @@ class Stepper:
                 update_world_vertices(b)
                 created = self.search(active) if active.any() else 0
         with tm.phase("contacts"):
-            if periodic:
-                self.refresh(all_contacts=False, periodic=True)
+            if periodic:  # (no search created contacts after a compiled run's marks)
+                self.refresh(all_contacts=False, periodic=True,
+                             stale=None if created else self._stale)
             elif created:
                 self.refresh(all_contacts=False)
         with tm.phase("halo"):

@@ -98,3 +98,35 @@ def test_fused_runs_stop_at_the_events_they_must_not_skip(tmp_path):
         [sim.state.step] if sim.state.step % 37 else [])
     written = sorted(p.name for p in tmp_path.glob("ck-*.h5"))
     assert written == [f"ck-{k:09d}.h5" for k in range(50, sim.state.step + 1, 50)]
+
+
+def test_periodic_update_uses_the_compiled_runs_stale_marks(monkeypatch):
+    """A compiled run that stops at a periodic update with work hands its staleness marks to
+    the update (pdem.cycle.STALE_FOUND): the stepper does not look again, and the state is
+    bitwise that of the step-by-step run, which looks for itself at every update."""
+    import pdem.stepper
+
+    looked = []
+    original = pdem.stepper.stale_contacts
+
+    def counted(*args):
+        looked.append(1)
+        return original(*args)
+
+    monkeypatch.setattr(pdem.stepper, "stale_contacts", counted)
+    sims = {}
+    for fused in (False, True):
+        d = yaml.safe_load(cube_stack_scene(4, "fast"))
+        d.setdefault("solve", {})["fused"] = fused
+        sim = Simulation(parse_scene(yaml.safe_dump(d)), MPI.COMM_SELF, output=False)
+        looked.clear()
+        sim.run(steps=400)
+        sims[fused] = (sim, len(looked))
+    (steps, looked_steps), (fused, looked_fused) = sims[False], sims[True]
+    periodic = 400 // steps.state.scene.contact.detect_every
+    assert looked_steps == periodic  # the step-by-step run looks at every periodic update
+    assert looked_fused < periodic // 4  # the compiled runs looked for nearly all of them
+    for name in ("x", "q", "v", "w", "work"):
+        assert np.array_equal(getattr(steps.blocks, name), getattr(fused.blocks, name)), name
+    for name in ("sc_fs", "sc_un", "sc_us", "sc_pa"):
+        assert np.array_equal(steps.contacts.sub[name], fused.contacts.sub[name]), name
