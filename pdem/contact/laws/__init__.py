@@ -20,6 +20,10 @@ linear springs dissipates exactly nothing).
 A scene compiles only the laws its joints use: the force kernel receives a tuple of the used
 laws' tables and :func:`apply_law` is resolved per tuple type at compile time (no runtime
 dispatch on names, numba's disk cache keyed on that type).
+
+A law may also give ``stays_open`` (:class:`.base.JointLaw`): whether a sub-contact is
+separated and stays so this step, when the update is known to return zero forces and the same
+state; the force loop then does only the kinematics for it (:func:`law_stays_open`).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from . import continuously_yielding, coulomb
 from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
 
 __all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams", "JointTable",
-           "apply_law", "joint_dissipation", "joint_table", "law_energy"]
+           "apply_law", "joint_dissipation", "joint_table", "law_energy", "law_stays_open"]
 
 JOINT_LAWS: Registry[JointLaw] = Registry("joint law")
 JOINT_LAWS.register("coulomb", coulomb.LAW)
@@ -109,6 +113,19 @@ def joint_dissipation(laws, slot, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil
     raise NotImplementedError("joint_dissipation is only callable from numba kernels")
 
 
+def law_stays_open(laws, slot, j, s, hist, un, dil, area, state):
+    """Whether the law in ``laws[slot]`` would leave sub-contact s separated with zero forces
+    and its state unchanged (:class:`.base.JointLaw`'s ``stays_open``; False for a law
+    without one)."""
+    raise NotImplementedError("law_stays_open is only callable from numba kernels")
+
+
+@inline_kernel
+def _never_open(p, j, s, hist, un, dil, area, state):
+    """``stays_open`` of a law without one: never, so the force loop always updates it."""
+    return False
+
+
 _DISSIPATION_ARGS = ("j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx, gy, gz, st0, un, dil, "
                      "fn, fx, fy, fz, st")
 
@@ -160,6 +177,12 @@ def _apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux
                state):
     return _dispatch(laws, "update", "j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, "
                                      "uy, uz, state")
+
+
+@overload(law_stays_open, inline="always")
+def _law_stays_open(laws, slot, j, s, hist, un, dil, area, state):
+    return _dispatch(laws, lambda law: law.stays_open or _never_open,
+                     "j, s, hist, un, dil, area, state")
 
 
 @overload(law_energy, inline="always")

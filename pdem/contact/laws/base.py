@@ -39,7 +39,12 @@ class JointLaw:
     ``variants``: ``(applies, law)`` pairs: when ``applies(params)`` holds for every joint of
     the scene using this law, ``law`` (same name, parameters and history, its own table type
     and kernels doing the same arithmetic without the branches those joints cannot take) is
-    compiled instead, so a scene pays only for the physics it uses (docs/fidelity.md).
+    compiled instead, so a scene pays only for the physics it uses (docs/fidelity.md);
+    ``stays_open``: optional kernel ``stays_open(p, j, s, hist, un, dil, area, state) -> bool``,
+    True only when ``update`` with these arguments would return ``(0.0, dil, state, 0.0, 0.0,
+    0.0)`` whatever the shear force and displacements, and change nothing else: a separated
+    sub-contact that stays separated. The force loop then skips the shear carry, the update
+    and the force sums for it (pdem.contact.forces); without one it never does.
     """
 
     name: str
@@ -50,6 +55,7 @@ class JointLaw:
     energy: Any
     variants: tuple = ()
     dissipation: Any = None
+    stays_open: Any = None
 
     def specialised(self, params: list) -> JointLaw:
         """The variant for these joints (unless ``PDEM_GENERIC_KERNELS`` is set), else self."""

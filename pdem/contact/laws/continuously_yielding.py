@@ -217,6 +217,15 @@ def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, sta
 
 
 @inline_kernel
+def stays_open(p, j, s, hist, un, dil, area, state):
+    """Whether :func:`update` takes its open branch with nothing to change: the state is
+    OPEN already and the reversal ratio it would zero is +0 (not -0: the same bits)."""
+    if state != OPEN or hist[s, 1] != 0.0 or math.copysign(1.0, hist[s, 1]) < 0.0:
+        return False
+    return normal_stress(p.an[j], p.en[j], un + dil) <= 0.0 or area <= 0.0
+
+
+@inline_kernel
 def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     """Normal force and stored spring energy: eq. 1b for the normal spring, ``|fs|^2 / (2 ks
     A)`` for the shear spring with ``ks`` at the current normal stress (exact for
@@ -234,4 +243,4 @@ def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
 
 
 LAW = JointLaw("continuously_yielding", Params, ("up", "r", "ex", "ey", "ez"), table, update,
-               energy)
+               energy, stays_open=stays_open)

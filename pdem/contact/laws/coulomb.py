@@ -121,6 +121,20 @@ def update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, sta
 
 
 @inline_kernel
+def stays_open(p, j, s, hist, un, dil, area, state):
+    """Whether :func:`update` takes its tensile branch (eq. 38) and returns ``state`` as it
+    was: the same tests on the same numbers, without the shear force (that branch drops it)."""
+    kept = state & FAILED
+    t_max = 0.0 if kept & FAILED else p.tension[j] * area
+    c_area = 0.0 if kept & FAILED else p.cohesion[j] * area
+    if not p.kn[j] * area * (un + dil) < -t_max:
+        return False
+    if t_max > 0.0 or c_area > 0.0:
+        kept |= FAILED
+    return kept | OPEN == state
+
+
+@inline_kernel
 def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     """Normal force and stored spring energy of a sub-contact in the given state: the normal
     spring ``kn A (un + dil)`` in compression, or in tension while the bond holds, and the
@@ -226,6 +240,12 @@ def friction_update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy
 
 
 @inline_kernel
+def friction_stays_open(p, j, s, hist, un, dil, area, state):
+    """:func:`stays_open` for :func:`friction_update`."""
+    return p.kn[j] * area * (un + dil) < -0.0 and (state & FAILED) | OPEN == state
+
+
+@inline_kernel
 def friction_energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     """:func:`energy` for a joint without tension (never bonded)."""
     return _springs(p.kn[j], p.ks[j], un, dil, fx, fy, fz, area, -0.0)
@@ -243,6 +263,7 @@ def friction_dissipation(p, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx,
 
 
 FRICTION_LAW = JointLaw("coulomb", Params, (), friction_table, friction_update, friction_energy,
-                        dissipation=friction_dissipation)
+                        dissipation=friction_dissipation, stays_open=friction_stays_open)
 LAW = JointLaw("coulomb", Params, (), table, update, energy,
-               variants=((is_frictional, FRICTION_LAW),), dissipation=dissipation)
+               variants=((is_frictional, FRICTION_LAW),), dissipation=dissipation,
+               stays_open=stays_open)
