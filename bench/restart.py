@@ -84,7 +84,7 @@ def restart(n: int, steps: int, ck: str) -> None:
 
     with h5py.File(path, "r") as f:
         totals = (len(f["contacts/nsub"]), len(f["subcontacts/sc_un"]))
-    rows = comm.gather((elapsed, rss, rss0, read.get("/contacts/ga", 0),
+    rows = comm.gather((elapsed, rss, rss0, read.get("/contacts/normal", 0),
                         read.get("/subcontacts/sc_un", 0), rss_restored), root=0)
     if comm.rank == 0:
         print("RESULT " + json.dumps({

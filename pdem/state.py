@@ -471,21 +471,28 @@ class ModelState:
                 raise UserError(f"cannot restart from {path}: contacts/nsub counts "
                                 f"{sum(counts)} sub-contacts, the file holds {reader.n_sub}")
             s0 = sum(counts[:comm.rank])
+            bounds = reader.contact_batches(nsub)
+            if len(nsub) and int(nsub.max()) < 2**31:  # held through the routing: half size
+                nsub = nsub.astype(np.int32)
             known = self._checked(lambda: reader.contact_blocks(c0, c1), path)
-            ga, gb = known["ga"], known["gb"]
             fixed = self.glob.fixed  # to the owners of their free blocks
+            ga = known["ga"]
+            to_a = np.where(fixed[ga] == 0, owner[ga], -1)
+            gb = known["gb"]
+            to_b = np.where(fixed[gb] == 0, owner[gb], -1)
+            del ga, gb
+            held = [known]  # the blocks and pieces: dropped once the keys are sent
+            del known
 
             def keys(lo, hi):
-                return known["pga"][lo:hi].astype(np.int64) * KEY_SHIFT + known["pgb"][lo:hi]
+                return held[0]["pga"][lo:hi].astype(np.int64) * KEY_SHIFT + held[0]["pgb"][lo:hi]
 
-            def read(lo, hi):
+            def read(lo, hi):  # (the blocks and pieces read again: 16 bytes a contact)
                 return self._checked(lambda: reader.contact_range(
-                    c0 + lo, c0 + hi, nsub[lo:hi], s0 + int(nsub[:lo].sum()),
-                    known={k: v[lo:hi] for k, v in known.items()}), path)
+                    c0 + lo, c0 + hi, nsub[lo:hi], s0 + int(nsub[:lo].sum())), path)
 
-            return route_contacts(comm, np.where(fixed[ga] == 0, owner[ga], -1),
-                                  np.where(fixed[gb] == 0, owner[gb], -1), nsub, keys,
-                                  reader.contact_batches(nsub), read)
+            return route_contacts(comm, to_a, to_b, nsub, keys, bounds, read,
+                                  keys_done=held.clear)
 
         held = [rows]  # given to the rebuild, then dropped: not kept while the contacts come
         del rows

@@ -170,7 +170,7 @@ def _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s) -> None:
 
 
 # bytes (as stored) of a batch of contacts that a restart reads and sends before the next
-READ_BATCH = 8 << 20
+READ_BATCH = 4 << 20
 
 # rows between two wanted ones that a read takes along rather than starting a new read
 READ_GAP = 256

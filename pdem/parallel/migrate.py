@@ -33,9 +33,32 @@ def _boxes(x, radius, pad):
     return x - r, x + r
 
 
+# contacts are looked up in pieces of this many rows, so the lookups' temporaries (int64
+# positions, masks) stay small beside the contacts: placing a restart's ~400,000 contacts a
+# rank (64,000 cubes on 2 ranks) made ~15 MB of them at once, the restart's peak
+LOOKUP_CHUNK = 1 << 16
+
+
+def _chunks(n: int):
+    return ((lo, min(lo + LOOKUP_CHUNK, n)) for lo in range(0, n, LOOKUP_CHUNK))
+
+
+def _in_sorted(sorted_set: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``np.isin(values, sorted_set)`` for an ascending ``sorted_set``, chunk by chunk."""
+    out = np.zeros(len(values), bool)
+    if len(sorted_set) == 0:
+        return out
+    last = len(sorted_set) - 1
+    for lo, hi in _chunks(len(values)):
+        v = values[lo:hi]
+        out[lo:hi] = sorted_set[np.minimum(np.searchsorted(sorted_set, v), last)] == v
+    return out
+
+
 def contacts_needed(contacts: ContactStore, owned_free_gids: np.ndarray) -> np.ndarray:
     """Mask of contacts in which this rank owns a free block."""
-    return np.isin(contacts.ga, owned_free_gids) | np.isin(contacts.gb, owned_free_gids)
+    free = np.sort(owned_free_gids)
+    return _in_sorted(free, contacts.ga) | _in_sorted(free, contacts.gb)
 
 
 def _merge_contacts(parts: list[ContactStore], free_gids: np.ndarray, drop: list[bool]
@@ -62,20 +85,21 @@ def _merge_contacts(parts: list[ContactStore], free_gids: np.ndarray, drop: list
     # one part in key order, each contact once (a restart's, routed in key order)
     in_order = len(parts) == 1 and bool(np.all(keys[1:] > keys[:-1]))
     if in_order:
-        first = np.arange(len(keys))
+        first = None  # every row (made only if some are not needed)
         ga, gb = parts[0].arrays["ga"], parts[0].arrays["gb"]
     else:
         _, first = np.unique(keys, return_index=True)
         ga = np.concatenate([p.arrays["ga"] for p in parts])[first]
         gb = np.concatenate([p.arrays["gb"] for p in parts])[first]
     del keys
-    needed = np.isin(ga, free_gids) | np.isin(gb, free_gids)
+    free = np.sort(free_gids)
+    needed = _in_sorted(free, ga) | _in_sorted(free, gb)
     del ga, gb
     if in_order and needed.all() and drop[0]:  # all of a part the caller gives up: its
         arrays, sub = parts[0].arrays, parts[0].sub  # columns are taken as they are
         parts[0].arrays, parts[0].sub = {}, {}
         return ContactStore(arrays, sub, parts[0].sc_start)
-    first = first[needed]
+    first = np.nonzero(needed)[0] if first is None else first[needed]
     sub_rows, start = csr.take(csr.starts(np.concatenate([np.diff(p.sc_start) for p in parts])),
                                first)
     arrays = {k: column("arrays", k, first) for k in list(parts[0].arrays)}
@@ -89,18 +113,26 @@ def _number_rows(contacts: ContactStore, blocks: BlockStore) -> None:
     all_gids = blocks.gid
     row_of = np.argsort(all_gids, kind="stable")
     sorted_gids = all_gids[row_of]
+    a = contacts.arrays
     for side, g in (("ia", "ga"), ("ib", "gb")):
-        pos = np.searchsorted(sorted_gids, contacts.arrays[g])
-        if np.any(pos >= len(sorted_gids)) or np.any(
-                sorted_gids[np.minimum(pos, len(sorted_gids) - 1)] != contacts.arrays[g]):
-            raise RuntimeError("a contact's block is neither owned nor a ghost after the rebuild")
-        contacts.arrays[side] = row_of[pos].astype(contacts.arrays[side].dtype)
+        rows = np.empty(len(a[g]), a[side].dtype)
+        for lo, hi in _chunks(len(rows)):
+            gids = a[g][lo:hi]
+            pos = np.searchsorted(sorted_gids, gids)
+            if np.any(pos >= len(sorted_gids)) or np.any(
+                    sorted_gids[np.minimum(pos, len(sorted_gids) - 1)] != gids):
+                raise RuntimeError("a contact's block is neither owned nor a ghost after the "
+                                   "rebuild")
+            rows[lo:hi] = row_of[pos]
+        a[side] = rows
     # the pieces in contact: the same piece ordinal within the block's local pieces
+    start, piece_gid = blocks.piece_start, blocks.piece_gid
     for side, piece, pg in (("ia", "ka", "pga"), ("ib", "kb", "pgb")):
-        first = blocks.piece_gid[blocks.piece_start[contacts.arrays[side]]]  # 1st piece
-        ordinal = contacts.arrays[pg] - first
-        contacts.arrays[piece] = (blocks.piece_start[contacts.arrays[side]] + ordinal).astype(
-            contacts.arrays[piece].dtype)
+        out = np.empty(len(a[side]), a[piece].dtype)
+        for lo, hi in _chunks(len(out)):
+            first = start[a[side][lo:hi]]  # the block's first piece
+            out[lo:hi] = first + (a[pg][lo:hi] - piece_gid[first])
+        a[piece] = out
 
 
 def place_contacts(blocks: BlockStore, n_owned: int, fixed: np.ndarray,
@@ -115,14 +147,15 @@ def place_contacts(blocks: BlockStore, n_owned: int, fixed: np.ndarray,
 
 
 def route_contacts(comm, to_a: np.ndarray, to_b: np.ndarray, nsub: np.ndarray,
-                   keys, bounds: np.ndarray, read) -> ContactStore:
+                   keys, bounds: np.ndarray, read, keys_done=None) -> ContactStore:
     """This rank's contacts ``0..n`` each to rank ``to_a[c]`` and to rank ``to_b[c]`` (-1:
     none; once if the same), with their ``nsub[c]`` sub-contacts (collective); returns the
     contacts sent here in the order of their keys (``keys(lo, hi)``: those of contacts
     ``lo:hi``; equal keys in rank order, then each rank's order). ``read(lo, hi)`` gives
     contacts ``lo:hi`` as a ContactStore;
     ``bounds`` are the batches' first rows and the end (the ranks may give different
-    numbers of batches).
+    numbers of batches). ``keys_done()``, if given, is called once the keys are no longer
+    asked for (the caller may drop what it made them from before the contacts are read).
 
     A batch is read, sent column by column as raw rows (no pickle) and dropped before the
     next is read, and what arrives is put straight into its place in arrays of the final
@@ -145,7 +178,9 @@ def route_contacts(comm, to_a: np.ndarray, to_b: np.ndarray, nsub: np.ndarray,
                         ).reshape(comm.size, n_batches, 2).sum(axis=0)
     # the keys and sub-contact counts first: where each contact received goes
     key_here = np.empty(int(got[:, 0].sum()), np.int64)
-    n_here = np.empty(len(key_here), np.int64)
+    # (the sub-contact counts in the caller's dtype and the places in int32 where they fit:
+    # both are held until the last batch has arrived, the routing's peak)
+    n_here = np.empty(len(key_here), nsub.dtype)
     at = 0
     for j, (lo, hi) in enumerate(batches):
         rows, _ = _sends(to_a[lo:hi], to_b[lo:hi])
@@ -153,10 +188,12 @@ def route_contacts(comm, to_a: np.ndarray, to_b: np.ndarray, nsub: np.ndarray,
         alltoall_rows(comm, keys(lo, hi)[rows], counts[j], out=key_here[at:at + m])
         alltoall_rows(comm, nsub[lo:hi][rows], counts[j], out=n_here[at:at + m])
         at += m
+    if keys_done is not None:
+        keys_done()
     order = np.argsort(key_here, kind="stable")
     del key_here
-    place = np.empty(len(order), np.int64)
-    place[order] = np.arange(len(order))
+    place = np.empty(len(order), np.int32 if len(order) < 2**31 else np.int64)
+    place[order] = np.arange(len(order), dtype=place.dtype)
     sc_start = csr.starts(n_here[order])
     del order
     arrays: dict[str, np.ndarray] = {}

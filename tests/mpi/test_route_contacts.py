@@ -34,19 +34,32 @@ def _share(rank, size, seed, empty):
 @pytest.mark.mpi(min_size=2)
 @pytest.mark.parametrize("empty", [False, True])
 @pytest.mark.parametrize("batch", [1, 3, 1000])
-def test_routed_contacts_arrive_whole_and_in_key_order(batch, empty):
+@pytest.mark.parametrize("count_type", [np.int64, np.int32])
+def test_routed_contacts_arrive_whole_and_in_key_order(batch, empty, count_type):
     comm = MPI.COMM_WORLD
     mine, to_a, to_b, nsub = _share(comm.rank, comm.size, 7, empty)
+    nsub = nsub.astype(count_type)  # a restart passes int32 counts (held through the routing)
     reads = []
+    events = []
 
     def read(lo, hi):
         reads.append((lo, hi))
+        events.append("read")
         return mine.take(np.arange(lo, hi))
+
+    def keys(lo, hi):
+        events.append("keys")
+        return mine.arrays["key"][lo:hi]
 
     # batches of `batch` contacts, so the ranks give different numbers of them
     bounds = np.unique(np.r_[np.arange(0, len(nsub), batch), len(nsub)])
-    got = route_contacts(comm, to_a, to_b, nsub, lambda lo, hi: mine.arrays["key"][lo:hi],
-                         bounds, read)
+    got = route_contacts(comm, to_a, to_b, nsub, keys, bounds, read,
+                         keys_done=lambda: events.append("done"))
+    # the keys are all asked for before the caller is told it may drop them, and that before
+    # the first contact is read
+    assert events.count("done") == 1
+    assert set(events[:events.index("done")]) <= {"keys"}
+    assert set(events[events.index("done") + 1:]) <= {"read"}
     # what it must be: every rank's contacts naming this one, sorted by key
     every = comm.allgather((mine, to_a, to_b))
     want = [(s, np.nonzero((a == comm.rank) | (b == comm.rank))[0]) for s, a, b in every]
