@@ -184,18 +184,12 @@ def _partials(x, out):
 
 def exact_sum(comm, values: np.ndarray) -> np.ndarray:
     """Column sums of ``values`` (n, k) over all ranks' rows, correctly rounded: the same bits
-    for any distribution of the rows over any number of ranks."""
+    for any distribution of the rows over any number of ranks. One rank takes the same path
+    without the gather (``math.fsum`` of a numpy column took ~60 ns a row: a serial energy
+    sample of 1,000 blocks spent ~0.7 ms in it)."""
     values = np.asarray(values, np.float64)
     if values.ndim == 1:
         values = values[:, None]
-    if comm.size == 1:  # a correctly rounded sum is unique: fsum of the rows is the same bits
-        out = np.empty(values.shape[1])
-        for c, col in enumerate(values.T):
-            try:
-                out[c] = math.fsum(col) if np.isfinite(col).all() else float(np.sum(col))
-            except OverflowError:  # an overflowing partial
-                out[c] = float(np.sum(col))
-        return out
     parts = []
     for col in values.T:
         if not np.isfinite(col).all():
@@ -203,7 +197,7 @@ def exact_sum(comm, values: np.ndarray) -> np.ndarray:
             continue
         out = np.empty(1100)  # partials of finite doubles never outnumber the exponent range
         parts.append(out[:_partials(np.ascontiguousarray(col), out)].copy())
-    gathered = allgather(comm, parts)
+    gathered = allgather(comm, parts) if comm.size > 1 else [parts]
     out = np.empty(values.shape[1])
     for c in range(values.shape[1]):
         terms = np.concatenate([g[c] for g in gathered])

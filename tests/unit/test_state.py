@@ -103,6 +103,10 @@ def test_exact_sum_does_not_depend_on_how_rows_are_split():
 
     np.testing.assert_array_equal(whole, [math.fsum(v[:, k]) for k in range(3)])
     assert exact_sum(MPI.COMM_SELF, np.zeros((0, 3))).tolist() == [0.0, 0.0, 0.0]
+    bad = v.copy()
+    bad[3, 1], bad[4, 2] = np.inf, np.nan  # a column that is not finite sums as numpy does
+    got = exact_sum(MPI.COMM_SELF, bad)
+    assert got[0] == whole[0] and got[1] == np.inf and np.isnan(got[2])
 
 
 def _as_format_3(path):
