@@ -221,9 +221,9 @@ class Stepper:
             s.contacts = s.grids.regrid(c, s.contacts, todo_kept, b, TOUCH_FRACTION * s.ctol)
         # energy budget: what the update changed in the joints' springs, with no work done
         # (after the zoned blocks' regrid: their sub-contacts are the regrid's)
-        if before is None and all_kept:
+        if before is None:  # (a contact deleted here added 0 to its blocks: nothing to book)
             forces.book_stored_energy(self.bodies(), s.contacts.pairs(), s.contacts.subs(),
-                                      joints, todo, motion.WORK_GEOMETRY)
+                                      joints, todo_kept, motion.WORK_GEOMETRY)
             return
         after = contact_energies(s.contacts.pairs(), s.contacts.subs(), joints, todo_kept)
         if not all_kept:  # a deleted contact's energy after is 0

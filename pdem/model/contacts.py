@@ -113,10 +113,19 @@ class ContactStore:
         """:meth:`take`, each column dropped from this store once taken (the store is not
         read after): one column's copy on top of the store, not a second store (the start's
         first update of a rock mass keeps ~2/3 of the pairs its search found: a copy of
-        them all was its set-up's peak)."""
-        sub_idx, start = csr.take(self.sc_start, idx)
+        them all was its set-up's peak). When the contacts left out hold no sub-contacts (the
+        pairs that update found apart) and the order is kept, the sub-contact columns are
+        kept as they are: no gather of every sub-contact, and no copy of the largest column
+        on top of the store (~27 MB a rank for a cut rock mass of 88,000 blocks on 2 ranks)."""
+        idx = np.asarray(idx, np.int64)
+        if csr.takes_every_row(self.sc_start, idx):
+            start = csr.kept_starts(self.sc_start, idx)
+            sub = {k: self.sub.pop(k) for k in list(self.sub)}
+        else:
+            sub_idx, start = csr.take(self.sc_start, idx)
+            sub = {k: self.sub.pop(k)[sub_idx] for k in list(self.sub)}
+            del sub_idx
         arrays = {k: self.arrays.pop(k)[idx] for k in list(self.arrays)}
-        sub = {k: self.sub.pop(k)[sub_idx] for k in list(self.sub)}
         return ContactStore(arrays, sub, start)
 
     def select(self, keep: np.ndarray) -> ContactStore:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..jit import kernel
+
 # A contact's key packs the two global ids; gids stay below 2**31.
 KEY_SHIFT = 1 << 31
 
@@ -27,3 +29,26 @@ def take(start: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     new_start = starts(counts)
     idx = np.repeat(start[rows] - new_start[:-1], counts) + np.arange(new_start[-1])
     return idx, new_start
+
+
+@kernel
+def takes_every_row(start, rows) -> bool:
+    """Whether ``rows`` (of a CSR array with ``start``) ascend and leave out only rows with
+    no entries: :func:`take` would then give every entry, in order (no array made)."""
+    total = 0
+    prev = -1
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        if r <= prev:
+            return False
+        total += start[r + 1] - start[r]
+        prev = r
+    return total == start[start.shape[0] - 1]
+
+
+def kept_starts(start: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """:func:`take`'s start array when :func:`takes_every_row`: the rows left out add
+    nothing, so row ``rows[i]`` ends where it ended (no per-row counts made)."""
+    out = np.zeros(len(rows) + 1, np.int64)
+    np.take(start[1:], rows, out=out[1:])
+    return out
