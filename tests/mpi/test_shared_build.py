@@ -18,7 +18,7 @@ from support import shared_dir
 from pdem.cases.rock_mass import tunnel_scene
 from pdem.config import ConfigError, parse_scene
 from pdem.model.build import expand_blocks
-from pdem.parallel.mpi import shared_work
+from pdem.parallel.mpi import SHARE_CHUNK, shared_work
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
 
@@ -153,4 +153,22 @@ def test_an_error_on_one_rank_is_raised_on_every_rank():
     expected = Unpicklable if comm.rank == last else RuntimeError
     with pytest.raises(expected, match="a local failure"):
         shared_work(comm, np.ones(10), odd_error)
+    comm.Barrier()  # every rank got here: none was left waiting
+
+
+def test_shares_larger_than_a_chunk_arrive_whole_and_a_short_share_is_refused():
+    """Shares of several broadcast chunks (uneven weights: the ranks' shares differ in size and
+    in their number of chunks) come back in item order on every rank; a share that returns
+    fewer results than its items is an error on every rank, not a wait for what never comes."""
+    comm = MPI.COMM_WORLD
+    n = 3 * SHARE_CHUNK + 17
+    weights = np.random.default_rng(2).random(n) ** 3
+    got = shared_work(comm, weights, lambda lo, hi: [(i, i * i) for i in range(lo, hi)])
+    assert got == [(i, i * i) for i in range(n)]
+
+    def short(lo, hi):
+        return list(range(lo, hi - 1 if comm.rank == 0 and hi > lo else hi))
+
+    with pytest.raises(RuntimeError, match="results for items"):
+        shared_work(comm, weights, short)
     comm.Barrier()  # every rank got here: none was left waiting
