@@ -12,7 +12,6 @@ it, plugins (:mod:`pdem.plugins`) observe it.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 
 import numpy as np
@@ -31,7 +30,7 @@ from .errors import UserError
 from .io.checkpoint import new_run_id
 from .memory import map_large_blocks, return_freed_memory
 from .model.blocks import BlockStore
-from .model.build import SpecTable, block_store, expand_blocks, geometry_columns, lazy_scene
+from .model.build import SpecTable, block_store, expand_blocks, geometry_columns
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
@@ -208,11 +207,9 @@ class ModelState:
             if len(specs) > estimate.max_blocks or estimate.bytes_per_rank > estimate.max_bytes:
                 raise ConfigError([f"limits: the scene makes {estimate} (limits.max_blocks, "
                                    "limits.max_memory_per_rank; docs/limits.md)"])
+        # this rank built the shapes of its share only (the others' blocks are names and
+        # scalars: pdem.model.speclist)
         lo, hi = (0, len(specs)) if whole else build_share(comm, len(specs))
-        if not whole and not lazy_scene(scene):  # every rank made every block's shape: the
-            for k in itertools.chain(range(lo), range(hi, len(specs))):  # store and the
-                specs[k].drop_pieces()  # columns read its share's only
-            return_freed_memory()
         share, group_names = block_store(scene, specs, lo, hi)
         grids = zoned_grids(scene, comm, specs[lo:hi], lo)
         columns = geometry_columns(specs[lo:hi])

@@ -157,7 +157,6 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
     ``memory``: the physical memory to plan for (default: this machine's); ``whole``: every
     rank builds every block's store (pdem.state.needs_whole_scene), else its share."""
     from ..model.blocks import VERT_ROW
-    from ..model.build import lazy_scene
     from ..model.fields import BLOCK, CONTACT, HELD_WIDTH, SUB, held_width
 
     block_row = _row_bytes(BLOCK)
@@ -167,11 +166,11 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
     vert_row = np.dtype(VERT_ROW).itemsize
     per_entry = []
     n_total = 0
-    # Set-up (pdem.state.ModelState.create): every rank makes a spec of every block and keeps
-    # the per-block catalogue (SCENE_BYTES_PER_BLOCK); it builds the shapes and store of its
-    # share of the gids (of every block when ``whole``; the shapes of every block when cuts,
-    # joins, excavations or meshes decide what the blocks are) and then holds its own blocks
-    # and ghosts (pdem.parallel.migrate)
+    # Set-up (pdem.state.ModelState.create): every rank keeps the per-block catalogue
+    # (SCENE_BYTES_PER_BLOCK); it builds the shapes and store of its share of the gids (of
+    # every block when ``whole``; cuts, joins and excavations work on the blocks spread over
+    # the ranks, pdem.model.spread) and then holds its own blocks and ghosts
+    # (pdem.parallel.migrate)
     built_bytes = 0.0  # a block's row, geometry and shape objects while it is built
     held_bytes = 0.0  # a block's row and geometry in a rank's store
     for i, b in enumerate(scene.blocks):
@@ -184,11 +183,8 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
         geom = 8 * (6 * v + 6 * f + 3 * e + 4) + vert_row * (2 * e + 2 * e)
         built_bytes += float(n) * (geom + block_row + PY_BYTES_PER_BLOCK)
         held_bytes += float(n) * (geom + block_row)
-    shapes_everywhere = whole or not lazy_scene(scene)
     built_fraction = 1.0 if whole else 1.0 / max(comm_size, 1)
     static_bytes = SCENE_BYTES_PER_BLOCK * float(n_total) + built_fraction * built_bytes
-    if shapes_everywhere and not whole:  # the shapes of every block, the store of a share
-        static_bytes += PY_BYTES_PER_BLOCK * float(n_total) * (1.0 - built_fraction)
     share = n_total / max(comm_size, 1)
     contacts = math.ceil(share * CONTACTS_PER_BLOCK / 2)
     avg_block = static_bytes / max(n_total, 1)

@@ -20,12 +20,13 @@ from ..geometry import (
     from_vertices,
     prism,
 )
+from ..parallel.mpi import LOCAL, allgather, run_together
 from ..registry import Registry
 from .blocks import VERT_ROW, BlockStore
 from .fields import BLOCK, allocate
 from .names import NameColumn
 from .runs import RunColumn
-from .speclist import SpecList, UnbuiltRun, spec_parts
+from .speclist import RemoteRun, SpecList, UnbuiltRun, spec_parts, spec_summary
 
 
 @dataclass
@@ -175,17 +176,28 @@ def _names(parts):
     for part in parts:
         if isinstance(part, UnbuiltRun):
             yield from (part.name(j) for j in range(part.count))
+        elif isinstance(part, RemoteRun):
+            yield from part.names
         else:
             yield from (sp.name for sp in part)
 
 
-def _column(parts, of_spec, of_run, dtype) -> RunColumn:
+def _column(parts, of_spec, of_run, dtype, of_remote) -> RunColumn:
     """A per-block column, part by part: ``of_spec(spec)`` of each built spec, ``of_run(run)``
-    for every member of an unbuilt run (one run: not expanded)."""
+    for every member of an unbuilt run (one run: not expanded), ``of_remote(run)`` the rows
+    of another rank's blocks."""
     return RunColumn.from_parts(
         [(part.count, of_run(part)) if isinstance(part, UnbuiltRun)
+         else np.asarray(of_remote(part), dtype) if isinstance(part, RemoteRun)
          else np.fromiter((of_spec(sp) for sp in part), dtype, len(part)) for part in parts],
         dtype)
+
+
+def _renumbered(values: list, index: np.ndarray, table: dict) -> np.ndarray:
+    """``index`` into ``values`` (-1: none) as indices into ``table``, which takes the values
+    it lacks in their order (as the built specs' values are taken, one by one)."""
+    to = np.array([table.setdefault(v, len(table)) for v in values] + [-1], np.int32)
+    return to[index]
 
 
 class SpecTable:
@@ -210,17 +222,21 @@ class SpecTable:
         parents: dict[str, int] = {}
         self.parent = _column(
             parts, lambda sp: -1 if sp.parent == sp.name
-            else parents.setdefault(sp.parent, len(parents)), lambda run: -1, np.int32)
+            else parents.setdefault(sp.parent, len(parents)), lambda run: -1, np.int32,
+            lambda run: _renumbered(run.parents, run.parent, parents))
         self.parents = list(parents)
         labels: dict[str, int] = {}
         self.group = _column(
             parts, lambda sp: labels.setdefault(sp.group, len(labels)),
-            lambda run: labels.setdefault(run.block.group, len(labels)), np.int32)
+            lambda run: labels.setdefault(run.block.group, len(labels)), np.int32,
+            lambda run: _renumbered(run.groups, run.group, labels))
         self.material = _column(
             parts, lambda sp: labels.setdefault(sp.material, len(labels)),
-            lambda run: labels.setdefault(run.block.material, len(labels)), np.int32)
+            lambda run: labels.setdefault(run.block.material, len(labels)), np.int32,
+            lambda run: _renumbered(run.materials, run.material, labels))
         self.labels = list(labels)
-        self.entry = _column(parts, lambda sp: sp.entry, lambda run: run.entry, np.int32)
+        self.entry = _column(parts, lambda sp: sp.entry, lambda run: run.entry, np.int32,
+                             lambda run: run.entry)
         if columns is None:
             columns = {k: np.fromiter((getattr(sp, k) for sp in specs), dt, n)
                        for k, dt in GEOMETRY_COLUMNS.items()}
@@ -231,13 +247,19 @@ class SpecTable:
         # members never are: a scene that excavates builds every block)
         self.excavate_at = self.excavate_stage = None
         if any(sp.excavate_at is not None or sp.excavate_stage is not None
-               for part in parts if isinstance(part, list) for sp in part):
-            self.excavate_at = RunColumn(np.fromiter(
-                (np.nan if sp.excavate_at is None else sp.excavate_at for sp in specs), float,
-                n))
-            self.excavate_stage = RunColumn(np.fromiter(
-                (-1 if sp.excavate_stage is None else sp.excavate_stage for sp in specs),
-                np.int32, n))
+               for part in parts if isinstance(part, list) for sp in part) or any(
+                (~np.isnan(part.excavate_at)).any() or (part.excavate_stage >= 0).any()
+                for part in parts if isinstance(part, RemoteRun)):
+            self.excavate_at = RunColumn(np.concatenate([np.zeros(0)] + [
+                part.excavate_at if isinstance(part, RemoteRun)
+                else np.full(part.count, np.nan) if isinstance(part, UnbuiltRun)
+                else np.fromiter((np.nan if sp.excavate_at is None else sp.excavate_at
+                                  for sp in part), float, len(part)) for part in parts]))
+            self.excavate_stage = RunColumn(np.concatenate([np.zeros(0, np.int32)] + [
+                part.excavate_stage if isinstance(part, RemoteRun)
+                else np.full(part.count, -1, np.int32) if isinstance(part, UnbuiltRun)
+                else np.fromiter((-1 if sp.excavate_stage is None else sp.excavate_stage
+                                  for sp in part), np.int32, len(part)) for part in parts]))
 
     def excavation_times(self) -> np.ndarray:
         """Every block's excavation time (NaN: none), gid order."""
@@ -504,8 +526,10 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
     members of families (``array``, ``random``) outside it are specs without pieces (a
     name, an entry, one piece), an array's never built. Only when the scene's blocks are
     known without building them: no cuts, joins, excavations or meshes (:func:`lazy_scene`).
-    ``comm``: the ranks share the work of the cuts (collective; every rank gets every block,
-    pdem.model.rockmass.build_rock_mass)."""
+    ``comm``: the ranks share the work of the cuts, joins and excavations (collective,
+    pdem.model.rockmass.build_rock_mass); with ``share``, a scene that has them gives this
+    rank's share of the blocks built and the others' names and scalars only (a
+    :class:`SpecList` of :class:`RemoteRun` parts), else every rank gets every block."""
     errors: list[str] = []
     lo, hi = share(sum(_family_size(b) or 1 for b in scene.blocks)) \
         if share is not None and lazy_scene(scene) else (0, None)
@@ -544,14 +568,33 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
             out.append_unbuilt(b, i, members.stop, size - members.stop)
     if errors:
         raise ConfigError(errors)
+    comm = LOCAL if comm is None else comm
+    if lazy_scene(scene):
+        _zone(scene, comm, out)
+        return out
+    # the cuts, joins and excavations work on the list spread over the ranks; then each rank
+    # keeps its build share's blocks and the others' names and scalars (``share``), or gets
+    # every block
     from .rockmass import build_rock_mass
 
-    out = build_rock_mass(scene, out, max_blocks, comm)
+    spread = build_rock_mass(scene, out, max_blocks, comm)
+    del out
+    if share is not None:
+        spread = spread.move_to(allgather(comm, share(spread.total)))
+    _zone(scene, comm, spread.local)
+    if share is None:
+        return spread.whole()
+    return SpecList.spread(spread.local, spread.start, spread.total,
+                           allgather(comm, spec_summary(spread.local)), comm.rank, scene.blocks)
+
+
+def _zone(scene: Scene, comm, specs) -> None:
+    """Zone the zoned blocks among ``specs`` (those with pieces; collective: an error on one
+    rank is raised on every rank)."""
     if any(b.zones is not None for b in scene.blocks):
         from ..deformable.store import zone_specs
 
-        zone_specs(scene, out)
-    return out
+        run_together(comm, lambda: zone_specs(scene, specs))
 
 
 def lazy_scene(scene: Scene) -> bool:

@@ -2,10 +2,12 @@
 (``join:``) and excavated (``excavate:``), as 3DEC's ``block cut joint-set``, ``block join``
 and ``block excavate``.
 
-Applied in that order to the blocks the ``blocks:`` entries make (pdem.model.build). Everything
-here runs once at model build, on every rank alike, so it is plain numpy (the geometry it
-calls per piece is compiled: the clips, the touch areas of pdem.geometry.intersection); the
-order of the resulting blocks (their gids) depends only on the scene.
+Applied in that order to the blocks the ``blocks:`` entries make (pdem.model.build), once at
+model build. The list of blocks is spread over the ranks (pdem.model.spread): each rank cuts,
+joins and excavates the blocks of its slice, asking the others for the neighbours it needs,
+so no rank holds every piece. It is plain numpy (the geometry it calls per piece is compiled:
+the clips, the touch areas of pdem.geometry.intersection); the order of the resulting blocks
+(their gids) depends only on the scene, not on the rank count.
 
 * A cut splits every selected one-piece block by each plane of its set; faces made by cut ``i``
   carry face tag ``i`` (the contact between two faces of one set uses the set's joint,
@@ -40,7 +42,8 @@ from ..geometry.cutting import (
 )
 from ..geometry.hull import default_tolerance
 from ..geometry.intersection import halfspace_volume
-from ..parallel.mpi import shared_work
+from ..parallel.mpi import allgather, run_together
+from .spread import Spread
 
 # Relative sliver size: pieces thinner than this fraction of the cut block's size (cube root
 # of its volume) are not created, unless ``cut_tolerance`` says otherwise.
@@ -50,19 +53,20 @@ AUTO_CUT_TOLERANCE = 0.01
 TOUCH_AREA = 1e-4
 
 
-def build_rock_mass(scene, specs, max_blocks: int | None = None, comm=None):
-    """The scene's blocks after its cuts, joins and excavations (gid order).
-
-    ``comm``: the ranks share the cutting of each joint set and sliver joining's face areas
-    (:func:`pdem.parallel.mpi.shared_work`) and each gets the whole result, the same on any
-    number of ranks (collective); None: this process does it all."""
+def build_rock_mass(scene, specs, max_blocks: int | None = None, comm=None) -> Spread:
+    """The scene's blocks after its cuts, joins and excavations (gid order), spread over the
+    ranks (:class:`pdem.model.spread.Spread`: each rank holds a contiguous slice, the slices
+    in rank order the list one process builds; collective). ``specs``: the blocks the
+    ``blocks:`` entries make, every one on every rank. ``comm`` None: this process does it
+    all."""
+    spread = Spread.from_whole(comm, specs)
     if scene.cuts:
-        specs = apply_cuts(scene, specs, max_blocks, comm)
+        spread = apply_cuts(scene, spread, max_blocks)
     if scene.join:
-        specs = apply_joins(scene, specs)
+        spread = apply_joins(scene, spread)
     if scene.excavate or any(st.excavate for st in scene.stages):
-        specs = apply_excavations(scene, specs, comm)
-    return specs
+        spread = apply_excavations(scene, spread)
+    return spread
 
 
 def _size(poly: ConvexPolyhedron) -> float:
@@ -79,101 +83,149 @@ def _in_box(point, box) -> bool:
     return bool(np.all(np.asarray(point) >= box.min) and np.all(np.asarray(point) <= box.max))
 
 
-def apply_cuts(scene, specs, max_blocks=None, comm=None):
+def apply_cuts(scene, spread: Spread, max_blocks=None) -> Spread:
+    """Cut the blocks by each joint set in turn (collective). Before each set the ranks'
+    slices are moved so that each cuts about an even share of the set's work (the planes
+    crossing its blocks); each rank cuts its own blocks and keeps their pieces in place."""
+    comm = spread.comm
+    limit = max_blocks if max_blocks is not None else np.inf
     for i, cut in enumerate(scene.cuts):
         where = f"{scene.at('cuts', i)} ({cut.name!r})"
-        chosen = [
-            len(s.pieces) == 1
-            and (cut.groups is None or s.group in cut.groups)
-            and (cut.range is None or _in_box(s.centroid, cut.range.box))
-            for s in specs
-        ]
-        if not any(chosen):
+
+        def chosen(s, cut=cut):
+            return (len(s.pieces) == 1 and (cut.groups is None or s.group in cut.groups)
+                    and (cut.range is None or _in_box(s.centroid, cut.range.box)))
+
+        mine = [s.pieces[0].vertices for s in spread.local if chosen(s)]
+        boxes = [b for b in allgather(comm, (np.min([v.min(axis=0) for v in mine], axis=0),
+                                             np.max([v.max(axis=0) for v in mine], axis=0))
+                                      if mine else None) if b is not None]
+        del mine
+        if not boxes:
             raise ConfigError([f"{where}: selects no block (range/groups; joined blocks are "
                                "not cut)"])
-        verts = np.concatenate([s.pieces[0].vertices for s, c in zip(specs, chosen, strict=True) if c])
         try:
-            normal, offsets = joint_set_planes(cut.dip, cut.dip_direction, cut.origin,
-                                               cut.spacing, cut.count,
-                                               (verts.min(axis=0), verts.max(axis=0)))
+            normal, offsets = joint_set_planes(
+                cut.dip, cut.dip_direction, cut.origin, cut.spacing, cut.count,
+                (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)))
         except GeometryError as exc:
             raise ConfigError([f"{where}: {exc}"]) from None
-        out, made = [], 0
-        limit = max_blocks if max_blocks is not None else np.inf
+
+        def crossing(s, normal=normal, offsets=offsets):
+            """The planes of the set crossing block ``s`` (each makes at most one more piece)."""
+            proj = s.pieces[0].vertices @ normal
+            return int(np.searchsorted(offsets, proj.max())
+                       - np.searchsorted(offsets, proj.min(), side="right"))
+
         # refuse a set that would make too many blocks before cutting (a tiny spacing would
         # otherwise take hours): each block gets at most one piece per plane crossing it, +1
-        crossing = 0
-        todo, planes = [], []  # the chosen blocks and how many planes cross each
-        for k, (s, c) in enumerate(zip(specs, chosen, strict=True)):
-            if c:
-                proj = s.pieces[0].vertices @ normal
-                m = int(np.searchsorted(offsets, proj.max())
-                        - np.searchsorted(offsets, proj.min(), side="right"))
-                crossing += m
-                todo.append(k)
-                planes.append(m)
-        if len(specs) + crossing > limit:
-            raise ConfigError([f"{where}: would make up to {len(specs) + crossing} blocks, more "
-                               f"than {int(limit)} (limits.max_blocks): a larger spacing, a "
-                               "range, or a higher limits.max_blocks"])
+        planes = [crossing(s) if chosen(s) else -1 for s in spread.local]
+        most = spread.total + sum(allgather(comm, sum(m for m in planes if m > 0)))
+        if most > limit:
+            raise ConfigError([f"{where}: would make up to {most} blocks, more than "
+                               f"{int(limit)} (limits.max_blocks): a larger spacing, a range, "
+                               "or a higher limits.max_blocks"])
+        # the ranks' slices evened out by the set's work, then each cuts its own blocks
+        spread = spread.rebalance([m + 1.0 if m >= 0 else 0.0 for m in planes])
 
-        def cut_share(lo, hi, i=i, normal=normal, offsets=offsets, todo=todo, specs=specs):
+        def cut_slice(spread=spread, i=i, normal=normal, offsets=offsets, chosen=chosen):
             out = []
-            for k in todo[lo:hi]:
-                poly = specs[k].pieces[0]
-                out.append(cut_blocks([poly], i, normal, offsets,
-                                      tol=_cut_tolerance(scene, poly))[0])
+            for s in spread.local:
+                if not chosen(s):
+                    out.append(s)
+                    continue
+                poly = s.pieces[0]
+                pieces = cut_blocks([poly], i, normal, offsets,
+                                    tol=_cut_tolerance(scene, poly))[0]
+                out.extend(dataclasses.replace(s, pieces=[p]) for p in pieces)
             return out
 
-        # the ranks cut shares of the blocks (weighted by the planes crossing them) and each
-        # gets every block's pieces, in block order: the same list as one rank cutting all
-        cut_pieces = dict(zip(todo, shared_work(comm, np.asarray(planes) + 1.0, cut_share),
-                              strict=True))
-        for k, (s, c) in enumerate(zip(specs, chosen, strict=True)):
-            if not c:
-                out.append(s)
-                continue
-            pieces = cut_pieces.pop(k)
-            made += len(pieces) - 1
-            out.extend(dataclasses.replace(s, pieces=[p]) for p in pieces)
-            if len(out) + len(specs) - k - 1 > limit:
-                raise ConfigError([f"{where}: makes more than {int(limit)} blocks "
-                                   "(limits.max_blocks): a larger spacing, a range, or a "
-                                   "higher limits.max_blocks"])
-        if made == 0:
+        before = spread.total
+        spread = spread.with_local(run_together(comm, cut_slice))
+        if spread.total > limit:
+            raise ConfigError([f"{where}: makes more than {int(limit)} blocks "
+                               "(limits.max_blocks): a larger spacing, a range, or a higher "
+                               "limits.max_blocks"])
+        if spread.total == before:
             raise ConfigError([f"{where}: misses every block (no plane of the set cuts one; "
                                f"{len(offsets)} plane(s) through origin {list(cut.origin)})"])
-        specs = out
     if scene.join_slivers > 0.0:
-        specs = join_slivers(specs, scene.join_slivers, comm=comm)
-    return _name_pieces(specs)
+        spread = join_slivers(spread, scene.join_slivers)
+    return _name_pieces(spread)
 
 
-def join_slivers(specs, fraction: float, same_parent: bool = True, comm=None):
+def join_slivers(spread: Spread, fraction: float, same_parent: bool = True) -> Spread:
     """Join every cut piece smaller than ``fraction`` of the median cut piece (by volume) to
     the block it shares the largest face with (smallest first; same material, group and
-    excavation time; of the same parent block with ``same_parent``).
+    excavation time; of the same parent block with ``same_parent``). Collective.
 
     Three sets leave small corner pieces even when no piece is thin along any one normal, and
     an excavation leaves corner bits of the blocks it cuts; the smallest block sets the
     timestep (eq. 87), so one sliver can cost 100x in run time. 3DEC users join them by hand;
     here they go into a neighbour, making it concave (fixed if the neighbour is).
 
-    The face areas between each small piece and its neighbours (nearly all the work) are
-    measured first, shared over the ranks (``comm``, :func:`pdem.parallel.mpi.shared_work`),
-    then the pieces are joined in order as before: the same blocks on any number of ranks."""
-    count: dict[str, int] = {}
-    for s in specs:
-        count[s.parent] = count.get(s.parent, 0) + 1
-    cut = [k for k, s in enumerate(specs) if count[s.parent] > 1]
-    if not cut:
-        return specs
-    vol = np.array([s.volume for s in specs])
-    limit = fraction * float(np.median(vol[cut]))
-    small = sorted((k for k in cut if vol[k] < limit), key=lambda k: (vol[k], k))
+    Every rank learns every block's volume, box and kind (~60 bytes a block), so each finds
+    the same small pieces and neighbours. The face area between a small piece and each
+    neighbour (nearly all the work) is measured by the rank holding the small piece, which
+    asks for the neighbours it does not hold; the areas are shared, and every rank joins in
+    the same order: the same blocks on any number of ranks. A group's pieces go to the rank
+    holding its first block."""
+    comm, local = spread.comm, spread.local
+    count = spread.counts(lambda s: s.parent)
+    vol = spread.gathered(np.array([s.volume for s in local], float))
+    is_cut = spread.gathered(np.array([count[s.parent] > 1 for s in local], bool))
+    if not is_cut.any():
+        return spread
+    limit = fraction * float(np.median(vol[is_cut]))
+    small = sorted((int(k) for k in np.flatnonzero(is_cut & (vol < limit))),
+                   key=lambda k: (vol[k], k))
     if not small:
-        return specs
-    owner = list(range(len(specs)))  # union-find over blocks
+        return spread
+
+    def kind(s):
+        return (s.material, s.group, s.excavate_at, s.excavate_stage,
+                s.parent if same_parent else None)
+
+    # every block's kind as a number, the same on every rank
+    kinds: dict = {}
+    for part in allgather(comm, list(dict.fromkeys(kind(s) for s in local))):
+        for k in part:
+            kinds.setdefault(k, len(kinds))
+    kind_of = spread.gathered(np.array([kinds[kind(s)] for s in local], np.int64))
+    del kinds
+    lo = spread.gathered(np.array([np.min([p.vertices.min(axis=0) for p in s.pieces], axis=0)
+                                   for s in local]).reshape(-1, 3))
+    hi = spread.gathered(np.array([np.max([p.vertices.max(axis=0) for p in s.pieces], axis=0)
+                                   for s in local]).reshape(-1, 3))
+    boxes = _BoxQuery(lo, hi)
+    # every (small piece, neighbour of its kind) pair whose face area the joining may read
+    near_of = {}
+    for k in small:
+        pad = 1e-6 * vol[k] ** (1.0 / 3.0)
+        near = boxes.meeting(lo[k] - pad, hi[k] + pad)
+        near_of[k] = [int(j) for j in near if int(j) != k and kind_of[j] == kind_of[k]]
+    del boxes, lo, hi, kind_of
+    # the areas of the pairs of this rank's small pieces, with the neighbours it lacks asked for
+    owner_rank = spread.owner_of(small)
+    mine = [k for k, r in zip(small, owner_rank, strict=True) if r == comm.rank]
+    first, last = spread.start, spread.start + len(local)
+    held = spread.fetch([j for k in mine for j in near_of[k] if not first <= j < last])
+
+    def spec(g):
+        return local[g - first] if first <= g < last else held[g]
+
+    def areas():
+        return [sum(touch_area(p, q) for p in spec(k).pieces for q in spec(j).pieces)
+                for k in mine for j in near_of[k]]
+
+    measured = allgather(comm, run_together(comm, areas))
+    held = {}
+    area_of = {}
+    for r, values in enumerate(measured):
+        pairs = ((k, j) for k, o in zip(small, owner_rank, strict=True) if o == r
+                 for j in near_of[k])
+        area_of.update(zip(pairs, values, strict=True))
+    owner = np.arange(spread.total)  # union-find over blocks
 
     def find(i):
         while owner[i] != i:
@@ -181,28 +233,6 @@ def join_slivers(specs, fraction: float, same_parent: bool = True, comm=None):
             i = owner[i]
         return i
 
-    def kind(s):
-        return (s.material, s.group, s.excavate_at, s.excavate_stage,
-                s.parent if same_parent else None)
-
-    lo = np.array([np.min([p.vertices.min(axis=0) for p in s.pieces], axis=0) for s in specs])
-    hi = np.array([np.max([p.vertices.max(axis=0) for p in s.pieces], axis=0) for s in specs])
-    boxes = _BoxQuery(lo, hi)
-    # every (small piece, neighbour of its kind) pair whose face area the joining may read
-    near_of = {}
-    pairs = []
-    for k in small:
-        pad = 1e-6 * vol[k] ** (1.0 / 3.0)
-        near = boxes.meeting(lo[k] - pad, hi[k] + pad)
-        near_of[k] = [int(j) for j in near if int(j) != k and kind(specs[j]) == kind(specs[k])]
-        pairs.extend((k, j) for j in near_of[k])
-
-    def areas(a, b):
-        return [sum(touch_area(p, q) for p in specs[k].pieces for q in specs[j].pieces)
-                for k, j in pairs[a:b]]
-
-    weights = [len(specs[k].pieces) * len(specs[j].pieces) for k, j in pairs]
-    area_of = dict(zip(pairs, shared_work(comm, weights, areas), strict=True))
     for k in small:
         best, best_area = -1, 0.0
         for j in near_of[k]:
@@ -214,27 +244,31 @@ def join_slivers(specs, fraction: float, same_parent: bool = True, comm=None):
         if best >= 0 and best_area > TOUCH_AREA * vol[k] ** (2.0 / 3.0):
             a, b = find(k), find(best)
             owner[max(a, b)] = min(a, b)
-    # the groups of more than one (a group's root is its lowest index: members in order); a
-    # block joined to none is passed on as it is, not remade (every block's spec made anew
-    # was ~35 MB on every rank at 88,000 blocks, the set-up's peak on 4 ranks)
-    members: dict[int, list[int]] = {}
-    for k in range(len(specs)):
-        root = find(k)
-        if root != k:
-            members.setdefault(root, [root]).append(k)
+    while True:  # every block's root (a group's root is its lowest index: members in order)
+        up = owner[owner]
+        if np.array_equal(up, owner):
+            break
+        owner = up
+    joined = np.flatnonzero(owner != np.arange(spread.total))
+    # this rank's groups: their other members' specs (wherever they are) come here
+    roots = set(int(r) for r in owner[joined] if first <= r < last)
+    members: dict[int, list[int]] = {r: [r] for r in sorted(roots)}
+    for g in joined:
+        if int(owner[g]) in members:
+            members[int(owner[g])].append(int(g))
+    held = spread.fetch([g for m in members.values() for g in m[1:] if not first <= g < last])
     out = []
-    for k, s in enumerate(specs):
-        if k not in members:
-            if find(k) == k:
-                out.append(s)
-            continue
-        group = [specs[j] for j in members[k]]
-        spec = s.spec
-        if any(m.spec.fixed for m in group) and not spec.fixed:
-            spec = spec.model_copy(update={"fixed": True})
-        out.append(dataclasses.replace(s, pieces=[p for m in group for p in m.pieces],
-                                       spec=spec))
-    return out
+    for g, s in enumerate(local, start=first):
+        if g in members:
+            group = [spec(j) for j in members[g]]
+            block = s.spec
+            if any(m.spec.fixed for m in group) and not block.fixed:
+                block = block.model_copy(update={"fixed": True})
+            out.append(dataclasses.replace(s, pieces=[p for m in group for p in m.pieces],
+                                           spec=block))
+        elif owner[g] == g:  # a block joined to none is passed on as it is, not remade
+            out.append(s)
+    return spread.with_local(out)
 
 
 class _BoxQuery:
@@ -263,21 +297,20 @@ class _BoxQuery:
         return np.sort(cand[meet])
 
 
-def _name_pieces(specs):
-    """Pieces of scene block ``P`` (more than one) are named ``P[k]`` in build order."""
-    count: dict[str, int] = {}
-    for s in specs:
-        count[s.parent] = count.get(s.parent, 0) + 1
-    seen: dict[str, int] = {}
+def _name_pieces(spread: Spread) -> Spread:
+    """Pieces of scene block ``P`` (more than one) are named ``P[k]`` in build order
+    (collective: a rank counts on from the pieces of ``P`` the ranks before it hold)."""
+    count = spread.counts(lambda s: s.parent)
+    seen = spread.counts_before(lambda s: s.parent)
     out = []
-    for s in specs:
+    for s in spread.local:
         if count[s.parent] == 1:
             out.append(dataclasses.replace(s, name=s.parent))
             continue
-        k = seen.get(s.parent, 0)
+        k = seen[s.parent]
         seen[s.parent] = k + 1
         out.append(dataclasses.replace(s, name=f"{s.parent}[{k}]"))
-    return out
+    return spread.with_local(out)
 
 
 # ---------------------------------------------------------------------------- contact of pieces
@@ -327,15 +360,25 @@ def components(pieces: list[ConvexPolyhedron]) -> list[list[int]]:
 
 
 # ---------------------------------------------------------------------------- joins
-def apply_joins(scene, specs):
-    by_name = {s.name: k for k, s in enumerate(specs)}
+def apply_joins(scene, spread: Spread) -> Spread:
+    """Join the blocks each ``join:`` entry names (collective: every rank learns where the
+    named blocks are and gets their specs, checks every join alike and makes the joined
+    block where its first member is)."""
+    wanted = {name for names in scene.join for name in names}
+    found: dict[str, int] = {}
+    for part in allgather(spread.comm, {s.name: g for g, s in enumerate(spread.local,
+                                                                        start=spread.start)
+                                        if s.name in wanted}):
+        for name, g in part.items():  # a repeated name: its last block, as one list reads
+            found[name] = max(g, found.get(name, -1))
+    specs = spread.fetch(list(found.values()))  # every rank checks every join alike
     member_of: dict[int, int] = {}
     errors = []
     for i, names in enumerate(scene.join):
         where = scene.at("join", i)
         rows = []
         for name in names:
-            k = by_name.get(name)
+            k = found.get(name)
             if k is None:
                 errors.append(f"{where}: unknown block {name!r}")
             elif k in member_of:
@@ -371,18 +414,18 @@ def apply_joins(scene, specs):
     if errors:
         raise ConfigError(errors)
     out = []
-    for k, s in enumerate(specs):
+    for k, s in enumerate(spread.local, start=spread.start):
         i = member_of.get(k)
         if i is None:
             out.append(s)
-        elif by_name[scene.join[i][0]] == k:  # the first member leads: name and place
-            members = [specs[by_name[name]] for name in scene.join[i]]
+        elif found[scene.join[i][0]] == k:  # the first member leads: name and place
+            members = [specs[found[name]] for name in scene.join[i]]
             pieces = [p for m in members for p in m.pieces]
-            spec = s.spec
+            block = s.spec
             if any(m.spec.fixed for m in members):  # joined to a fixed block: part of it
-                spec = spec.model_copy(update={"fixed": True})
-            out.append(dataclasses.replace(s, pieces=pieces, spec=spec))
-    return out
+                block = block.model_copy(update={"fixed": True})
+            out.append(dataclasses.replace(s, pieces=pieces, spec=block))
+    return spread.with_local(out)
 
 
 # ---------------------------------------------------------------------------- excavations
@@ -421,53 +464,69 @@ def _excavations(scene):
             yield f"{scene.at('stages', i, 'excavate', j)} ({exc.region_kind})", exc, i
 
 
-def apply_excavations(scene, specs, comm=None):
+def apply_excavations(scene, spread: Spread) -> Spread:
+    """Cut each excavation's region out of the blocks (collective: each rank its own
+    blocks)."""
+    comm = spread.comm
     for where, exc, stage in _excavations(scene):
         later = exc.time > 0.0 or stage is not None  # the inside stays a block until then
         try:
             normals, offsets = region_planes(exc)
         except GeometryError as exc_:
             raise ConfigError([f"{where}: {exc_}"]) from None
-        out, touched = [], 0
-        for s in specs:
-            if s.excavate_at is not None or s.excavate_stage is not None or (
-                    exc.groups is not None and s.group not in exc.groups):
-                out.append(s)  # inside an earlier excavation, or not of its groups
-                continue
-            outside, inside, changed = [], [], False
-            for poly in s.pieces:
-                tol = _cut_tolerance(scene, poly)
-                kept, removed = excavate(poly, (normals, offsets), tol, UNTAGGED)
-                if removed == 0.0 and len(kept) == 1:
-                    outside.append(poly)
+
+        def excavate_slice(exc=exc, stage=stage, later=later, normals=normals,
+                           offsets=offsets, spread=spread):
+            out, touched = [], 0
+            for s in spread.local:
+                if s.excavate_at is not None or s.excavate_stage is not None or (
+                        exc.groups is not None and s.group not in exc.groups):
+                    out.append(s)  # inside an earlier excavation, or not of its groups
                     continue
-                changed = True
-                outside.extend(kept)
-                if removed > 0.0 and later:
-                    part = inside_part(poly, normals, offsets,
-                                       max(tol, default_tolerance(poly.vertices)))
-                    if part is not None:
-                        inside.append(part)
-            if not changed:
-                out.append(s)
-                continue
-            touched += 1
-            made = [dataclasses.replace(s, pieces=[outside[i] for i in g])
-                    for g in components(outside)]
-            made += [dataclasses.replace(s, pieces=[inside[i] for i in g],
-                                         excavate_at=exc.time if stage is None else None,
-                                         excavate_stage=stage) for g in components(inside)]
-            if len(made) == 1:
-                made[0] = dataclasses.replace(made[0], name=s.name)
-            else:
-                made = [dataclasses.replace(m, name=f"{s.name}[{k}]")
-                        for k, m in enumerate(made)]
-            out.extend(made)
-        if touched == 0:
+                made = _excavated(scene, s, exc, stage, later, normals, offsets)
+                if made is None:
+                    out.append(s)
+                    continue
+                touched += 1
+                out.extend(made)
+            return out, touched
+
+        out, touched = run_together(comm, excavate_slice)
+        if sum(allgather(comm, touched)) == 0:
             raise ConfigError([f"{where}: the region meets no block"])
-        if not out:
+        spread = spread.with_local(out)
+        if spread.total == 0:
             raise ConfigError([f"{where}: removes every block"])
-        specs = out
     if scene.join_slivers > 0.0:
-        specs = join_slivers(specs, scene.join_slivers, same_parent=False, comm=comm)
-    return specs
+        spread = join_slivers(spread, scene.join_slivers, same_parent=False)
+    return spread
+
+
+def _excavated(scene, s, exc, stage, later, normals, offsets):
+    """The blocks an excavation's region leaves of block ``s`` (None: it misses ``s``): the
+    groups of its pieces outside the region connected face to face, then (``later``) those
+    inside, which go at the excavation's time or stage."""
+    outside, inside, changed = [], [], False
+    for poly in s.pieces:
+        tol = _cut_tolerance(scene, poly)
+        kept, removed = excavate(poly, (normals, offsets), tol, UNTAGGED)
+        if removed == 0.0 and len(kept) == 1:
+            outside.append(poly)
+            continue
+        changed = True
+        outside.extend(kept)
+        if removed > 0.0 and later:
+            part = inside_part(poly, normals, offsets,
+                               max(tol, default_tolerance(poly.vertices)))
+            if part is not None:
+                inside.append(part)
+    if not changed:
+        return None
+    made = [dataclasses.replace(s, pieces=[outside[i] for i in g])
+            for g in components(outside)]
+    made += [dataclasses.replace(s, pieces=[inside[i] for i in g],
+                                 excavate_at=exc.time if stage is None else None,
+                                 excavate_stage=stage) for g in components(inside)]
+    if len(made) == 1:
+        return [dataclasses.replace(made[0], name=s.name)]
+    return [dataclasses.replace(m, name=f"{s.name}[{k}]") for k, m in enumerate(made)]

@@ -310,10 +310,7 @@ def shared_work(comm, weights, work) -> list:
     except Exception as exc:  # noqa: BLE001 - every rank must hear of it
         mine = None
         failure = exc
-        try:
-            sent = ("raised", pickle.dumps(exc), str(exc))
-        except Exception:  # noqa: BLE001 - an unpicklable exception: its text
-            sent = ("raised", None, f"{type(exc).__name__}: {exc}")
+        sent = _as_sent(exc)
     # one rank's results at a time (a broadcast from each in turn, not one allgather), and
     # those in chunks: a rank holds its own results, the others' received so far and one
     # chunk's pickle (a cut rock mass's set-up peak was the last rank pickling its share
@@ -336,6 +333,23 @@ def shared_work(comm, weights, work) -> list:
         for _ in range(0, r_hi - r_lo, SHARE_CHUNK):
             part.extend(comm.bcast(None, root=r))
         parts.append(part)
+    _raise_first(comm, parts, failure)
+    return [x for part in parts for x in part]
+
+
+def _as_sent(exc: BaseException) -> tuple:
+    """An exception as another rank can raise it: pickled, and its text (if it does not
+    pickle, or not unpickle there)."""
+    try:
+        return ("raised", pickle.dumps(exc), str(exc))
+    except Exception:  # noqa: BLE001 - an unpicklable exception: its text
+        return ("raised", None, f"{type(exc).__name__}: {exc}")
+
+
+def _raise_first(comm, parts, failure) -> None:
+    """Raise the failure of the lowest rank among ``parts`` (one per rank, a failure as
+    :func:`_as_sent` made it): this rank's own ``failure`` as itself, another's unpickled (a
+    :class:`RuntimeError` naming the rank if it does not unpickle)."""
     for r, part in enumerate(parts):
         if isinstance(part, tuple) and part and part[0] == "raised":
             if r == comm.rank:
@@ -346,7 +360,21 @@ def shared_work(comm, weights, work) -> list:
                 exc = None
             raise exc if isinstance(exc, BaseException) else RuntimeError(
                 f"rank {r}: {part[2]}")
-    return [x for part in parts for x in part]
+
+
+def run_together(comm, work):
+    """``work()`` on every rank, returning its result; if it raised on any rank, the
+    exception of the lowest rank that failed is raised on every rank (collective: each
+    rank's own part of a distributed computation, so that none is left waiting in the next
+    collective)."""
+    failure = result = None
+    try:
+        result = work()
+    except Exception as exc:  # noqa: BLE001 - every rank must hear of it
+        failure = exc
+    _raise_first(comm, allgather(comm, None if failure is None else _as_sent(failure)),
+                 failure)
+    return result
 
 
 def allgather_rows(comm, values: np.ndarray) -> np.ndarray:
