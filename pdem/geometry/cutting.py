@@ -128,7 +128,11 @@ def _plane_cut(poly, normal, offset, tol, tag):
     """(below, above, None) when the plane leaves ``poly`` whole (see :func:`split_by_plane`),
     else (None, None, the cut)."""
     n, d = _unit_plane(normal, offset)
-    tol = _check_tol(tol)
+    return _unit_plane_cut(poly, n, d, _check_tol(tol), tag)
+
+
+def _unit_plane_cut(poly, n, d, tol, tag):
+    """:func:`_plane_cut` by the unit plane ``n . x = d`` with a checked ``tol``."""
     snap = default_tolerance(poly.vertices)
     s = poly.vertices @ n - d
     thin = max(tol, snap)
@@ -136,32 +140,49 @@ def _plane_cut(poly, normal, offset, tol, tag):
         return _tagged(poly), None, None
     if s.min() > -thin:
         return None, _tagged(poly), None
-    # Vertices within round-off of the plane count as on it and belong to both pieces, so a
-    # cut through a vertex does not leave a needle edge next to it.
-    side = np.where(s > snap, 1, np.where(s < -snap, -1, 0)).astype(np.int64)
-    e = poly.edges
-    crossing = side[e[:, 0]] * side[e[:, 1]] < 0
-    a, b = e[crossing, 0], e[crossing, 1]
-    # One intersection point per crossing edge, shared by both pieces and both faces at it.
-    t = s[a] / (s[a] - s[b])
-    x_edge = np.full((len(e), 3), np.nan)
-    x_edge[crossing] = poly.vertices[a] + t[:, None] * (poly.vertices[b] - poly.vertices[a])
-    cut = _Cut(poly, side, x_edge, snap, tag)
+    cut = _Cut(poly, *_cut_points(poly.vertices, poly.edges, s, snap), snap, tag)
     cut.plane = (n, d)
     return None, None, cut
+
+
+@kernel
+def _cut_points(vertices, edges, s, snap):
+    """``(side, points, edge_key)`` of a plane cut, compiled (per piece of a rock mass: a
+    dozen numpy calls were ~10 % of its build). ``s``: the vertices' signed distances to the
+    plane. A vertex within ``snap`` of the plane is on it (``side`` 0) and belongs to both
+    pieces, so a cut through a vertex does not leave a needle edge next to it; else ``side``
+    is +1 above, -1 below. ``points``: the vertices, then one row per edge, its intersection
+    point where the edge crosses the plane (shared by both pieces and both faces at it), NaN
+    elsewhere. ``edge_key``: ``i * nv + j`` of each edge (sorted: the edges are)."""
+    nv = vertices.shape[0]
+    ne = edges.shape[0]
+    side = np.empty(nv, np.int64)
+    for i in range(nv):
+        side[i] = 1 if s[i] > snap else (-1 if s[i] < -snap else 0)
+    points = np.full((nv + ne, 3), np.nan)
+    points[:nv] = vertices
+    edge_key = np.empty(ne, np.int64)
+    for k in range(ne):
+        a = edges[k, 0]
+        b = edges[k, 1]
+        edge_key[k] = a * nv + b
+        if side[a] * side[b] < 0:
+            t = s[a] / (s[a] - s[b])
+            for j in range(3):
+                points[nv + k, j] = vertices[a, j] + t * (vertices[b, j] - vertices[a, j])
+    return side, points, edge_key
 
 
 class _Cut:
     """One plane cut of one polyhedron, shared by its two sides (internal)."""
 
-    def __init__(self, poly, side, x_edge, snap, tag):
+    def __init__(self, poly, side, points, edge_key, snap, tag):
         self.poly = poly
         self.side = side
         self.snap = snap
         self.tag = int(tag)
-        self.points = np.concatenate([poly.vertices, x_edge])
-        nv = poly.n_vertices
-        self.edge_key = poly.edges[:, 0] * nv + poly.edges[:, 1]  # sorted: edges are sorted
+        self.points = points
+        self.edge_key = edge_key
 
     def piece(self, n: np.ndarray, d: float, keep: int) -> ConvexPolyhedron:
         """Piece on the ``keep`` side (-1: below, +1: above) of the plane; its cap normal is n."""
@@ -181,11 +202,10 @@ class _Cut:
             self.edge_key, self.snap, n)
         if not ok:
             raise GeometryError("cut section has fewer than 3 distinct corners")
-        normals = np.concatenate([poly.normals[kept], n[None, :]])
-        offsets = np.concatenate([poly.offsets[kept], [d]])
-        ftags = np.concatenate([face_tags(poly)[kept], [self.tag]]).astype(np.int64)
-        return ConvexPolyhedron.from_csr(self.points[used], start, verts, normals, offsets,
-                                         ftags)
+        v, normals, offsets, ftags = _piece_arrays(
+            self.points, used, kept, poly.normals, poly.offsets, face_tags(poly), n, d,
+            self.tag)
+        return ConvexPolyhedron.from_csr(v, start, verts, normals, offsets, ftags, fresh=True)
 
     # -------------------------------------------------------------- fallback: hull
     def _clip_hull(self, side: np.ndarray, n: np.ndarray, d: float) -> ConvexPolyhedron:
@@ -218,6 +238,32 @@ def _match_plane(face_pts: np.ndarray, cand_n: np.ndarray, cand_d: np.ndarray) -
 
 
 # ---------------------------------------------------------------------------- the face clip
+@kernel
+def _piece_arrays(points, used, kept, normals, offsets, tags, n, d, tag):
+    """A clipped piece's vertices (``points[used]``) and its faces' planes and tags: the
+    parent's kept faces', then the cap's (``n``, ``d``, ``tag``). Copies only, compiled (four
+    numpy concatenations a piece)."""
+    v = np.empty((used.shape[0], 3))
+    for i in range(used.shape[0]):
+        for j in range(3):
+            v[i, j] = points[used[i], j]
+    nk = kept.shape[0]
+    out_n = np.empty((nk + 1, 3))
+    out_d = np.empty(nk + 1)
+    out_t = np.empty(nk + 1, np.int64)
+    for i in range(nk):
+        f = kept[i]
+        for j in range(3):
+            out_n[i, j] = normals[f, j]
+        out_d[i] = offsets[f]
+        out_t[i] = tags[f]
+    for j in range(3):
+        out_n[nk, j] = n[j]
+    out_d[nk] = d
+    out_t[nk] = tag
+    return v, out_n, out_d, out_t
+
+
 @kernel
 def _clip_kernel(points, nv, face_start, face_verts, side, edge_key, snap, n):
     """One piece of a plane cut, compiled (every cut piece of a rock mass is made here: in
@@ -455,8 +501,19 @@ def _cut_one(poly, n, offsets, tags, tol) -> list[ConvexPolyhedron]:
     # Planes outside the block's extent along n cannot cut it: skip them without a split.
     proj = poly.vertices @ n
     window = slice(*np.searchsorted(offsets, [proj.min(), proj.max()], side="right"))
+    # the set's unit normal and the tolerance once, each plane's offset over the same norm
+    # (split_by_plane's numbers)
+    unit, _ = _unit_plane(n, 0.0)
+    norm = float(np.linalg.norm(np.asarray(n, dtype=np.float64).reshape(3)))
+    tol = _check_tol(tol)
     for d, t in zip(offsets[window], tags[window], strict=True):
-        below, above = split_by_plane(rest, n, d, tol, t)
+        d = float(d)
+        if not np.isfinite(d):
+            raise GeometryError(f"invalid plane: normal {unit * norm}, offset {d}")
+        below, above, cut = _unit_plane_cut(rest, unit, d / norm, tol, t)
+        if cut is not None:
+            below, above = cut.piece(unit, d / norm, keep=-1), cut.piece(-unit, -d / norm,
+                                                                          keep=1)
         if above is None:  # this plane, and every later (higher) one, is above what is left
             break
         if below is not None:

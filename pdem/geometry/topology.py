@@ -62,6 +62,39 @@ def build_half_edges(nv: int, face_start: np.ndarray, face_verts: np.ndarray) ->
     return HalfEdges(fv, twin, nxt, face, vert_he, edges)
 
 
+def cut_piece_edges(nv: int, face_start: np.ndarray, face_verts: np.ndarray) -> np.ndarray:
+    """The sorted unique edges of a closed surface (:func:`build_half_edges`'s ``edges``),
+    its vertex ids checked first (in range, else "face vertex id out of range", as
+    pdem.geometry.polyhedron.ConvexPolyhedron.from_csr does), then the same checks and
+    errors; without the half-edge record. For the arrays of a cut piece (int64, contiguous):
+    every piece of a rock mass comes through here (~20 us of numpy checks a piece)."""
+    code = _csr_code(int(nv), face_start, face_verts)
+    if code == 1:
+        raise GeometryError("face vertex id out of range")
+    if code == 2:
+        raise GeometryError("faces must be at least 4 polygons of at least 3 vertices each")
+    code, at, _, _, _, _, edges = _half_edges(int(nv), face_start, face_verts)
+    if code:
+        raise GeometryError(_ERRORS[code].format(at=at))
+    return edges
+
+
+@kernel
+def _csr_code(nv, fs, fv):
+    """0 if faces ``fs``/``fv`` over ``nv`` vertices are at least 4 polygons of at least 3
+    valid vertex ids each; 1: a vertex id out of range; 2: too few faces or corners."""
+    for h in range(fv.shape[0]):
+        if fv[h] < 0 or fv[h] >= nv:
+            return 1
+    nf = fs.shape[0] - 1
+    if nf < 4 or fs[0] != 0 or fs[nf] != fv.shape[0]:
+        return 2
+    for f in range(nf):
+        if fs[f + 1] - fs[f] < 3:
+            return 2
+    return 0
+
+
 # what :func:`_half_edges` found wrong, by its code (``at``: a vertex or Euler's sum)
 _ERRORS = {
     1: "a face repeats a vertex consecutively",

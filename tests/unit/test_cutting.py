@@ -297,7 +297,8 @@ def test_hull_fallback_agrees_with_face_clipping():
     a, b = e[cr, 0], e[cr, 1]
     t = s[a] / (s[a] - s[b])
     x_edge[cr] = poly.vertices[a] + t[:, None] * (poly.vertices[b] - poly.vertices[a])
-    cut = _Cut(poly, side, x_edge, 1e-12, 5)
+    points = np.concatenate([poly.vertices, x_edge])
+    cut = _Cut(poly, side, points, e[:, 0] * poly.n_vertices + e[:, 1], 1e-12, 5)
     direct, hull = cut._clip_faces(side, n, d), cut._clip_hull(side, n, d)
     assert hull.volume == pytest.approx(direct.volume, rel=1e-12)
 
@@ -473,3 +474,68 @@ def test_clip_below_is_split_by_planes_below_piece(seed):
                       "inertia"):
                 assert np.array_equal(getattr(below, k), getattr(clipped, k)), k
             assert below.volume == clipped.volume
+
+
+def test_compiled_cut_points_are_numpys_bit_for_bit():
+    """The plane cut's sides, intersection points and edge keys, compiled
+    (``_cut_points``), are the numpy expressions they replace, bit for bit: on random blocks
+    and planes, with vertices on the plane within the snap distance (side 0) and without."""
+    from pdem.geometry.cutting import _cut_points
+
+    rng = np.random.default_rng(11)
+    crossed = touched = 0
+    for k in range(40):
+        poly = random_block(k)
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        d = float(n @ poly.vertices[k % poly.n_vertices]) if k % 2 else float(n @ poly.centroid)
+        s = poly.vertices @ n - d
+        snap = 1e-9
+        side = np.where(s > snap, 1, np.where(s < -snap, -1, 0)).astype(np.int64)
+        e = poly.edges
+        cr = side[e[:, 0]] * side[e[:, 1]] < 0
+        a, b = e[cr, 0], e[cr, 1]
+        t = s[a] / (s[a] - s[b])
+        x_edge = np.full((len(e), 3), np.nan)
+        x_edge[cr] = poly.vertices[a] + t[:, None] * (poly.vertices[b] - poly.vertices[a])
+        got_side, got_points, got_key = _cut_points(poly.vertices, e, s, snap)
+        assert np.array_equal(got_side, side)
+        assert np.array_equal(got_points, np.concatenate([poly.vertices, x_edge]),
+                              equal_nan=True)
+        assert np.array_equal(got_key, e[:, 0] * poly.n_vertices + e[:, 1])
+        crossed += int(cr.any())
+        touched += int((side == 0).any())
+    assert crossed > 30 and touched >= 20  # the cases exist: cuts, and vertices on the plane
+
+
+def test_a_fresh_piece_is_checked_as_any_other():
+    """``from_csr(..., fresh=True)`` (a cut piece's arrays, kept instead of copied) refuses
+    what the copying path refuses, with the same messages, and gives the same polyhedron
+    with read-only arrays."""
+    from pdem.geometry.polyhedron import ConvexPolyhedron
+
+    b = box([0, 0, 0], [1, 2, 3])
+
+    def arrays(fv=None, fs=None):
+        return (np.array(b.vertices), np.array(b.face_start if fs is None else fs),
+                np.array(b.face_verts if fv is None else fv), np.array(b.normals),
+                np.array(b.offsets))
+
+    for bad in (dict(fv=np.where(b.face_verts == 3, 8, b.face_verts)),
+                dict(fv=np.where(b.face_verts == 3, -1, b.face_verts)),
+                dict(fs=b.face_start[[0, 1, 2, 3, 6]], fv=b.face_verts[:b.face_start[3]]),
+                dict(fs=np.array([0, 2, 4, 6, 8, 10, 12]), fv=b.face_verts[:12]),
+                dict(fv=b.face_verts[::-1].copy())):
+        messages = []
+        for fresh in (False, True):
+            with pytest.raises(GeometryError) as err:
+                ConvexPolyhedron.from_csr(*arrays(**bad), fresh=fresh)
+            messages.append(str(err.value))
+        assert messages[0] == messages[1]
+    kept = ConvexPolyhedron.from_csr(*arrays(), fresh=True)
+    copied = ConvexPolyhedron.from_csr(*arrays())
+    for k in ("vertices", "face_start", "face_verts", "normals", "offsets", "edges",
+              "centroid", "inertia"):
+        assert np.array_equal(getattr(kept, k), getattr(copied, k))
+        assert not getattr(kept, k).flags.writeable
+    assert kept.volume == copied.volume
