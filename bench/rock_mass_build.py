@@ -3,6 +3,7 @@ of one spacing (pdem.model.rockmass: the cuts, then sliver joining), set up to t
 
     .venv/bin/python bench/rock_mass_build.py                   # spacings 2 and 1.5, 1 and 2 ranks
     .venv/bin/python bench/rock_mass_build.py --spacing 4 2 --ranks 1 2 3
+    .venv/bin/python bench/rock_mass_build.py --mesh 30 --ranks 2   # a mesh of 30^3 cells
 
 Prints, per spacing and rank count, the blocks made, the seconds of the build (the cuts and
 sliver joining: every rank gets every block) and of the whole set-up to the first step (the
@@ -43,6 +44,47 @@ solve: {{steps: 1}}
 """
 
 
+MESH_SCENE = """
+name: meshed-{n}
+materials:
+  granite: {{density: 2600}}
+joints:
+  default: {{kn: 5.0e9, ks: 2.5e9, friction: 35}}
+blocks:
+  - {{name: rock, mesh: {{file: {path}, cell_data_group: pair}}, material: granite}}
+  - {{name: base, box: {{min: [-1, -1, -1], max: [{top}, {top}, 0]}}, material: granite,
+     fixed: true}}
+solve: {{steps: 1}}
+"""
+
+
+def mesh_scene(n: int, comm) -> str:
+    """A lattice of n^3 unit hexahedra joined two by two along x (a .vtu rank 0 writes), on
+    a fixed base."""
+    import tempfile
+
+    import meshio
+    import numpy as np
+
+    path = Path(tempfile.gettempdir()) / f"pdem-bench-mesh-{n}.vtu"
+    if comm.rank == 0:
+        x = np.arange(n + 1, dtype=float)
+        pts = np.stack(np.meshgrid(x, x, x, indexing="ij"), axis=-1).reshape(-1, 3)
+        i, j, k = (a.ravel() for a in np.meshgrid(*(np.arange(n),) * 3, indexing="ij"))
+
+        def node(a, b, c):
+            return (a * (n + 1) + b) * (n + 1) + c
+
+        cells = np.stack([node(i, j, k), node(i + 1, j, k), node(i + 1, j + 1, k),
+                          node(i, j + 1, k), node(i, j, k + 1), node(i + 1, j, k + 1),
+                          node(i + 1, j + 1, k + 1), node(i, j + 1, k + 1)], axis=1)
+        pair = ((i // 2) * n * n + j * n + k).astype(float)
+        meshio.write(path, meshio.Mesh(pts, [("hexahedron", cells)],
+                                       cell_data={"pair": [pair]}))
+    comm.Barrier()
+    return MESH_SCENE.format(n=n, path=path, top=n + 1)
+
+
 def child(spacing: float) -> None:
     from mpi4py import MPI
 
@@ -67,7 +109,9 @@ def child(spacing: float) -> None:
     build[0] = 0.0
     gc.collect()
     before = resident_mb()
-    scene = parse_scene(SCENE.format(spacing=spacing))
+    # a negative spacing -n: the mesh of n^3 cells (--mesh)
+    scene = parse_scene(SCENE.format(spacing=spacing) if spacing > 0
+                        else mesh_scene(int(-spacing), comm))
     comm.Barrier()
     t0 = time.perf_counter()
     sim = Simulation(scene, comm, output=False)
@@ -91,6 +135,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--spacing", type=float, nargs="+", default=[2.0, 1.5])
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--mesh", type=int, nargs="+", default=[],
+                    help="instead of the cut region: a mesh of n^3 hexahedra joined two by two")
     ap.add_argument("--child", type=float, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
@@ -100,7 +146,7 @@ def main() -> None:
     mpiexec = Path(py).with_name("mpiexec")
     print(f"{'spacing':>8} {'ranks':>6} {'blocks':>8} {'build s':>9} {'set-up s':>9} "
           f"{'MB before':>10} {'peak MB':>8} {'after MB':>9} {'kB/block':>9} {'after':>6}")
-    for spacing in args.spacing:
+    for spacing in [-float(n) for n in args.mesh] if args.mesh else args.spacing:
         for ranks in args.ranks:
             cmd = [str(mpiexec), "-n", str(ranks), py, __file__, "--child", str(spacing)]
             proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ)

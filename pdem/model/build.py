@@ -535,12 +535,15 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
         if share is not None and lazy_scene(scene) else (0, None)
     # with a share, the family members outside it are runs, not an object each
     out = SpecList() if hi is not None else []
+    # the list in segments: every rank's whole (True) or this rank's slice of a mesh (False)
+    segments: list[tuple[bool, list]] = []
     for i, b in enumerate(scene.blocks):
         kind = b.shape_kind
         if kind == "mesh":
             from .mesh_blocks import mesh_blocks
 
-            out.extend(mesh_blocks(scene, i, b, comm))
+            segments += [(True, out), (False, mesh_blocks(scene, i, b, comm))]
+            out = []
             continue
         size = _family_size(b)
         g0 = len(out)
@@ -577,8 +580,8 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
     # every block
     from .rockmass import build_rock_mass
 
-    spread = build_rock_mass(scene, out, max_blocks, comm)
-    del out
+    spread = build_rock_mass(scene, [*segments, (True, out)], max_blocks, comm)
+    del out, segments
     if share is not None:
         spread = spread.move_to(allgather(comm, share(spread.total)))
     _zone(scene, comm, spread.local)

@@ -53,13 +53,14 @@ AUTO_CUT_TOLERANCE = 0.01
 TOUCH_AREA = 1e-4
 
 
-def build_rock_mass(scene, specs, max_blocks: int | None = None, comm=None) -> Spread:
+def build_rock_mass(scene, segments, max_blocks: int | None = None, comm=None) -> Spread:
     """The scene's blocks after its cuts, joins and excavations (gid order), spread over the
     ranks (:class:`pdem.model.spread.Spread`: each rank holds a contiguous slice, the slices
-    in rank order the list one process builds; collective). ``specs``: the blocks the
-    ``blocks:`` entries make, every one on every rank. ``comm`` None: this process does it
-    all."""
-    spread = Spread.from_whole(comm, specs)
+    in rank order the list one process builds; collective). ``segments``: the blocks the
+    ``blocks:`` entries make, in order, as ``(whole, specs)``: every rank's specs alike
+    (``whole``) or this rank's slice (a mesh's cells, pdem.model.mesh_blocks). ``comm``
+    None: this process does it all."""
+    spread = Spread.from_segments(comm, segments)
     if scene.cuts:
         spread = apply_cuts(scene, spread, max_blocks)
     if scene.join:

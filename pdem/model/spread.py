@@ -40,6 +40,38 @@ class Spread:
         n = len(specs)
         return cls(comm, list(specs[comm.rank * n // comm.size:(comm.rank + 1) * n // comm.size]))
 
+    @classmethod
+    def from_segments(cls, comm, segments) -> Spread:
+        """The spread of a list made of segments in order, each ``(whole, specs)``: a list
+        every rank holds whole (``whole``), or this rank's slice of one spread over the ranks
+        in rank order; an even slice each (collective)."""
+        comm = LOCAL if comm is None else comm
+        if all(whole for whole, _ in segments):
+            return cls.from_whole(comm, [s for _, part in segments for s in part])
+        rank, size = comm.rank, comm.size
+        held, offset = [], 0  # (first gid, specs) this rank sends on
+        for whole, part in segments:
+            if whole:  # an even slice of it is sent by each rank
+                n = len(part)
+                a = rank * n // size
+                held.append((offset + a, part[a:(rank + 1) * n // size]))
+                offset += n
+            else:
+                counts = allgather(comm, len(part))
+                held.append((offset + sum(counts[:rank]), part))
+                offset += sum(counts)
+        send: list[list] = [[] for _ in range(size)]
+        for r in range(size):
+            a, b = r * offset // size, (r + 1) * offset // size
+            for first, part in held:
+                lo, hi = max(a, first), min(b, first + len(part))
+                if lo < hi:
+                    send[r].append((lo, part[lo - first:hi - first]))
+        del held
+        got = sorted((chunk for part in alltoall(comm, send) for chunk in part),
+                     key=lambda chunk: chunk[0])
+        return cls(comm, [s for _, part in got for s in part])
+
     def with_local(self, local: list) -> Spread:
         """The spread after each rank replaced its slice (collective)."""
         return Spread(self.comm, local)

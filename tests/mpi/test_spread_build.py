@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mpi4py import MPI
-from test_shared_build import JOINTED, build_digest
+from support import shared_dir
+from test_shared_build import JOINTED, MESHED, build_digest, hex_mesh
 
 from pdem.cases.rock_mass import tunnel_scene
 from pdem.config import ConfigError, parse_scene
@@ -34,14 +35,44 @@ def table_rows(table: SpecTable) -> list:
 
 @pytest.mark.parametrize("text", [JOINTED, tunnel_scene(0.1, 0.2)], ids=["jointed", "tunnel"])
 def test_each_rank_builds_its_share_and_knows_every_block_by_name(text, monkeypatch):
+    check_spread_build(parse_scene(text), monkeypatch)
+
+
+def test_a_meshs_cells_are_made_and_joined_spread(tmp_path, monkeypatch):
+    """A mesh's cells joined two by two across the ranks' shares of the cells: each rank
+    makes the polyhedra of its share only, and the blocks come out as above."""
+    from pdem.geometry import mesh_import
+
     comm = MPI.COMM_WORLD
-    scene = parse_scene(text)
+    base = shared_dir(comm, tmp_path)
+    if comm.rank == 0:
+        hex_mesh(f"{base}/good.vtu", 6)
+    comm.Barrier()
+    scene = parse_scene(MESHED.format(path=f"{base}/good.vtu"))
+    made = [0]
+    real = mesh_import.cell_polyhedron
+
+    def counted(*args, **kwargs):
+        made[0] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(mesh_import, "cell_polyhedron", counted)
+    specs = expand_blocks(scene, 10**6, lambda n: build_share(comm, n), comm)
+    assert made[0] <= -(-216 // comm.size), made[0]  # its share of the 216 cells
+    assert len(specs) == 108
+    monkeypatch.undo()
+    check_spread_build(scene, monkeypatch)
+
+
+def check_spread_build(scene, monkeypatch):
+    comm = MPI.COMM_WORLD
     whole = expand_blocks(scene, 10**6)
     largest = [0]
     real_init = Spread.__init__
 
     def counted(self, comm_, local):  # the most specs a rank holds at once during the build
-        largest[0] = max(largest[0], len(local))
+        if local and hasattr(local[0], "pieces"):  # (a mesh's cells are spread as polyhedra)
+            largest[0] = max(largest[0], len(local))
         real_init(self, comm_, local)
 
     monkeypatch.setattr(spread_module.Spread, "__init__", counted)
