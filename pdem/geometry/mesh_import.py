@@ -392,7 +392,7 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
     share_work : callable, optional
         ``share_work(weights, work) -> list``: runs ``work(lo, hi)`` (the polyhedra of the
         selected cells ``[lo, hi)``) over all of them and returns the results in order, e.g.
-        shared by the ranks (:func:`pdem.parallel.mpi.shared_work`). Default: here, in one go.
+        each rank making its share (pdem.model.mesh_blocks). Default: here, in one go.
 
     Returns
     -------

@@ -244,8 +244,9 @@ class ConvexPolyhedron:
     # ------------------------------------------------------------------ pickling
     def __reduce_ex__(self, protocol):
         """Pickled as one buffer of its arrays' bytes and their sizes, not nine arrays: the
-        ranks that share a rock mass's cutting send each other every piece (pdem.parallel.mpi
-        .shared_work), and pickling nine small arrays a piece cost ~3x the pickle's size in
+        ranks that share a rock mass's build send each other pieces (its slices moved and
+        neighbours fetched, pdem.model.spread), and pickling nine small arrays a piece cost
+        ~3x the pickle's size in
         the heap; unpickled, the arrays are read-only views of that one buffer. Caches
         (half-edges, face areas) are not sent: they are made again, alike, on first use."""
         floats = (self.vertices, self.normals, self.offsets, self.centroid, self.inertia)

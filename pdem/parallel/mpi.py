@@ -280,63 +280,6 @@ def weighted_share(rank: int, size: int, weights) -> tuple[int, int]:
     return int(np.searchsorted(owner, rank)), int(np.searchsorted(owner, rank, side="right"))
 
 
-# results a rank broadcasts at a time in shared_work: one pickle of a few MB, not of its whole
-# share (a pickle of ~50,000 cut pieces held its buffer, its growth and a packed copy of every
-# piece at once: +290 MB on the last rank of a 2-rank cut of 88,000 blocks)
-SHARE_CHUNK = 1024
-
-
-def shared_work(comm, weights, work) -> list:
-    """Items of a deterministic computation split over the ranks: each rank runs ``work(lo,
-    hi)`` (a list of ``hi - lo`` results) on its contiguous share (:func:`weighted_share`), and
-    every rank gets all the results in item order (each rank's broadcast in turn, in pickles
-    of :data:`SHARE_CHUNK` results; a rank keeps its own as they are), the same as one rank
-    running ``work(0, n)``. ``weights`` must be the same on every rank (each rank knows every
-    share's size from them). ``comm`` None: this process does it all.
-
-    An exception on any rank is raised on every rank (that of the lowest rank that failed), so
-    no rank is left waiting in the next collective: where it was raised as itself, elsewhere
-    as the same exception unpickled (a :class:`RuntimeError` naming the rank if it does not
-    unpickle)."""
-    n = len(weights)
-    if comm is None or comm.size == 1:
-        return list(work(0, n))
-    lo, hi = weighted_share(comm.rank, comm.size, weights)
-    failure = None
-    try:
-        mine = list(work(lo, hi))
-        if len(mine) != hi - lo:  # the others would wait for results that never come
-            raise RuntimeError(f"shared_work: {len(mine)} results for items {lo}-{hi}")
-    except Exception as exc:  # noqa: BLE001 - every rank must hear of it
-        mine = None
-        failure = exc
-        sent = _as_sent(exc)
-    # one rank's results at a time (a broadcast from each in turn, not one allgather), and
-    # those in chunks: a rank holds its own results, the others' received so far and one
-    # chunk's pickle (a cut rock mass's set-up peak was the last rank pickling its share
-    # with every other rank's results already unpickled beside it)
-    parts = []
-    for r in range(comm.size):
-        if r == comm.rank:
-            comm.bcast(None if failure is None else sent, root=r)
-            if failure is None:
-                for a in range(0, len(mine), SHARE_CHUNK):
-                    comm.bcast(mine[a:a + SHARE_CHUNK], root=r)
-            parts.append(mine if failure is None else sent)
-            continue
-        status = comm.bcast(None, root=r)
-        if status is not None:
-            parts.append(status)
-            continue
-        r_lo, r_hi = weighted_share(r, comm.size, weights)
-        part = []
-        for _ in range(0, r_hi - r_lo, SHARE_CHUNK):
-            part.extend(comm.bcast(None, root=r))
-        parts.append(part)
-    _raise_first(comm, parts, failure)
-    return [x for part in parts for x in part]
-
-
 def _as_sent(exc: BaseException) -> tuple:
     """An exception as another rank can raise it: pickled, and its text (if it does not
     pickle, or not unpickle there)."""

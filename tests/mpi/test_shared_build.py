@@ -1,7 +1,9 @@
-"""The ranks share the build of a rock mass (each joint set's cutting and sliver joining's face
-areas, pdem.parallel.mpi.shared_work) and every rank gets the very blocks one process builds:
-names, parents, pieces' vertices and face tags, excavation times, fixed flags, bit for bit, on
-2, 3 and 4 ranks. An error on one rank is raised on every rank (none is left waiting).
+"""The ranks share the build of a rock mass (its cuts, sliver joining, excavations and a mesh's
+cells, each rank on its slice: pdem.model.spread) and, gathered, every rank gets the very
+blocks one process builds: names, parents, pieces' vertices and face tags, excavation times,
+fixed flags, bit for bit, on 2, 3 and 4 ranks. A bad cell in one rank's share is the same
+scene error on every rank (none is left waiting; tests/mpi/test_spread_build.py for the
+error path itself).
 
 Run with ``mpiexec -n N python -m mpi4py -m pytest --with-mpi tests/mpi/test_shared_build.py``.
 """
@@ -18,7 +20,6 @@ from support import shared_dir
 from pdem.cases.rock_mass import tunnel_scene
 from pdem.config import ConfigError, parse_scene
 from pdem.model.build import expand_blocks
-from pdem.parallel.mpi import SHARE_CHUNK, shared_work
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
 
@@ -122,53 +123,3 @@ def test_a_meshs_cells_are_shared_and_a_bad_cell_named_on_every_rank(tmp_path):
         expand_blocks(bad, 10**6, None, comm)
     assert "cell 200 (hexahedron)" in str(err.value)
     comm.Barrier()
-
-
-def test_an_error_on_one_rank_is_raised_on_every_rank():
-    """A scene error raised by the last rank's share reaches every rank as that error, with
-    its messages; an exception that does not pickle reaches the others as a RuntimeError
-    naming the rank; the results come back in item order."""
-    comm = MPI.COMM_WORLD
-    last = comm.size - 1
-    assert shared_work(comm, np.ones(10), lambda lo, hi: list(range(lo, hi))) == list(range(10))
-
-    def scene_error(lo, hi):
-        if comm.rank == last:
-            raise ConfigError([f"cuts[0]: rank {last} failed on items {lo}-{hi}"])
-        return list(range(lo, hi))
-
-    with pytest.raises(ConfigError) as err:
-        shared_work(comm, np.ones(10), scene_error)
-    assert err.value.messages[0].startswith(f"cuts[0]: rank {last} failed")
-
-    class Unpicklable(Exception):
-        def __reduce__(self):
-            raise TypeError("no")
-
-    def odd_error(lo, hi):
-        if comm.rank == last:
-            raise Unpicklable("a local failure")
-        return list(range(lo, hi))
-
-    expected = Unpicklable if comm.rank == last else RuntimeError
-    with pytest.raises(expected, match="a local failure"):
-        shared_work(comm, np.ones(10), odd_error)
-    comm.Barrier()  # every rank got here: none was left waiting
-
-
-def test_shares_larger_than_a_chunk_arrive_whole_and_a_short_share_is_refused():
-    """Shares of several broadcast chunks (uneven weights: the ranks' shares differ in size and
-    in their number of chunks) come back in item order on every rank; a share that returns
-    fewer results than its items is an error on every rank, not a wait for what never comes."""
-    comm = MPI.COMM_WORLD
-    n = 3 * SHARE_CHUNK + 17
-    weights = np.random.default_rng(2).random(n) ** 3
-    got = shared_work(comm, weights, lambda lo, hi: [(i, i * i) for i in range(lo, hi)])
-    assert got == [(i, i * i) for i in range(n)]
-
-    def short(lo, hi):
-        return list(range(lo, hi - 1 if comm.rank == 0 and hi > lo else hi))
-
-    with pytest.raises(RuntimeError, match="results for items"):
-        shared_work(comm, weights, short)
-    comm.Barrier()  # every rank got here: none was left waiting
