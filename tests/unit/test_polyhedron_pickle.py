@@ -46,7 +46,7 @@ def test_a_polyhedron_comes_back_from_its_pickle_bitwise(seed, n, shift):
 
 def test_cut_pieces_and_nested_lists_round_trip():
     """The cut pieces of a block (face tags of the joint sets) in the lists the ranks
-    sends; a polyhedron whose arrays are not the usual dtypes pickles the default way."""
+    send; a polyhedron whose arrays are not the usual dtypes pickles the default way."""
     below, above = split_by_plane(box([0, 0, 0], [2, 1, 1]), np.array([1.0, 0.2, 0.1]) /
                                   np.linalg.norm([1.0, 0.2, 0.1]), 0.9, tag=3)
     pieces = [[below, above], [box([0, 0, 0], [1, 1, 1])]]
