@@ -21,15 +21,6 @@ def _readonly(a: np.ndarray, dtype) -> np.ndarray:
     return out
 
 
-def _frozen(a: np.ndarray, dtype) -> np.ndarray:
-    """``a`` itself made read-only: an array made for the polyhedron that nobody else holds
-    (a cut piece's: its nine copies were ~7 % of a rock mass's build)."""
-    if a.dtype != dtype or not a.flags.c_contiguous:
-        return _readonly(a, dtype)
-    a.flags.writeable = False
-    return a
-
-
 def newell_normal(points: np.ndarray) -> np.ndarray:
     """Area vector of a planar polygon (Newell's method): ``2 * area * unit normal``.
 
@@ -169,7 +160,8 @@ class ConvexPolyhedron:
         """:meth:`from_faces` with the faces in CSR form (``face_start``, ``face_verts``,
         int64) and ``v`` a finite (nv, 3) float64 array; ``face_tag``: one int64 per face
         (:meth:`with_face_tag` without the copy). ``fresh``: the arrays given were made for
-        this polyhedron and nobody else holds them: kept (read-only) instead of copied."""
+        this polyhedron (float64 and int64) and nobody else holds them: copied into one
+        buffer instead of nine arrays."""
         faces = range(len(face_start) - 1)  # the face count, for the offsets below
         if fresh:  # a cut piece: the checks and the edges compiled, in the same order
             edges = cut_piece_edges(len(v), face_start, face_verts)
@@ -198,18 +190,23 @@ class ConvexPolyhedron:
             raise GeometryError(
                 f"polyhedron volume is {volume:g}; faces must be counter-clockwise from outside"
             )
-        keep = _frozen if fresh else _readonly
+        if fresh:
+            # one buffer for all its arrays, laid out as a pickled piece arrives: the arrays
+            # the kernels made each carry numba's allocation record (kept, they were ~1.6 KB
+            # a piece more than copies)
+            return _packed(v, face_start, face_verts, n, d, edges, volume, centroid, inertia,
+                           face_tag)
         return cls(
-            vertices=keep(v, np.float64),
-            face_start=keep(face_start, np.int64),
-            face_verts=keep(face_verts, np.int64),
-            normals=keep(n, np.float64),
-            offsets=keep(d, np.float64),
-            edges=_frozen(edges, np.int64),  # made here, as are the mass properties
+            vertices=_readonly(v, np.float64),
+            face_start=_readonly(face_start, np.int64),
+            face_verts=_readonly(face_verts, np.int64),
+            normals=_readonly(n, np.float64),
+            offsets=_readonly(d, np.float64),
+            edges=_readonly(edges, np.int64),
             volume=volume,
-            centroid=_frozen(centroid, np.float64),
-            inertia=_frozen(inertia, np.float64),
-            face_tag=None if face_tag is None else keep(face_tag, np.int64),
+            centroid=_readonly(centroid, np.float64),
+            inertia=_readonly(inertia, np.float64),
+            face_tag=None if face_tag is None else _readonly(face_tag, np.int64),
         )
 
     def with_face_tag(self, face_tag) -> ConvexPolyhedron:
@@ -246,9 +243,9 @@ class ConvexPolyhedron:
         """Pickled as one buffer of its arrays' bytes and their sizes, not nine arrays: the
         ranks that share a rock mass's build send each other pieces (its slices moved and
         neighbours fetched, pdem.model.spread), and pickling nine small arrays a piece cost
-        ~3x the pickle's size in
-        the heap; unpickled, the arrays are read-only views of that one buffer. Caches
-        (half-edges, face areas) are not sent: they are made again, alike, on first use."""
+        ~3x the pickle's size in the heap; unpickled, the arrays are read-only views of that
+        one buffer. Caches (half-edges, face areas) are not sent: they are made again,
+        alike, on first use."""
         floats = (self.vertices, self.normals, self.offsets, self.centroid, self.inertia)
         ints = (self.face_start, self.face_verts, self.edges) + (
             () if self.face_tag is None else (self.face_tag,))
@@ -451,6 +448,33 @@ def face_areas(polys) -> list[np.ndarray]:
             part.flags.writeable = False
             object.__setattr__(p, "_face_areas", part)
     return [p.__dict__["_face_areas"] for p in polys]
+
+
+def _packed(v, face_start, face_verts, normals, offsets, edges, volume, centroid, inertia,
+            face_tag) -> ConvexPolyhedron:
+    """A polyhedron whose arrays are read-only views of one buffer (the layout of
+    :func:`_unpacked`), copied from the given ones (float64 and int64 already)."""
+    nv, nf, nfv, ne = len(v), len(face_start) - 1, len(face_verts), len(edges)
+    n_float = 3 * nv + 4 * nf + 12
+    n_int = nf + 1 + nfv + 2 * ne + (nf if face_tag is not None else 0)
+    buf = np.empty(n_float + n_int)
+    f8, i8 = buf[:n_float], buf[n_float:].view(np.int64)
+    at = (0, 3 * nv, 3 * nv + 3 * nf, 3 * nv + 4 * nf, 3 * nv + 4 * nf + 3, n_float)
+    it = (0, nf + 1, nf + 1 + nfv, nf + 1 + nfv + 2 * ne, n_int)
+    for part, a, b in ((v, 0, 1), (normals, 1, 2), (offsets, 2, 3), (centroid, 3, 4),
+                       (inertia, 4, 5)):
+        f8[at[a]:at[b]] = part.reshape(-1)
+    for part, a, b in ((face_start, 0, 1), (face_verts, 1, 2), (edges, 2, 3)):
+        i8[it[a]:it[b]] = part.reshape(-1)
+    if face_tag is not None:
+        i8[it[3]:it[4]] = face_tag
+    buf.flags.writeable = False
+    return ConvexPolyhedron(
+        vertices=f8[at[0]:at[1]].reshape(nv, 3), face_start=i8[it[0]:it[1]],
+        face_verts=i8[it[1]:it[2]], normals=f8[at[1]:at[2]].reshape(nf, 3),
+        offsets=f8[at[2]:at[3]], edges=i8[it[2]:it[3]].reshape(ne, 2), volume=volume,
+        centroid=f8[at[3]:at[4]], inertia=f8[at[4]:at[5]].reshape(3, 3),
+        face_tag=i8[it[3]:it[4]] if face_tag is not None else None)
 
 
 def _unpacked(blob: bytes, nv: int, nf: int, nfv: int, ne: int, tagged: bool, volume: float
