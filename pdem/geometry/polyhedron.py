@@ -468,7 +468,8 @@ def _packed(v, face_start, face_verts, normals, offsets, edges, volume, centroid
         i8[it[a]:it[b]] = part.reshape(-1)
     if face_tag is not None:
         i8[it[3]:it[4]] = face_tag
-    buf.flags.writeable = False
+    for a in (buf, f8, i8):  # the views below are read-only too
+        a.flags.writeable = False
     return ConvexPolyhedron(
         vertices=f8[at[0]:at[1]].reshape(nv, 3), face_start=i8[it[0]:it[1]],
         face_verts=i8[it[1]:it[2]], normals=f8[at[1]:at[2]].reshape(nf, 3),
