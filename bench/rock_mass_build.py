@@ -44,12 +44,8 @@ solve: {{steps: 1}}
 """
 
 
-MESH_SCENE = """
-name: meshed-{n}
-materials:
-  granite: {{density: 2600}}
-joints:
-  default: {{kn: 5.0e9, ks: 2.5e9, friction: 35}}
+# the cut region's scene with the region a mesh (its materials and joints)
+MESH_SCENE = SCENE[:SCENE.index("blocks:")].replace("jointed-{spacing}", "meshed-{n}") + """\
 blocks:
   - {{name: rock, mesh: {{file: {path}, cell_data_group: pair}}, material: granite}}
   - {{name: base, box: {{min: [-1, -1, -1], max: [{top}, {top}, 0]}}, material: granite,
