@@ -23,8 +23,8 @@ What is data here, easy to extend:
 Cost: model steps, CPU seconds of the run (process time: less disturbed than wall time by
 other jobs on a shared machine; JIT compilation excluded by a short warm-up run of the same
 scene; steps and updates are exact, CPU time still varies by some 10 %), and
-contact geometry updates (contacts re-detected: common plane + sub-contacts, counted by
-wrapping ``pdem.stepper.refresh_contacts``), plus contacts and sub-contacts held at the end.
+contact geometry updates (contacts re-detected: common plane + sub-contacts, the stepper's
+``redetected`` count), plus contacts and sub-contacts held at the end.
 """
 
 from __future__ import annotations
@@ -109,30 +109,6 @@ solve: {steps: 1}
 def pdem_default(key: str):
     """pdem's default for ``key`` (from the schema, via a scene that does not set it)."""
     return get_key(_MINIMAL, key)
-
-
-# ------------------------------------------------------------------------------ cost counters
-COUNTS = {"updates": 0}
-
-
-def install_update_counter() -> bool:
-    """Count contact geometry updates (the ``todo`` flags passed to refresh_contacts). False
-    when the stepper no longer calls ``refresh_contacts`` by that name (updates: n/a)."""
-    import pdem.stepper as stepper
-
-    orig = getattr(stepper, "refresh_contacts", None)
-    if orig is None:
-        return False
-    if getattr(orig, "_fidelity_counter", False):
-        return True
-
-    def counted(*args, **kwargs):
-        COUNTS["updates"] += int(np.count_nonzero(args[6]))
-        return orig(*args, **kwargs)
-
-    counted._fidelity_counter = True
-    stepper.refresh_contacts = counted
-    return True
 
 
 # ------------------------------------------------------------------------------ the cases
@@ -549,7 +525,7 @@ def fmt_value(v) -> str:
 _CACHE: dict = {}
 
 
-def run_one(case: Case, text: str, quick: bool, counting: bool) -> dict:
+def run_one(case: Case, text: str, quick: bool) -> dict:
     """Warm up (JIT) on a few steps of ``text``, then run and measure it. The same scene is
     run once (a case's own setting appears under every knob)."""
     key = (case.name, text, quick)
@@ -557,26 +533,26 @@ def run_one(case: Case, text: str, quick: bool, counting: bool) -> dict:
         return dict(_CACHE[key])
     make_simulation(text).run(steps=20)
     sim = make_simulation(text)
-    COUNTS["updates"] = 0
+    updates = sim.stepper.redetected  # (the start's update is not counted)
     t0, c0 = time.perf_counter(), time.process_time()
     res = case.measure(sim, quick)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     c = sim.contacts
     _CACHE[key] = out = {"error": float(res.pop("error")), "steps": int(sim.step), "cpu": cpu,
                          "wall": wall,
-            "updates": COUNTS["updates"] if counting else None, "contacts": int(c.n),
+            "updates": sim.stepper.redetected - updates, "contacts": int(c.n),
             "subcontacts": int(len(c.sc_area)), "dt": float(sim.dt), "extra": res}
     return dict(out)
 
 
-def run_knob(key: str, values, cases, quick: bool, counting: bool, apply=None) -> list[Row]:
+def run_knob(key: str, values, cases, quick: bool, apply=None) -> list[Row]:
     rows = []
     for name in cases:
         case = CASES[name]
         base = case.scene(quick)
         for v in values:
             text = apply(base, v) if apply is not None else set_key(base, key, v)
-            r = run_one(case, text, quick, counting)
+            r = run_one(case, text, quick)
             rows.append(Row(key, v, name, **r))
             print(f"  {key} = {fmt_value(v):>8} {name:>10}: error {r['error']:.2e} "
                   f"(tol {case.tolerance:.0e}), {r['steps']} steps, {r['cpu']:.2f} cpu s"
@@ -973,19 +949,18 @@ def main(argv=None) -> int:
         results = {k: [Row(**r) for r in rows] for k, rows in saved["knobs"].items()}
         toggles = {k: [Row(**r) for r in rows] for k, rows in saved["toggles"].items()}
         return report(results, toggles, saved["quick"], saved["runtime"], saved["date"], doc=True)
-    counting = install_update_counter()
     t0 = time.perf_counter()
     results: dict[str, list[Row]] = {}
     for k in KNOBS:
         if args.knob and k.key not in args.knob:
             continue
         print(f"{k.key}: {k.about}", flush=True)
-        results[k.key] = run_knob(k.key, k.tried(args.quick), k.cases, args.quick, counting)
+        results[k.key] = run_knob(k.key, k.tried(args.quick), k.cases, args.quick)
     toggles = {}
     for t in FEATURE_TOGGLES:
         print(f"feature {t.name}", flush=True)
         try:
-            toggles[t.name] = run_knob(t.name, (False, True), t.cases, args.quick, counting,
+            toggles[t.name] = run_knob(t.name, (False, True), t.cases, args.quick,
                                        apply=t.apply)
         finally:
             t.reset()

@@ -8,66 +8,85 @@ loop, calling the same kernels in the same order on the same arrays, so the resu
 that of the step-by-step path (and so of any rank count, whose steps exchange halos in Python).
 
 The loop does a step's first half (motion, bookkeeping, rotation matrices, contact forces)
-and then, if nothing needs Python, its second half: at a periodic contact update with no
-contact to update (pdem.contact.staleness: no contact new or stale) it does what
-the update would have done, which is only bookkeeping. Otherwise it returns after the first
-half and the stepper finishes that step in Python. Runs on several ranks never fuse: their
-halo and reductions run every step (docs/architecture.md).
+and then, if nothing needs Python, its second half. At a periodic contact update it marks the
+stale contacts (pdem.contact.staleness) and, if any, updates them by the stepper's own kernel
+(:func:`pdem.contact.update.update_marked`), carrying on with the new sub-contact columns.
+Otherwise it returns after the first half and the stepper finishes that step in Python: a
+search, an update that found contacts apart (the stepper drops them from every column), a bad
+state, an event. Runs on several ranks never fuse: their halo and reductions run every step
+(docs/architecture.md).
 """
 
 from __future__ import annotations
 
 from .contact.forces import contact_forces
 from .contact.staleness import stale_contacts
+from .contact.update import keeps_all, update_marked
 from .dynamics import motion
 from .dynamics.inactive import update_inactive
-from .dynamics.kinematics import rotation_matrices
+from .dynamics.kinematics import rotation_matrices, world_vertices
 from .jit import kernel
 
 # why a compiled run of steps returned (the stepper finishes the last step in Python)
 DONE = 0  # the step budget, a plugin's event step or time, or the ratio target was reached
-NEEDS_PYTHON = 1  # a search, a contact update with work, or a bad state
-# a periodic contact update with work: ``todo`` and ``c_moved`` hold what
-# pdem.contact.staleness.stale_contacts found, for the stepper's update to reuse
-STALE_FOUND = 2
+NEEDS_PYTHON = 1  # a search, a periodic update the stepper must do, or a bad state
+# the last step's periodic update was done and found contacts apart: the stepper drops them
+# (the returned ``keep``) and finishes the step without updating again
+DROPS = 2
 
 
 @kernel
-def _noop_refresh(x, q, R, radius, pairs, rel_x, rel_q, gap, c_moved, c_warm, sc_un, u_geo,
-                  refresh_tolerance, todo):
-    """True if a periodic contact update would update no contact (pdem.stepper.refresh): then
-    its bookkeeping (each contact's relative motion in ``c_moved``, ``u_geo`` reset) is done."""
-    if stale_contacts(x, q, R, radius, pairs.ia, pairs.ib, rel_x, rel_q, gap, c_warm,
-                      pairs.sc_start, sc_un, refresh_tolerance, c_moved, todo) > 0:
-        return False
+def _periodic_update(x, q, R, radius, up, pieces, pairs, subs, joints, bodies, rel_x, rel_q,
+                     c_moved, u_geo, refresh_tolerance, todo):
+    """The stepper's periodic contact update (pdem.stepper.Stepper._second_half with
+    ``refresh(periodic=True)``) of a rigid serial scene in which no search is due: returns
+    ``(n, keep, pairs, subs)``: ``n`` contacts were updated; none if none was stale (then
+    only its bookkeeping was done: each contact's relative motion in ``c_moved``, ``u_geo``
+    reset)."""
     u_geo[:] = 0.0
-    return True
+    shapes = up.shapes
+    n = stale_contacts(x, q, R, radius, pairs.ia, pairs.ib, rel_x, rel_q, up.planes.gap,
+                       up.planes.warm, pairs.sc_start, subs.un, refresh_tolerance, c_moved, todo)
+    if n == 0:
+        return 0, todo, pairs, subs
+    world_vertices(x, R, shapes.piece_block, pieces[0], shapes.piece_x, shapes.vert_start,
+                   pieces[1], shapes.verts_world)
+    keep, pairs, subs = update_marked(x, q, R, up, pairs, subs, joints, bodies, c_moved, rel_x,
+                                      rel_q, todo)
+    return n, keep, pairs, subs
 
 
 @kernel
 def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u_geo, u_mig,
-                q, R, bodies, pairs, subs, joints, c_moved, c_warm, rel_x, rel_q, gap, radius_all,
+                q, R, bodies, pairs, subs, joints, c_moved, up, pieces, rel_x, rel_q, radius_all,
                 m_true, calm, still,
                 speed, sleep_steps, force_frac, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
                 step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step,
                 todo):
-    """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max)``, the
-    last two from the last step's :func:`pdem.dynamics.motion.motion_bookkeeping`.
+    """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max,
+    redetected, keep, pairs, subs)``: ``bad`` and ``u_mig_max`` from the last step's
+    :func:`pdem.dynamics.motion.motion_bookkeeping`, how many contacts the periodic updates
+    re-detected, the last update's ``keep`` (valid when ``why`` is :data:`DROPS`) and the
+    contacts' ``pairs``/``subs`` after the updates (a new CSR start and sub-contact columns
+    when any contact was re-detected).
 
     ``m``: the owned rows' :data:`pdem.dynamics.motion.Motion` record (serial: every row);
     ``q``, ``R``, ``u_acc``, ``u_geo``, ``bodies``, ``radius_all``: all rows; ``rel_x``,
-    ``rel_q``, ``gap``: the contacts' columns the periodic check reads
-    (pdem.contact.staleness). Stops after the step that reaches ``stop_step`` or
-    ``stop_time`` (a plugin's event, the end of the run) or whose unbalanced ratio is at most
-    ``ratio_target`` (negative: none), with the step's second half left to the stepper, as for
-    ``NEEDS_PYTHON``. ``stop_at_update``: every periodic update goes to Python
-    (the model domain is checked there). ``m_true``: the record with the true ``fixed`` flags
-    when inactive blocks are held (``m``'s are ``still``; pdem.dynamics.inactive), else None.
-    ``todo`` (uint8, one per contact): where a periodic update's staleness marks are written;
-    valid when the call returns :data:`STALE_FOUND`.
+    ``rel_q``: the contacts' columns the periodic check reads (pdem.contact.staleness);
+    ``up``: :data:`pdem.contact.update.GeometryUpdate`; ``pieces``: the pieces' centres and
+    body-frame vertices (their world vertices are made before an update). Stops after the
+    step that reaches ``stop_step`` or ``stop_time`` (a plugin's event, the end of the run) or
+    whose unbalanced ratio is at most ``ratio_target`` (negative: none), with the step's
+    second half left to the stepper, as for ``NEEDS_PYTHON``. ``stop_at_update``: every
+    periodic update goes to Python (the model domain is checked there). ``m_true``: the
+    record with the true ``fixed`` flags when inactive blocks are held (``m``'s are
+    ``still``; pdem.dynamics.inactive), else None. ``todo`` (uint8, one per contact): where a
+    periodic update's staleness marks are written.
     """
     n_steps = 0
+    redetected = 0
+    keep = todo
     while True:
         # first half: pdem.stepper.Stepper.advance up to the contact forces
         stats[:] = 0.0
@@ -85,19 +104,35 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
         if m_true is not None:
             update_inactive(m_true, gravity, radius, calm, still, speed, sleep_steps, force_frac,
                             ref_force)
-        if bad >= 0:
-            return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
-        for i in range(u_acc.shape[0]):
-            if u_acc[i] > remap_at:
-                return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
+        if bad >= 0 or _remap_due(u_acc, remap_at):
+            why = NEEDS_PYTHON
+            break
         periodic = step % detect_every == 0
         if periodic and stop_at_update:
-            return n_steps, step, time, NEEDS_PYTHON, bad, u_mig_max
+            why = NEEDS_PYTHON
+            break
         if n_steps >= max_steps or step >= stop_step or time >= stop_time or \
                 stats[motion.STAT_MAX_FORCE] / ref_force <= ratio_target:
-            return n_steps, step, time, DONE, bad, u_mig_max
-        # second half, when it is only bookkeeping
+            why = DONE
+            break
+        # second half, when no search is due
         if periodic:
-            if not _noop_refresh(bodies.x, q, R, radius_all, pairs, rel_x, rel_q, gap, c_moved,
-                                 c_warm, subs.un, u_geo, refresh_tolerance, todo):
-                return n_steps, step, time, STALE_FOUND, bad, u_mig_max
+            n, kept, pairs, subs = _periodic_update(
+                bodies.x, q, R, radius_all, up, pieces, pairs, subs, joints, bodies, rel_x,
+                rel_q, c_moved, u_geo, refresh_tolerance, todo)
+            if n:
+                redetected += n
+                keep = kept
+                if not keeps_all(keep):
+                    why = DROPS
+                    break
+    return n_steps, step, time, why, bad, u_mig_max, redetected, keep, pairs, subs
+
+
+@kernel
+def _remap_due(u_acc, remap_at):
+    """Whether a block's accumulated motion calls for a search (the stepper's ``active``)."""
+    for i in range(u_acc.shape[0]):
+        if u_acc[i] > remap_at:
+            return True
+    return False

@@ -20,18 +20,18 @@ import numpy as np
 from . import domain
 from .config.resolve import TOUCH_FRACTION
 from .contact import forces
-from .contact.detect import Planes, refresh_contacts
+from .contact.detect import Planes
 from .contact.forces import contact_energies, contact_forces
-from .contact.joint_sets import set_joints
 from .contact.rigid import Bodies
-from .contact.staleness import mark_fresh, stale_contacts
-from .cycle import STALE_FOUND, fused_steps
+from .contact.staleness import stale_contacts
+from .contact.update import GeometryUpdate, JointSets, keeps_all, redetect, update_marked
+from .cycle import DROPS, fused_steps
 from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
 from .memory import large_blocks_mapped
-from .model.contacts import ContactStore
+from .model.contacts import ContactStore, sub_columns
 from .model.csr import pair_key
 from .parallel import mpi
 
@@ -62,9 +62,9 @@ class Stepper:
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
         self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
-        # the contacts a compiled run of steps found stale at its last step's periodic update
-        # (pdem.cycle.STALE_FOUND), for that update to use instead of looking again; else None
-        self._stale = None
+        # contacts whose geometry was updated since the start (its own update included): a
+        # cost figure (bench/fidelity.py)
+        self.redetected = 0
 
     @property
     def holds(self) -> bool:
@@ -143,13 +143,12 @@ class Stepper:
                                                gb=b.gid[ib], pga=pga, pgb=pgb, joint=joint)
         return s.contacts.n - before
 
-    def refresh(self, all_contacts: bool, periodic: bool = False, stale=None):
+    def refresh(self, all_contacts: bool, periodic: bool = False):
         """Geometry update of contacts: all, or those not yet detected plus (periodically) those
         whose blocks moved more than the refresh tolerance since their last update. Like 3DEC's
         "no time wasted on relatively inactive blocks": a resting contact keeps its plane and
-        sub-contacts (its overlaps still follow the motion every step). ``stale``: the marks
-        :func:`pdem.contact.staleness.stale_contacts` wrote for this state's contacts (with
-        their ``moved``), when a compiled run of steps has just looked."""
+        sub-contacts (its overlaps still follow the motion every step). The update itself is
+        :mod:`pdem.contact.update`'s, which a compiled run of steps calls too (pdem.cycle)."""
         s = self.s
         b = s.blocks
         c = s.contacts
@@ -160,12 +159,10 @@ class Stepper:
         if c.n == 0:
             return
         if periodic and s.grids is None:  # motion of B relative to A (pdem.contact.staleness)
-            todo = stale
-            if todo is None or len(todo) != c.n:
-                todo = np.empty(c.n, np.uint8)
-                stale_contacts(b.x, b.q, b.R, b.radius, c.ia, c.ib, c.arrays["rel_x"],
-                               c.arrays["rel_q"], c.gap, c.warm, c.sc_start, c.sub["sc_un"],
-                               s.resolved.refresh_tolerance, c.moved, todo)
+            todo = np.empty(c.n, np.uint8)
+            stale_contacts(b.x, b.q, b.R, b.radius, c.ia, c.ib, c.arrays["rel_x"],
+                           c.arrays["rel_q"], c.gap, c.warm, c.sc_start, c.sub["sc_un"],
+                           s.resolved.refresh_tolerance, c.moved, todo)
             todo = todo.astype(bool) | all_contacts
         else:
             todo = (c.warm == 0) | all_contacts
@@ -173,65 +170,74 @@ class Stepper:
                 todo |= c.moved > s.resolved.refresh_tolerance
         if not todo.any():  # nothing to update
             return
-        c.moved[todo] = 0.0
-        mark_fresh(b.x, b.q, b.R, c.ia, c.ib, c.arrays["rel_x"], c.arrays["rel_q"],
-                   todo.astype(np.uint8))
-        a = c.arrays
-        planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
-                        a["ctype"], a["warm"])
-        joints = s.joints.kernel_args
-        # only updated contacts can change their stored energy (the others are copied)
         todo = todo.astype(np.uint8)
-        # (none stored before the first update: no array of zeros on top of its peak)
-        before = contact_energies(c.pairs(), c.subs(), joints, todo) if c.n_sub else None
-        new = (c.warm == 0).astype(np.uint8) if s.joints.by_set else None
-        # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
-        # in place unless the zoned blocks' regrid reads the rows before the update
-        res = refresh_contacts(b.x, b.R, b.shapes(), planes, c.sc_start, c.subs(), todo,
-                               s.ctol, TOUCH_FRACTION, s.algorithm, not large_blocks_mapped(),
-                               s.grids is None)
-        keep, start, pa, area, un, fs, us, dil, state, hist = res
-        if s.joints.by_set and new.any():  # a new contact on a joint plane: the set's joint
-            set_joints(new & keep, c.ia, c.ib, c.ka, c.kb, c.normal, b.x, b.R, b.face_start,
-                       b.normals_local, b.offsets_local, b.face_tag, s.joints.cut_joint,
-                       s.ctol, c.joint)
-        sub = {"sc_pa": pa, "sc_area": area, "sc_un": un, "sc_fs": fs, "sc_us": us,
-               "sc_dil": dil, "sc_state": state, "sc_hist": hist}
-        if s.grids is not None:  # the kept sub-contacts keep their gridpoints
-            from .deformable.subcontacts import carry_grid_columns
+        self.redetected += int(np.count_nonzero(todo))
+        a = c.arrays
+        joints = s.joints.kernel_args
+        if s.grids is None:
+            keep, pairs, subs = update_marked(b.x, b.q, b.R, self.geometry_update(), c.pairs(),
+                                              c.subs(), joints, self.bodies(), c.moved,
+                                              a["rel_x"], a["rel_q"], todo)
+            sub = sub_columns(subs)
+            start = pairs.sc_start
+            # only the store holds the new columns: each is freed once taken (below)
+            del a, pairs, subs
+            s.contacts = self._kept(ContactStore(c.arrays, sub, start), keep)
+            return
+        # zoned blocks: sub-contacts at their surface gridpoints, found after the update
+        from .deformable.subcontacts import carry_grid_columns
 
-            sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
-        c.frozen[todo != 0] = 0  # new sub-contacts: held forces are void
-        # the common case deletes no contact: no need to copy every contact field (a select is
-        # a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts), nor any
-        # per-contact array below (the start's first update is the set-up's peak)
-        all_kept = bool(keep.all())
+        keep, start, subs, before = redetect(b.x, b.q, b.R, self.geometry_update(), c.pairs(),
+                                             c.subs(), joints, c.moved, a["rel_x"],
+                                             a["rel_q"], todo, False)
+        sub = sub_columns(subs)
+        # the kept sub-contacts keep their gridpoints
+        sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
+        del a, subs
+        all_kept = keeps_all(keep)
         kept = None if all_kept else keep.astype(bool)
-        ia, ib = c.ia, c.ib  # the deleted contacts' energy is booked on their blocks
-        del planes, a, res, pa, area, un, fs, us, dil, state, hist
-        if all_kept:
-            s.contacts = ContactStore(c.arrays, sub, start)
-        elif s.grids is None:  # column by column, each dropped once taken (c is not read)
-            s.contacts = ContactStore(c.arrays, sub, start).take_consumed(np.nonzero(kept)[0])
-        else:  # the zoned blocks' regrid reads the contacts before the update
-            s.contacts = ContactStore(c.arrays, sub, start).select(kept)
+        # (the regrid reads the contacts before the update)
+        s.contacts = ContactStore(c.arrays, sub, start)
+        if not all_kept:
+            s.contacts = s.contacts.select(kept)
         del sub
         todo_kept = todo if all_kept else todo[kept]
-        if s.grids is not None:  # zoned blocks: sub-contacts at their surface gridpoints
-            s.contacts = s.grids.regrid(c, s.contacts, todo_kept, b, TOUCH_FRACTION * s.ctol)
+        s.contacts = s.grids.regrid(c, s.contacts, todo_kept, b, TOUCH_FRACTION * s.ctol)
         # energy budget: what the update changed in the joints' springs, with no work done
-        # (after the zoned blocks' regrid: their sub-contacts are the regrid's)
-        if before is None:  # (a contact deleted here added 0 to its blocks: nothing to book)
+        # (after the regrid: the sub-contacts are its own)
+        if len(before) == 0:  # (a contact deleted here added 0 to its blocks: nothing to book)
             forces.book_stored_energy(self.bodies(), s.contacts.pairs(), s.contacts.subs(),
                                       joints, todo_kept, motion.WORK_GEOMETRY)
             return
         after = contact_energies(s.contacts.pairs(), s.contacts.subs(), joints, todo_kept)
         if not all_kept:  # a deleted contact's energy after is 0
-            after, kept_after = np.zeros(len(ia)), after
+            after, kept_after = np.zeros(c.n), after
             after[kept] = kept_after
-        forces.book_contact_energy(self.bodies(), ia, ib,
-                                   after if before is None else after - before,
+        forces.book_contact_energy(self.bodies(), c.ia, c.ib, after - before,
                                    motion.WORK_GEOMETRY)
+
+    @staticmethod
+    def _kept(store: ContactStore, keep: np.ndarray) -> ContactStore:
+        """``store`` without the contacts an update found apart (``keep`` 0): column by column,
+        each dropped once taken. The common case deletes none: no copy of every column (a
+        select is a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts)."""
+        if keeps_all(keep):
+            return store
+        return store.take_consumed(np.nonzero(keep)[0])
+
+    def geometry_update(self) -> GeometryUpdate:
+        """What a contact update reads besides the poses and contacts
+        (:data:`pdem.contact.update.GeometryUpdate`)."""
+        s = self.s
+        b = s.blocks
+        a = s.contacts.arrays
+        planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
+                        a["ctype"], a["warm"])
+        sets = JointSets(b.face_start, b.normals_local, b.offsets_local, b.face_tag,
+                         s.joints.cut_joint) if s.joints.by_set else None
+        # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
+        return GeometryUpdate(b.shapes(), planes, s.ctol, TOUCH_FRACTION, s.algorithm,
+                              not large_blocks_mapped(), sets)
 
     def bodies(self) -> Bodies:
         b = self.s.blocks
@@ -299,23 +305,32 @@ class Stepper:
         speed, sleep_steps, frac = inactive_args(s.scene)
         todo = np.empty(c.n, np.uint8)
         with s.timers.phase("fused"):
-            steps, s.step, s.time, why, self._bad, self._u_mig_max = fused_steps(
-                motion_record(b, n, self.holds), s.gravity, s.dt, s.damping_args(),
-                s.scalar_inertia, self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n], b.q,
-                b.R, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args, c.moved,
-                c.warm, c.arrays["rel_x"], c.arrays["rel_q"], c.gap, b.radius,
-                motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
-                speed, sleep_steps, frac,
-                REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
-                r.refresh_tolerance, s.scene.domain is not None, r.speed_limit, r.speed_growth,
-                s.step, s.time, max_steps, NO_STEP if stop_step is None else stop_step,
-                math.inf if stop_time is None else stop_time,
-                -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step, todo)
-        self._stale = todo if why == STALE_FOUND else None
-        try:
-            self._second_half()
-        finally:
-            self._stale = None
+            steps, s.step, s.time, why, self._bad, self._u_mig_max, redetected, keep, pairs, \
+                subs = fused_steps(
+                    motion_record(b, n, self.holds), s.gravity, s.dt, s.damping_args(),
+                    s.scalar_inertia, self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n],
+                    b.q, b.R, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
+                    c.moved, self.geometry_update(), (b.piece_center, b.verts_local),
+                    c.arrays["rel_x"], c.arrays["rel_q"], b.radius,
+                    motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
+                    speed, sleep_steps, frac,
+                    REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
+                    r.refresh_tolerance, s.scene.domain is not None, r.speed_limit,
+                    r.speed_growth, s.step, s.time, max_steps,
+                    NO_STEP if stop_step is None else stop_step,
+                    math.inf if stop_time is None else stop_time,
+                    -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step,
+                    todo)
+        self.redetected += redetected
+        if redetected:  # the loop updated contacts (pdem.contact.update): their new columns
+            sub = sub_columns(subs)
+            start = pairs.sc_start
+            del pairs, subs
+            s.contacts = ContactStore(c.arrays, sub, start)
+            if why == DROPS:  # the last update found contacts apart
+                s.contacts = self._kept(s.contacts, keep)
+        # the last step's periodic update is done when the loop stopped for its dropped contacts
+        self._second_half(updated=why == DROPS)
         return steps
 
     def _first_half(self):
@@ -356,7 +371,7 @@ class Stepper:
             self.compute_forces(s.dt)
             self.update_inactive()
 
-    def _second_half(self) -> bool:
+    def _second_half(self, updated: bool = False) -> bool:
         """Contact search and updates, and the step's one reduction; True if blocks must
         migrate. After :meth:`_first_half` or a compiled run of steps (pdem.cycle), which
         leaves ``u_mig`` and the state check to be redone here (both are cheap)."""
@@ -373,9 +388,8 @@ class Stepper:
                 update_world_vertices(b)
                 created = self.search(active) if active.any() else 0
         with tm.phase("contacts"):
-            if periodic:  # (no search created contacts after a compiled run's marks)
-                self.refresh(all_contacts=False, periodic=True,
-                             stale=None if created else self._stale)
+            if periodic and not updated:
+                self.refresh(all_contacts=False, periodic=True)
             elif created:
                 self.refresh(all_contacts=False)
         with tm.phase("halo"):

@@ -22,6 +22,13 @@ Pairs = namedtuple("Pairs", "ia ib joint normal sc_start held frozen")
 # No normal force: the law gives it from the stored state (:meth:`ContactStore.normal_forces`),
 # so a sub-contact does not keep a column only the force step would write.
 Subs = namedtuple("Subs", "pa area un fs us dil state hist")
+# the store's name of each column of :data:`Subs`, in its order
+SUB_COLUMNS = ("sc_pa", "sc_area", "sc_un", "sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist")
+
+
+def sub_columns(subs: Subs) -> dict[str, np.ndarray]:
+    """The store's sub-contact columns of a :data:`Subs` record (a kernel's result)."""
+    return dict(zip(SUB_COLUMNS, subs, strict=True))
 
 
 @dataclass
@@ -89,9 +96,7 @@ class ContactStore:
                      a["frozen"])
 
     def subs(self) -> Subs:
-        s = self.sub
-        return Subs(s["sc_pa"], s["sc_area"], s["sc_un"], s["sc_fs"], s["sc_us"], s["sc_dil"],
-                    s["sc_state"], s["sc_hist"])
+        return Subs(*(self.sub[k] for k in SUB_COLUMNS))
 
     def normal_forces(self, joints) -> np.ndarray:
         """Each sub-contact's normal force by its joint law in its stored state (overlap,

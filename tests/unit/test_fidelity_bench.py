@@ -56,9 +56,8 @@ def test_a_case_measures_a_finite_error_and_counts_updates(fidelity):
     """The sliding block on the incline: finite error within its tolerance, steps and contact
     updates counted (it slides, so its contact is re-detected; the oscillator's, which only
     presses and lifts, is not)."""
-    assert fidelity.install_update_counter()
     case = fidelity.CASES["incline"]
-    r = fidelity.run_one(case, case.scene(True), True, True)
+    r = fidelity.run_one(case, case.scene(True), True)
     assert math.isfinite(r["error"]) and 0.0 <= r["error"] < case.tolerance
     assert r["steps"] > 100 and r["updates"] > 0 and r["contacts"] == 1
     row = fidelity.Row("solve.timestep.frac", 0.1, "incline", **r)

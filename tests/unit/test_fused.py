@@ -100,33 +100,38 @@ def test_fused_runs_stop_at_the_events_they_must_not_skip(tmp_path):
     assert written == [f"ck-{k:09d}.h5" for k in range(50, sim.state.step + 1, 50)]
 
 
-def test_periodic_update_uses_the_compiled_runs_stale_marks(monkeypatch):
-    """A compiled run that stops at a periodic update with work hands its staleness marks to
-    the update (pdem.cycle.STALE_FOUND): the stepper does not look again, and the state is
-    bitwise that of the step-by-step run, which looks for itself at every update."""
+def test_compiled_run_does_the_periodic_contact_updates():
+    """A compiled run does the periodic contact updates with work itself
+    (pdem.contact.update.update_marked) and carries on: the stepper's update runs only where a
+    compiled run stopped, and the state is bitwise that of the step-by-step run, whose stepper
+    updates at every periodic step."""
     import pdem.stepper
 
-    looked = []
-    original = pdem.stepper.stale_contacts
+    calls = []
+    original = pdem.stepper.Stepper.refresh
 
-    def counted(*args):
-        looked.append(1)
-        return original(*args)
+    def counted(self, all_contacts, periodic=False):
+        calls.append(periodic)
+        return original(self, all_contacts, periodic)
 
-    monkeypatch.setattr(pdem.stepper, "stale_contacts", counted)
     sims = {}
     for fused in (False, True):
         d = yaml.safe_load(cube_stack_scene(4, "fast"))
         d.setdefault("solve", {})["fused"] = fused
         sim = Simulation(parse_scene(yaml.safe_dump(d)), MPI.COMM_SELF, output=False)
-        looked.clear()
-        sim.run(steps=400)
-        sims[fused] = (sim, len(looked))
-    (steps, looked_steps), (fused, looked_fused) = sims[False], sims[True]
+        calls.clear()
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(pdem.stepper.Stepper, "refresh", counted)
+            sim.run(steps=400)
+        sims[fused] = (sim, sum(calls))
+    (steps, updates_steps), (fused, updates_fused) = sims[False], sims[True]
     periodic = 400 // steps.state.scene.contact.detect_every
-    assert looked_steps == periodic  # the step-by-step run looks at every periodic update
-    assert looked_fused < periodic // 4  # the compiled runs looked for nearly all of them
+    assert updates_steps == periodic  # the stepper updates at every periodic step
+    assert updates_fused < periodic // 4  # the compiled runs did nearly all the others
     for name in ("x", "q", "v", "w", "work"):
         assert np.array_equal(getattr(steps.blocks, name), getattr(fused.blocks, name)), name
-    for name in ("sc_fs", "sc_un", "sc_us", "sc_pa"):
+    for name in steps.contacts.arrays:
+        assert np.array_equal(steps.contacts.arrays[name], fused.contacts.arrays[name]), name
+    for name in steps.contacts.sub:
         assert np.array_equal(steps.contacts.sub[name], fused.contacts.sub[name]), name
+    assert np.array_equal(steps.contacts.sc_start, fused.contacts.sc_start)

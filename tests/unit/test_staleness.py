@@ -149,18 +149,21 @@ solve: {steps: 1, damping: none}
 
 
 def _updates(scene: str, steps: int, monkeypatch) -> int:
-    """Contacts re-detected by periodic updates over ``steps`` steps (after the start's)."""
+    """Contacts re-detected by periodic updates over ``steps`` steps (after the start's), each
+    step in Python (a compiled run of steps updates inside its loop, pdem.cycle: the same
+    contacts, tests/unit/test_fused.py)."""
     import pdem.stepper as stepper
 
-    sim = Simulation(parse_scene(scene), MPI.COMM_SELF, output=False)
+    sim = Simulation(parse_scene(scene.replace("damping: none}", "damping: none, fused: false}")),
+                     MPI.COMM_SELF, output=False)
     count = [0]
-    real = stepper.refresh_contacts
+    real = stepper.update_marked
 
     def counting(*args):
-        count[0] += int(np.count_nonzero(args[6]))
+        count[0] += int(np.count_nonzero(args[-1]))
         return real(*args)
 
-    monkeypatch.setattr(stepper, "refresh_contacts", counting)
+    monkeypatch.setattr(stepper, "update_marked", counting)
     sim.run(steps=steps)
     return count[0]
 

@@ -1,0 +1,132 @@
+"""A contact geometry update of the marked contacts, with its bookkeeping, in compiled calls.
+
+The stepper's update (:meth:`pdem.stepper.Stepper.refresh`) and the compiled run of steps
+(:mod:`pdem.cycle`) both call :func:`update_marked`, so a periodic update done inside the
+compiled loop is the same operations on the same arrays as the stepper's, in the same order:
+the same bits. The loop then no longer returns to Python for each periodic update with work
+(nearly every one of a settling stack), which cost ~1 ms of interpreter a time against
+~1.5 ms of geometry for a few hundred contacts of the 10³ cube stack (docs/validation.md).
+
+What an update does, in order: each marked contact's relative motion is zeroed and its
+relative pose recorded (:mod:`.staleness`), the marked contacts' stored spring energy is read,
+their planes and sub-contacts are found again (:func:`.detect.refresh_contacts`), new contacts
+on a joint plane take the set's joint (:func:`.joint_sets.set_joints`), held forces of the
+updated contacts are void, and the change of the stored energy is booked on the blocks
+(``WORK_GEOMETRY``). Contacts found apart keep their rows with no sub-contact: the caller
+drops them (:meth:`pdem.model.contacts.ContactStore.take_consumed`). A dropped contact's energy
+after the update is zero: it has no sub-contact left, so summing over the rows before they are
+dropped books the same numbers as summing over the kept ones.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+from ..jit import kernel
+from ..model.contacts import Pairs, Subs
+from .detect import refresh_contacts
+from .forces import book_contact_energy, book_stored_energy, contact_energies
+from .joint_sets import set_joints
+from .rigid import WORK_GEOMETRY
+from .staleness import mark_fresh
+
+# What an update reads besides the poses and the contacts: ``shapes``
+# (pdem.model.blocks.Shapes), ``planes`` (pdem.contact.detect.Planes), CTOL, the touch
+# fraction, the common-plane algorithm, whether an update of every contact trims its slack
+# (pdem.contact.detect.refresh_contacts), and ``sets`` (:data:`JointSets`, or None when no cut
+# names a joint).
+GeometryUpdate = namedtuple("GeometryUpdate", "shapes planes ctol touch_frac alg trim sets")
+# the block faces' planes and cut tags, and each cut's joint row (pdem.contact.joint_sets)
+JointSets = namedtuple("JointSets", "face_start normals_local offsets_local face_tag cut_joint")
+
+
+@kernel
+def redetect(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo, in_place):
+    """The update of the contacts with ``todo[c] != 0`` up to its energy booking; returns
+    ``(keep, start, subs, before)``: which contacts stay, the new CSR start (a contact found
+    apart has no sub-contact), the new sub-contact columns (:data:`Subs`; with ``in_place``
+    the old ones, written over, when the layout allows) and the marked contacts' stored energy
+    before (empty when there was no sub-contact: then :func:`book_update` books the energy
+    after, and no array of zeros is made at the start's first update, the set-up's peak)."""
+    planes = up.planes
+    nc = planes.ia.shape[0]
+    for c in range(nc):
+        if todo[c] != 0:
+            moved[c] = 0.0
+    mark_fresh(x, q, R, planes.ia, planes.ib, rel_x, rel_q, todo)
+    if pairs.sc_start[nc] > 0:
+        before = contact_energies(pairs, subs, joints, todo)
+    else:
+        before = np.empty(0)
+    new = _unseen(up.sets, planes.warm)
+    keep, start, pa, area, un, fs, us, dil, state, hist = refresh_contacts(
+        x, R, up.shapes, planes, pairs.sc_start, subs, todo, up.ctol, up.touch_frac, up.alg,
+        up.trim, in_place)
+    _set_joints(up.sets, new, keep, planes, x, R, up.ctol, pairs.joint)
+    for c in range(nc):
+        if todo[c] != 0:  # new sub-contacts: held forces are void
+            pairs.frozen[c] = 0
+    return keep, start, Subs(pa, area, un, fs, us, dil, state, hist), before
+
+
+@kernel
+def _unseen(sets, warm):
+    """With joint sets, the contacts never updated (found by a search since): the ones that may
+    lie on a joint plane. (Empty without: ``sets`` None compiles to nothing here.)"""
+    if sets is None:
+        return np.empty(0, np.uint8)
+    new = np.empty(warm.shape[0], np.uint8)
+    for c in range(warm.shape[0]):
+        new[c] = 1 if warm[c] == 0 else 0
+    return new
+
+
+@kernel
+def _set_joints(sets, new, keep, planes, x, R, ctol, joint):
+    """A new contact kept on a joint plane takes the set's joint (:func:`.joint_sets.set_joints`)."""
+    if sets is None:
+        return
+    any_new = False
+    for c in range(new.shape[0]):
+        new[c] &= keep[c]
+        any_new |= new[c] != 0
+    if any_new:
+        set_joints(new, planes.ia, planes.ib, planes.ka, planes.kb, planes.normal, x, R,
+                   sets.face_start, sets.normals_local, sets.offsets_local, sets.face_tag,
+                   sets.cut_joint, ctol, joint)
+
+
+@kernel
+def book_update(bodies, pairs, subs, joints, todo, before):
+    """Book what the update changed in the marked contacts' stored energy on their blocks
+    (``WORK_GEOMETRY``): no work is done, so the change is the geometry's. ``pairs``/``subs``
+    after the update, found-apart contacts still in their rows (no sub-contact: zero energy);
+    ``before`` from :func:`redetect`."""
+    if before.shape[0] == 0:
+        book_stored_energy(bodies, pairs, subs, joints, todo, WORK_GEOMETRY)
+        return
+    after = contact_energies(pairs, subs, joints, todo)
+    book_contact_energy(bodies, pairs.ia, pairs.ib, after - before, WORK_GEOMETRY)
+
+
+@kernel
+def update_marked(x, q, R, up, pairs, subs, joints, bodies, moved, rel_x, rel_q, todo):
+    """A rigid scene's update of the contacts with ``todo[c] != 0``, bookkeeping included;
+    returns ``(keep, pairs, subs)`` after it (``pairs`` with the new CSR start; found-apart
+    contacts still in their rows, to be dropped by the caller where ``keep`` is 0)."""
+    keep, start, subs, before = redetect(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q,
+                                         todo, True)
+    pairs = Pairs(pairs.ia, pairs.ib, pairs.joint, pairs.normal, start, pairs.held, pairs.frozen)
+    book_update(bodies, pairs, subs, joints, todo, before)
+    return keep, pairs, subs
+
+
+@kernel
+def keeps_all(keep):
+    """Whether an update kept every contact."""
+    for c in range(keep.shape[0]):
+        if keep[c] == 0:
+            return False
+    return True
