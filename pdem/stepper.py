@@ -213,7 +213,9 @@ class Stepper:
         if not all_kept:  # a deleted contact's energy after is 0
             after, kept_after = np.zeros(c.n), after
             after[kept] = kept_after
-        forces.book_contact_energy(self.bodies(), c.ia, c.ib, after - before,
+        full = np.zeros(c.n)  # (the marked contacts' energies before, in contact order)
+        full[todo != 0] = before
+        forces.book_contact_energy(self.bodies(), c.ia, c.ib, after - full,
                                    motion.WORK_GEOMETRY)
 
     @staticmethod

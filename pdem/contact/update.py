@@ -27,9 +27,9 @@ import numpy as np
 from ..jit import kernel
 from ..model.contacts import Pairs, Subs
 from .detect import refresh_contacts
-from .forces import book_contact_energy, book_stored_energy, contact_energies
+from .forces import book_stored_energy, spring_energy
 from .joint_sets import set_joints
-from .rigid import WORK_GEOMETRY
+from .rigid import WORK_GEOMETRY, energy_shares
 from .staleness import mark_fresh
 
 # What an update reads besides the poses and the contacts: ``shapes``
@@ -48,18 +48,17 @@ def redetect(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo, in_pla
     ``(keep, start, subs, before)``: which contacts stay, the new CSR start (a contact found
     apart has no sub-contact), the new sub-contact columns (:data:`Subs`; with ``in_place``
     the old ones, written over, when the layout allows) and the marked contacts' stored energy
-    before (empty when there was no sub-contact: then :func:`book_update` books the energy
-    after, and no array of zeros is made at the start's first update, the set-up's peak)."""
+    before, in contact order (empty when there was no sub-contact: then :func:`book_update`
+    books the energy after, and no array is made at the start's first update, the set-up's
+    peak)."""
     planes = up.planes
     nc = planes.ia.shape[0]
     for c in range(nc):
         if todo[c] != 0:
             moved[c] = 0.0
     mark_fresh(x, q, R, planes.ia, planes.ib, rel_x, rel_q, todo)
-    if pairs.sc_start[nc] > 0:
-        before = contact_energies(pairs, subs, joints, todo)
-    else:
-        before = np.empty(0)
+    before = _marked_energies(pairs, subs, joints, todo) if pairs.sc_start[nc] > 0 \
+        else np.empty(0)
     new = _unseen(up.sets, planes.warm)
     keep, start, pa, area, un, fs, us, dil, state, hist = refresh_contacts(
         x, R, up.shapes, planes, pairs.sc_start, subs, todo, up.ctol, up.touch_frac, up.alg,
@@ -99,16 +98,42 @@ def _set_joints(sets, new, keep, planes, x, R, ctol, joint):
 
 
 @kernel
+def _marked_energies(pairs, subs, joints, todo):
+    """The stored spring energy of each contact with ``todo[c] != 0``, in contact order (an
+    array of the marked ones only: a periodic update marks a few per cent of the contacts)."""
+    n = 0
+    for c in range(todo.shape[0]):
+        n += todo[c] != 0
+    out = np.empty(n)
+    k = 0
+    for c in range(todo.shape[0]):
+        if todo[c] != 0:
+            out[k] = spring_energy(pairs, subs, joints, c)
+            k += 1
+    return out
+
+
+@kernel
 def book_update(bodies, pairs, subs, joints, todo, before):
     """Book what the update changed in the marked contacts' stored energy on their blocks
     (``WORK_GEOMETRY``): no work is done, so the change is the geometry's. ``pairs``/``subs``
     after the update, found-apart contacts still in their rows (no sub-contact: zero energy);
-    ``before`` from :func:`redetect`."""
+    ``before`` from :func:`redetect`. (An unmarked contact's change is 0, whose booking would
+    add +0 to its blocks' sums and leave them as they are: they are not visited.)"""
     if before.shape[0] == 0:
         book_stored_energy(bodies, pairs, subs, joints, todo, WORK_GEOMETRY)
         return
-    after = contact_energies(pairs, subs, joints, todo)
-    book_contact_energy(bodies, pairs.ia, pairs.ib, after - before, WORK_GEOMETRY)
+    k = 0
+    for c in range(todo.shape[0]):
+        if todo[c] == 0:
+            continue
+        e = spring_energy(pairs, subs, joints, c) - before[k]
+        k += 1
+        a = pairs.ia[c]
+        b = pairs.ib[c]
+        wa, wb = energy_shares(bodies, a, b)
+        bodies.work[a, WORK_GEOMETRY] += wa * e
+        bodies.work[b, WORK_GEOMETRY] += wb * e
 
 
 @kernel
