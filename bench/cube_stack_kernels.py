@@ -23,7 +23,7 @@ from pdem.config import parse_scene
 from pdem.config.resolve import TOUCH_FRACTION
 from pdem.contact.detect import Planes, _plane, plane_scratch, refresh_contacts
 from pdem.contact.forces import contact_forces
-from pdem.contact.subcontacts import contact_region
+from pdem.contact.subcontacts import region_in, region_scratch
 from pdem.dynamics import motion
 from pdem.dynamics.kinematics import rotation_matrices, update_world_vertices
 from pdem.simulation import Simulation
@@ -43,13 +43,17 @@ def _planes_only(shapes, R, ka, kb, normal, point, warm, alg):
 
 @numba.njit
 def _regions_only(shapes, ka, kb, normal, point, tol):
+    """The contact regions as the update makes them: one scratch for all."""
     vs = shapes.vert_start
     vw = shapes.verts_world
+    max_verts = 0
+    for k in range(vs.shape[0] - 1):
+        max_verts = max(max_verts, vs[k + 1] - vs[k])
+    scratch = region_scratch(max_verts)
     g = 0.0
     for c in range(ka.shape[0]):
-        _, ovl, _, _, _, _, _ = contact_region(vw[vs[ka[c]]:vs[ka[c] + 1]],
-                                               vw[vs[kb[c]]:vs[kb[c] + 1]], normal[c], point[c],
-                                               tol)
+        _, ovl, _, _, _, _ = region_in(vw[vs[ka[c]]:vs[ka[c] + 1]], vw[vs[kb[c]]:vs[kb[c] + 1]],
+                                       normal[c], point[c], tol, scratch)
         g += ovl[0]
     return g
 

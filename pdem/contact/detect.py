@@ -22,7 +22,7 @@ from ..jit import inline_kernel, kernel
 from .algorithms import find_plane, uses_face_normals
 from .common_plane import type_code
 from .laws import FAILED
-from .subcontacts import POLYGON, contact_region
+from .subcontacts import POLYGON, region_in, region_scratch
 
 # The contact arrays the geometry update reads and writes.
 # ``ia``/``ib`` are the bodies (block rows), ``ka``/``kb`` the convex pieces in contact.
@@ -252,6 +252,10 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
     # state: the store's dtype (uint8 bits)
     pa, area, un, fs, us, dil, state, hist = _new_subs(cap, old_state, old_hist.shape[1])
     scratch = plane_scratch(shapes)
+    max_verts = 0
+    for k in range(vert_start.shape[0] - 1):
+        max_verts = max(max_verts, vert_start[k + 1] - vert_start[k])
+    region = region_scratch(max_verts)
     pos = 0
     for c in range(nc):
         a = c_ia[c]
@@ -273,7 +277,7 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         c_warm[c] = 1
         va = verts_world[vert_start[ka]:vert_start[ka + 1]]
         vb = verts_world[vert_start[kb]:vert_start[kb + 1]]
-        pts, ovl, ar, kind, e1, e2, cnt = contact_region(va, vb, n, p, touch_frac * ctol)
+        pts, ovl, ar, kind, e, cnt = region_in(va, vb, n, p, touch_frac * ctol, region)
         c_ctype[c] = type_code(cnt[0], cnt[1])  # Table 1
         apt = min(point_area[a], point_area[b])
         k = pts.shape[0]
@@ -287,9 +291,9 @@ def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_fra
         o1 = old_start[c + 1]
         for i in range(k):
             s = pos + i
-            wx = p[0] + pts[i, 0] * e1[0] + pts[i, 1] * e2[0]
-            wy = p[1] + pts[i, 0] * e1[1] + pts[i, 1] * e2[1]
-            wz = p[2] + pts[i, 0] * e1[2] + pts[i, 1] * e2[2]
+            wx = p[0] + pts[i, 0] * e[0] + pts[i, 1] * e[3]
+            wy = p[1] + pts[i, 0] * e[1] + pts[i, 1] * e[4]
+            wz = p[2] + pts[i, 0] * e[2] + pts[i, 1] * e[5]
             dx = wx - x[a, 0]
             dy = wy - x[a, 1]
             dz = wz - x[a, 2]

@@ -13,9 +13,11 @@ vertices), so a tilted face carries a linearly varying load.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
-from ..jit import kernel
+from ..jit import inline_kernel, kernel
 
 EMPTY = 0
 POINT = 1
@@ -26,14 +28,23 @@ POLYGON = 3
 @kernel
 def plane_basis(n):
     """Deterministic in-plane unit vectors (e1, e2) with e1 x e2 = n."""
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = a - (a[0] * n[0] + a[1] * n[1] + a[2] * n[2]) * n
-    e1 /= np.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
-    e2 = np.empty(3)
-    e2[0] = n[1] * e1[2] - n[2] * e1[1]
-    e2[1] = n[2] * e1[0] - n[0] * e1[2]
-    e2[2] = n[0] * e1[1] - n[1] * e1[0]
-    return e1, e2
+    b = _plane_basis(n[0], n[1], n[2])
+    return np.array([b[0], b[1], b[2]]), np.array([b[3], b[4], b[5]])
+
+
+@inline_kernel
+def _plane_basis(n0, n1, n2):
+    """:func:`plane_basis` as six numbers (e1, e2), the same operations."""
+    a0, a1, a2 = (1.0, 0.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0, 0.0)
+    d = a0 * n0 + a1 * n1 + a2 * n2
+    x = a0 - d * n0
+    y = a1 - d * n1
+    z = a2 - d * n2
+    norm = np.sqrt(x ** 2 + y ** 2 + z ** 2)
+    x /= norm
+    y /= norm
+    z /= norm
+    return x, y, z, n1 * z - n2 * y, n2 * x - n0 * z, n0 * y - n1 * x
 
 
 @kernel
@@ -47,12 +58,21 @@ def hull2d(pts, eps):
 
     Returns (hull (k,2), kind) with kind POINT, SEGMENT or POLYGON."""
     m = pts.shape[0]
+    return _hull2d(pts, eps, np.empty(m, np.int64), np.empty((2 * m + 1, 2)))
+
+
+@inline_kernel
+def _hull2d(pts, eps, order, h):
+    """:func:`hull2d` in ``order`` (room for the points) and ``h`` (for twice as many and one);
+    the hull is a view of ``h``."""
+    m = pts.shape[0]
     # lexicographic order by (x, y): insertion sort, pre-sorted for larger inputs (the order of
     # exact duplicates does not change the hull)
     if m > 32:
-        order = np.argsort(pts[:, 0] * 1.0 + pts[:, 1] * 1e-7)
+        order[:m] = np.argsort(pts[:, 0] * 1.0 + pts[:, 1] * 1e-7)
     else:
-        order = np.arange(m)
+        for i in range(m):
+            order[i] = i
     for i in range(1, m):
         j = i
         while j > 0:
@@ -64,7 +84,6 @@ def hull2d(pts, eps):
                 j -= 1
             else:
                 break
-    h = np.empty((2 * m + 1, 2))
     k = 0
     for ii in range(m):
         i = order[ii]
@@ -161,12 +180,10 @@ def height_fit(st, h):
     return mh - cs * ms - ct * mt, cs, ct
 
 
-@kernel
-def _clip_polygon(subject, clip):
-    """Sutherland-Hodgman: convex ``subject`` clipped by convex CCW ``clip``."""
-    cap = subject.shape[0] + clip.shape[0] + 2
-    cur = np.empty((cap, 2))
-    nxt = np.empty((cap, 2))
+@inline_kernel
+def _clip_polygon(subject, clip, cur, nxt):
+    """Sutherland-Hodgman: convex ``subject`` clipped by convex CCW ``clip``, in ``cur`` and
+    ``nxt`` (room for both polygons' corners and two); a view of one of them."""
     nc = subject.shape[0]
     cur[:nc] = subject
     m = clip.shape[0]
@@ -266,15 +283,24 @@ def _segment_cross(s1, s2):
 
 @kernel
 def merge_close_corners(pts, area, tol):
+    """:func:`_merge_close_corners` into arrays of its own."""
+    k = pts.shape[0]
+    out, out_area = _merge_close_corners(pts, area, tol, np.empty(k, np.bool_),
+                                         np.empty((k, 2)), np.empty(k))
+    return out.copy(), out_area.copy()
+
+
+@inline_kernel
+def _merge_close_corners(pts, area, tol, apart, out, out_area):
     """A polygon region's corners (in order) with each run of consecutive corners closer than
     ``tol`` to the next merged into one, at their area-weighted centroid, carrying their summed
     area. A sliver where two faces overlap by microns (diagonal neighbours in a settling stack)
     or the near-duplicate corners of a slightly turned face keep one sub-contact per place
     instead of two a hair apart: the same force and moment to within ``tol`` times the force,
-    for fewer sub-contacts (the 20^3 cube stack: 14 % fewer)."""
+    for fewer sub-contacts (the 20^3 cube stack: 14 % fewer). ``apart``, ``out`` and
+    ``out_area``: room for the corners; the result is ``(pts, area)`` or views of those."""
     k = pts.shape[0]
-    apart = np.empty(k, np.bool_)  # corner i is farther than tol from corner i - 1
-    for i in range(k):
+    for i in range(k):  # apart[i]: corner i is farther than tol from corner i - 1
         j = i - 1 if i > 0 else k - 1
         apart[i] = (pts[i, 0] - pts[j, 0]) ** 2 + (pts[i, 1] - pts[j, 1]) ** 2 > tol * tol
     first = 0  # a corner that starts a cluster (none apart: one cluster of all, from 0)
@@ -282,30 +308,48 @@ def merge_close_corners(pts, area, tol):
         if apart[i]:
             first = i
             break
-    out = np.empty((k, 2))
-    out_area = np.empty(k)
     m = 0
-    sums = np.zeros(6)  # sum a x, sum a y, sum a, sum x, sum y, count
+    # sum a x, sum a y, sum a, sum x, sum y, count
+    sax = say = sa = sx = sy = cnt = 0.0
     for t in range(k + 1):
         i = (first + t) % k
         if t == k or (t > 0 and apart[i]):  # close the cluster before corner i
-            w = sums[2] if sums[2] > 0.0 else sums[5]
-            out[m, 0] = (sums[0] if sums[2] > 0.0 else sums[3]) / w
-            out[m, 1] = (sums[1] if sums[2] > 0.0 else sums[4]) / w
-            out_area[m] = sums[2]
+            w = sa if sa > 0.0 else cnt
+            out[m, 0] = (sax if sa > 0.0 else sx) / w
+            out[m, 1] = (say if sa > 0.0 else sy) / w
+            out_area[m] = sa
             m += 1
-            sums[:] = 0.0
+            sax = say = sa = sx = sy = cnt = 0.0
             if t == k:
                 break
-        sums[0] += area[i] * pts[i, 0]
-        sums[1] += area[i] * pts[i, 1]
-        sums[2] += area[i]
-        sums[3] += pts[i, 0]
-        sums[4] += pts[i, 1]
-        sums[5] += 1.0
+        sax += area[i] * pts[i, 0]
+        say += area[i] * pts[i, 1]
+        sa += area[i]
+        sx += pts[i, 0]
+        sy += pts[i, 1]
+        cnt += 1.0
     if m == k:
         return pts, area
-    return out[:m].copy(), out_area[:m].copy()
+    return out[:m], out_area[:m]
+
+
+# Room for one contact region (:func:`region_scratch`), reused from contact to contact by the
+# geometry update: the region of two cubes is a few dozen numbers, and the ~20 small arrays it
+# allocated cost as much as its arithmetic (docs/validation.md, Benchmarks).
+RegionScratch = namedtuple("RegionScratch",
+                           "h st ht order hull_a hull_b cur nxt area apart merged merged_area "
+                           "overlap counts")
+
+
+@kernel
+def region_scratch(max_verts):
+    """:data:`RegionScratch` for pieces of up to ``max_verts`` vertices."""
+    m = 2 * max_verts
+    cap = 2 * (m + 1) + 2  # both hulls' corners and two (the clip)
+    return RegionScratch(np.empty(m), np.empty((m, 2)), np.empty(m), np.empty(m, np.int64),
+                         np.empty((m + 1, 2)), np.empty((m + 1, 2)), np.empty((cap, 2)),
+                         np.empty((cap, 2)), np.empty(cap), np.empty(cap, np.bool_),
+                         np.empty((cap, 2)), np.empty(cap), np.empty(cap), np.empty(2, np.int64))
 
 
 @kernel
@@ -327,13 +371,26 @@ def contact_region(va, vb, n, p, touch_tol):
     e1, e2 : the in-plane basis used.
     counts : (2,) touching vertices of A and of B (contact type, Table 1).
     """
-    e1, e2 = plane_basis(n)
+    ws = region_scratch(max(va.shape[0], vb.shape[0]))
+    pts, overlap, area, kind, e, counts = region_in(va, vb, n, p, touch_tol, ws)
+    return pts.copy(), overlap.copy(), area.copy(), kind, np.array([e[0], e[1], e[2]]), \
+        np.array([e[3], e[4], e[5]]), counts.copy()
+
+
+@kernel
+def region_in(va, vb, n, p, touch_tol, ws):
+    """:func:`contact_region` in the room of ``ws`` (:func:`region_scratch`, for pieces of at
+    least as many vertices): ``pts``, ``overlap``, ``area`` and ``counts`` are views of it (or
+    small arrays of their own), valid until its next use, and the basis is six numbers
+    ``(e1, e2)``."""
+    e = _plane_basis(n[0], n[1], n[2])
+    e10, e11, e12, e20, e21, e22 = e
     na = va.shape[0]
     nb = vb.shape[0]
     n0, n1, n2 = n[0], n[1], n[2]
     p0, p1, p2 = p[0], p[1], p[2]
     # heights above the plane: A's in h[:na], B's in h[na:]
-    h = np.empty(na + nb)
+    h = ws.h
     amax = -np.inf
     for i in range(na):
         hi = n0 * (va[i, 0] - p0) + n1 * (va[i, 1] - p1) + n2 * (va[i, 2] - p2)
@@ -346,16 +403,16 @@ def contact_region(va, vb, n, p, touch_tol):
         bmin = min(bmin, hi)
     # touching vertices projected on the plane: A's in st[:ka], B's in st[ka:ka + kb], with
     # their heights in ht
-    st = np.empty((na + nb, 2))
-    ht = np.empty(na + nb)
+    st = ws.st
+    ht = ws.ht
     ka = 0
     for i in range(na):
         if h[i] >= amax - touch_tol:
             d0 = va[i, 0] - p0
             d1 = va[i, 1] - p1
             d2 = va[i, 2] - p2
-            st[ka, 0] = d0 * e1[0] + d1 * e1[1] + d2 * e1[2]
-            st[ka, 1] = d0 * e2[0] + d1 * e2[1] + d2 * e2[2]
+            st[ka, 0] = d0 * e10 + d1 * e11 + d2 * e12
+            st[ka, 1] = d0 * e20 + d1 * e21 + d2 * e22
             ht[ka] = h[i]
             ka += 1
     kb = 0
@@ -364,13 +421,13 @@ def contact_region(va, vb, n, p, touch_tol):
             d0 = vb[i, 0] - p0
             d1 = vb[i, 1] - p1
             d2 = vb[i, 2] - p2
-            st[ka + kb, 0] = d0 * e1[0] + d1 * e1[1] + d2 * e1[2]
-            st[ka + kb, 1] = d0 * e2[0] + d1 * e2[1] + d2 * e2[2]
+            st[ka + kb, 0] = d0 * e10 + d1 * e11 + d2 * e12
+            st[ka + kb, 1] = d0 * e20 + d1 * e21 + d2 * e22
             ht[ka + kb] = h[na + i]
             kb += 1
     sta = st[:ka]
     stb = st[ka:ka + kb]
-    counts = np.empty(2, np.int64)
+    counts = ws.counts
     counts[0] = ka
     counts[1] = kb
     # size scale for the 2D tolerances
@@ -379,13 +436,13 @@ def contact_region(va, vb, n, p, touch_tol):
         scale = max(scale, abs(st[k, 0]) + abs(st[k, 1]))
     scale = max(scale, touch_tol, 1e-300)
     eps = 1e-12 * scale * scale
-    polya, kinda = hull2d(sta, eps)
-    polyb, kindb = hull2d(stb, eps)
+    polya, kinda = _hull2d(sta, eps, ws.order, ws.hull_a)
+    polyb, kindb = _hull2d(stb, eps, ws.order, ws.hull_b)
     ca0, cas, cat = height_fit(sta, ht[:ka])
     cb0, cbs, cbt = height_fit(stb, ht[ka:ka + kb])
 
     if kinda == POLYGON and kindb == POLYGON:
-        pts = _clip_polygon(polya, polyb)
+        pts = _clip_polygon(polya, polyb, ws.cur, ws.nxt)
         kind = POLYGON if pts.shape[0] >= 3 else EMPTY
     elif kinda == POLYGON and kindb == SEGMENT:
         pts = _clip_segment(polyb, polya)
@@ -398,18 +455,19 @@ def contact_region(va, vb, n, p, touch_tol):
         kind = POINT
     elif kinda == POINT and kindb == POLYGON:
         pts = polya if _point_in_polygon(polya[0, 0], polya[0, 1], polyb, 1e-9 * scale) \
-            else np.empty((0, 2))
+            else ws.cur[:0]
         kind = POINT
     elif kindb == POINT and kinda == POLYGON:
         pts = polyb if _point_in_polygon(polyb[0, 0], polyb[0, 1], polya, 1e-9 * scale) \
-            else np.empty((0, 2))
+            else ws.cur[:0]
         kind = POINT
     else:
-        pts = np.empty((0, 2))
+        pts = ws.cur[:0]
         kind = EMPTY
 
     # A polygon clip can come back with near-duplicate corners; a degenerate area is no polygon.
-    area = np.zeros(pts.shape[0])
+    area = ws.area[:pts.shape[0]]
+    area[:] = 0.0
     if kind == POLYGON:
         k = pts.shape[0]
         cx = 0.0
@@ -428,25 +486,30 @@ def contact_region(va, vb, n, p, touch_tol):
             total += tri
         if total <= eps:
             kind = EMPTY
-            pts = np.empty((0, 2))
-            area = np.zeros(0)
+            pts = ws.cur[:0]
+            area = ws.area[:0]
         else:  # corners within the touch tolerance of each other: one sub-contact
-            pts, area = merge_close_corners(pts, area, touch_tol)
+            pts, area = _merge_close_corners(pts, area, touch_tol, ws.apart, ws.merged,
+                                             ws.merged_area)
     elif kind == SEGMENT and pts.shape[0] == 2:
         if (pts[0, 0] - pts[1, 0]) ** 2 + (pts[0, 1] - pts[1, 1]) ** 2 <= eps:
-            pts = pts[:1].copy()
-            area = np.zeros(1)
+            pts = pts[:1]
+            area = ws.area[:1]
+            area[0] = 0.0
             kind = POINT
+    overlap = ws.overlap
     if pts.shape[0] == 0:
         # Numerically empty intersection (blocks meet at a corner): one point at the reference
         # point, loaded by the common-plane gap.
-        pts = np.zeros((1, 2))
-        area = np.zeros(1)
-        overlap = np.array([amax - bmin])
-        return pts, overlap, area, EMPTY, e1, e2, counts
-    overlap = np.empty(pts.shape[0])
+        pts = ws.cur[:1]
+        pts[0, 0] = 0.0
+        pts[0, 1] = 0.0
+        area = ws.area[:1]
+        area[0] = 0.0
+        overlap[0] = amax - bmin
+        return pts, overlap[:1], area, EMPTY, e, counts
     for i in range(pts.shape[0]):
         s = pts[i, 0]
         t = pts[i, 1]
         overlap[i] = (ca0 + cas * s + cat * t) - (cb0 + cbs * s + cbt * t)
-    return pts, overlap, area, kind, e1, e2, counts
+    return pts, overlap[:pts.shape[0]], area, kind, e, counts

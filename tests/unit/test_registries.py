@@ -71,11 +71,11 @@ def glue_registered(monkeypatch):
     from numba.core.dispatcher import Dispatcher
 
     from pdem import cycle
-    from pdem.contact import forces
+    from pdem.contact import forces, update
 
-    # every kernel whose argument types include the joint table: the force kernels and the
-    # compiled loop that calls them (pdem.cycle)
-    for module in (forces, cycle):
+    # every kernel whose argument types include the joint table: the force kernels, the
+    # contact update's (its energy booking) and the compiled loop that calls them (pdem.cycle)
+    for module in (forces, update, cycle):
         for kernel_ in vars(module).values():
             if isinstance(kernel_, Dispatcher):
                 monkeypatch.setattr(kernel_, "_cache", NullCache())
@@ -127,13 +127,14 @@ def test_kernel_records_pickle_by_reference():
     process (~30 s per rank)."""
     import pickle
 
-    from pdem.contact import algorithms, detect, rigid
+    from pdem.contact import algorithms, detect, rigid, update
     from pdem.contact import laws as L
     from pdem.dynamics import damping, motion
     from pdem.model import blocks, contacts
 
     records = [rigid.Bodies, contacts.Pairs, contacts.Subs, blocks.Shapes, detect.Planes,
-               motion.Motion, L.Joints, algorithms.CundallPlane, algorithms.FastPlane]
+               motion.Motion, L.Joints, algorithms.CundallPlane, algorithms.FastPlane,
+               update.GeometryUpdate, update.JointSets]
     records += [law.table([]).__class__ for law in L.JOINT_LAWS.values()]
     records += [mode.kernel_args for mode in damping.DAMPING.values()]
     for cls in records:

@@ -132,3 +132,45 @@ def test_tiny_region_is_one_sub_contact():
     assert kind == POLYGON and len(pts) == 1
     assert area[0] == pytest.approx(1e-6, rel=1e-9)
     np.testing.assert_allclose(world(pts, e1, e2)[0, :2], [1 - 5e-4, 1 - 5e-4], atol=1e-12)
+
+
+def _rotated(v, angle, axis):
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [(1, 2), (0, 2), (0, 1)][axis]
+    out = v.copy()
+    out[:, i] = c * v[:, i] - s * v[:, j]
+    out[:, j] = s * v[:, i] + c * v[:, j]
+    return out
+
+
+def test_one_scratch_reused_gives_each_region_as_its_own_arrays():
+    """The geometry update reuses one room (RegionScratch) for every contact's region: 300
+    regions of every kind (faces shifted and turned, tilted edges and corners, prisms of six
+    vertices beside cubes of eight, found apart) through one scratch equal, bit for bit, the
+    regions computed each in arrays of their own."""
+    from pdem.contact.subcontacts import EMPTY, region_in, region_scratch
+
+    rng = np.random.default_rng(7)
+    scratch = region_scratch(8)
+    floor = box_verts([-1, -1, -1], [1, 1, 0])
+    prism = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]], float)
+    kinds = set()
+    for _ in range(300):
+        top = box_verts([-0.5, -0.5, 0], [0.5, 0.5, 1]) if rng.random() < 0.7 else prism - 0.3
+        r = rng.random()
+        if r < 0.2:  # on an edge
+            top = _rotated(top, np.pi / 4 + rng.normal(0, 1e-9), 0)
+        top = _rotated(top, rng.normal(0, 0.3), 2)
+        if 0.2 <= r < 0.5:  # on a corner
+            top = _rotated(_rotated(top, rng.normal(0, 0.5), 0), rng.normal(0, 0.5), 1)
+        top = top + [rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5), 0.0]
+        top[:, 2] += -top[:, 2].min() + rng.uniform(-1e-3, 1e-3)
+        tol = 10.0 ** rng.uniform(-6, -2)
+        want = contact_region(floor, top, N, P, tol)
+        pts, ovl, area, kind, e, counts = region_in(floor, top, N, P, tol, scratch)
+        kinds.add(kind)
+        assert kind == want[3]
+        for got, ref in ((pts, want[0]), (ovl, want[1]), (area, want[2]), (counts, want[6]),
+                         (np.array(e[:3]), want[4]), (np.array(e[3:]), want[5])):
+            assert got.shape == ref.shape and np.array_equal(got, ref)
+    assert kinds == {EMPTY, POINT, SEGMENT, POLYGON}
