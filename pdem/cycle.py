@@ -10,7 +10,7 @@ that of the step-by-step path (and so of any rank count, whose steps exchange ha
 The loop does a step's first half (motion, bookkeeping, rotation matrices, contact forces)
 and then, if nothing needs Python, its second half. At a periodic contact update it marks the
 stale contacts (pdem.contact.staleness) and, if any, updates them by the stepper's own kernel
-(:func:`pdem.contact.update.update_marked`), carrying on with the new sub-contact columns.
+(:mod:`pdem.contact.update`), carrying on with the new sub-contact columns.
 Otherwise it returns after the first half and the stepper finishes that step in Python: a
 search, an update that found contacts apart (the stepper drops them from every column), a bad
 state, an event. Runs on several ranks never fuse: their halo and reductions run every step
@@ -19,13 +19,15 @@ state, an event. Runs on several ranks never fuse: their halo and reductions run
 
 from __future__ import annotations
 
+from .contact.detect import refresh_contacts
 from .contact.forces import contact_forces
 from .contact.staleness import stale_contacts
-from .contact.update import keeps_all, update_marked
+from .contact.update import begin_update, end_update, keeps_all
 from .dynamics import motion
 from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices, world_vertices
 from .jit import kernel
+from .model.contacts import Pairs, Subs
 
 # why a compiled run of steps returned (the stepper finishes the last step in Python)
 DONE = 0  # the step budget, a plugin's event step or time, or the ratio target was reached
@@ -33,27 +35,6 @@ NEEDS_PYTHON = 1  # a search, a periodic update the stepper must do, or a bad st
 # the last step's periodic update was done and found contacts apart: the stepper drops them
 # (the returned ``keep``) and finishes the step without updating again
 DROPS = 2
-
-
-@kernel
-def _periodic_update(x, q, R, radius, up, pieces, pairs, subs, joints, bodies, rel_x, rel_q,
-                     c_moved, u_geo, refresh_tolerance, todo):
-    """The stepper's periodic contact update (pdem.stepper.Stepper._second_half with
-    ``refresh(periodic=True)``) of a rigid serial scene in which no search is due: returns
-    ``(n, keep, pairs, subs)``: ``n`` contacts were updated; none if none was stale (then
-    only its bookkeeping was done: each contact's relative motion in ``c_moved``, ``u_geo``
-    reset)."""
-    u_geo[:] = 0.0
-    shapes = up.shapes
-    n = stale_contacts(x, q, R, radius, pairs.ia, pairs.ib, rel_x, rel_q, up.planes.gap,
-                       up.planes.warm, pairs.sc_start, subs.un, refresh_tolerance, c_moved, todo)
-    if n == 0:
-        return 0, todo, pairs, subs
-    world_vertices(x, R, shapes.piece_block, pieces[0], shapes.piece_x, shapes.vert_start,
-                   pieces[1], shapes.verts_world)
-    keep, pairs, subs = update_marked(x, q, R, up, pairs, subs, joints, bodies, c_moved, rel_x,
-                                      rel_q, todo)
-    return n, keep, pairs, subs
 
 
 @kernel
@@ -116,16 +97,34 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
             why = DONE
             break
         # second half, when no search is due
+        # (pdem.stepper.Stepper._second_half with refresh(periodic=True): the stale contacts
+        # are updated by the stepper's three calls, pdem.contact.update, inline here: a kernel
+        # around them would compile the re-detection once more)
         if periodic:
-            n, kept, pairs, subs = _periodic_update(
-                bodies.x, q, R, radius_all, up, pieces, pairs, subs, joints, bodies, rel_x,
-                rel_q, c_moved, u_geo, refresh_tolerance, todo)
-            if n:
-                redetected += n
-                keep = kept
-                if not keeps_all(keep):
-                    why = DROPS
-                    break
+            u_geo[:] = 0.0
+            x = bodies.x
+            planes = up.planes
+            n = stale_contacts(x, q, R, radius_all, pairs.ia, pairs.ib, rel_x, rel_q,
+                               planes.gap, planes.warm, pairs.sc_start, subs.un,
+                               refresh_tolerance, c_moved, todo)
+            if n == 0:  # nothing to update: its bookkeeping is done
+                continue
+            redetected += n
+            shapes = up.shapes
+            world_vertices(x, R, shapes.piece_block, pieces[0], shapes.piece_x,
+                           shapes.vert_start, pieces[1], shapes.verts_world)
+            before, new = begin_update(x, q, R, up, pairs, subs, joints, c_moved, rel_x, rel_q,
+                                       todo)
+            keep, start, pa, area, un, fs, us, dil, state, hist = refresh_contacts(
+                x, R, shapes, planes, pairs.sc_start, subs, todo, up.ctol, up.touch_frac,
+                up.alg, up.trim, up.in_place)
+            pairs = Pairs(pairs.ia, pairs.ib, pairs.joint, pairs.normal, start, pairs.held,
+                          pairs.frozen)
+            subs = Subs(pa, area, un, fs, us, dil, state, hist)
+            end_update(x, R, up, pairs, subs, joints, bodies, todo, keep, new, before, True)
+            if not keeps_all(keep):
+                why = DROPS
+                break
     return n_steps, step, time, why, bad, u_mig_max, redetected, keep, pairs, subs
 
 

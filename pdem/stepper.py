@@ -20,18 +20,18 @@ import numpy as np
 from . import domain
 from .config.resolve import TOUCH_FRACTION
 from .contact import forces
-from .contact.detect import Planes
+from .contact.detect import Planes, refresh_contacts
 from .contact.forces import contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
-from .contact.update import GeometryUpdate, JointSets, keeps_all, redetect, update_marked
+from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
 from .cycle import DROPS, fused_steps
 from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
 from .memory import large_blocks_mapped
-from .model.contacts import ContactStore, sub_columns
+from .model.contacts import ContactStore, Subs, sub_columns
 from .model.csr import pair_key
 from .parallel import mpi
 
@@ -172,28 +172,29 @@ class Stepper:
             return
         todo = todo.astype(np.uint8)
         self.redetected += int(np.count_nonzero(todo))
-        a = c.arrays
         joints = s.joints.kernel_args
-        if s.grids is None:
-            keep, pairs, subs = update_marked(b.x, b.q, b.R, self.geometry_update(), c.pairs(),
-                                              c.subs(), joints, self.bodies(), c.moved,
-                                              a["rel_x"], a["rel_q"], todo)
-            sub = sub_columns(subs)
-            start = pairs.sc_start
-            # only the store holds the new columns: each is freed once taken (below)
-            del a, pairs, subs
+        rigid = s.grids is None
+        # the update's three calls (pdem.contact.update), as the compiled loop makes them
+        up = self.geometry_update()
+        a = c.arrays
+        before, new = begin_update(b.x, b.q, b.R, up, c.pairs(), c.subs(), joints, c.moved,
+                                   a["rel_x"], a["rel_q"], todo)
+        keep, start, *columns = refresh_contacts(b.x, b.R, up.shapes, up.planes, c.sc_start,
+                                                 c.subs(), todo, up.ctol, up.touch_frac, up.alg,
+                                                 up.trim, up.in_place)
+        end_update(b.x, b.R, up, c.pairs()._replace(sc_start=start), Subs(*columns), joints,
+                   self.bodies(), todo, keep, new, before, rigid)
+        sub = sub_columns(columns)
+        # only the store holds the new columns: each is freed once taken (below)
+        del a, up, columns
+        if rigid:
             s.contacts = self._kept(ContactStore(c.arrays, sub, start), keep)
             return
         # zoned blocks: sub-contacts at their surface gridpoints, found after the update
         from .deformable.subcontacts import carry_grid_columns
 
-        keep, start, subs, before = redetect(b.x, b.q, b.R, self.geometry_update(), c.pairs(),
-                                             c.subs(), joints, c.moved, a["rel_x"],
-                                             a["rel_q"], todo, False)
-        sub = sub_columns(subs)
         # the kept sub-contacts keep their gridpoints
         sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
-        del a, subs
         all_kept = keeps_all(keep)
         kept = None if all_kept else keep.astype(bool)
         # (the regrid reads the contacts before the update)
@@ -237,9 +238,10 @@ class Stepper:
                         a["ctype"], a["warm"])
         sets = JointSets(b.face_start, b.normals_local, b.offsets_local, b.face_tag,
                          s.joints.cut_joint) if s.joints.by_set else None
-        # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed
+        # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed;
+        # zoned blocks: their regrid reads the rows before the update, so not in place
         return GeometryUpdate(b.shapes(), planes, s.ctol, TOUCH_FRACTION, s.algorithm,
-                              not large_blocks_mapped(), sets)
+                              not large_blocks_mapped(), s.grids is None, sets)
 
     def bodies(self) -> Bodies:
         b = self.s.blocks

@@ -61,7 +61,7 @@ def hull2d(pts, eps):
     return _hull2d(pts, eps, np.empty(m, np.int64), np.empty((2 * m + 1, 2)))
 
 
-@inline_kernel
+@kernel
 def _hull2d(pts, eps, order, h):
     """:func:`hull2d` in ``order`` (room for the points) and ``h`` (for twice as many and one);
     the hull is a view of ``h``."""
@@ -180,7 +180,7 @@ def height_fit(st, h):
     return mh - cs * ms - ct * mt, cs, ct
 
 
-@inline_kernel
+@kernel
 def _clip_polygon(subject, clip, cur, nxt):
     """Sutherland-Hodgman: convex ``subject`` clipped by convex CCW ``clip``, in ``cur`` and
     ``nxt`` (room for both polygons' corners and two); a view of one of them."""
@@ -290,7 +290,7 @@ def merge_close_corners(pts, area, tol):
     return out.copy(), out_area.copy()
 
 
-@inline_kernel
+@kernel
 def _merge_close_corners(pts, area, tol, apart, out, out_area):
     """A polygon region's corners (in order) with each run of consecutive corners closer than
     ``tol`` to the next merged into one, at their area-weighted centroid, carrying their summed

@@ -1,21 +1,24 @@
 """A contact geometry update of the marked contacts, with its bookkeeping, in compiled calls.
 
-The stepper's update (:meth:`pdem.stepper.Stepper.refresh`) and the compiled run of steps
-(:mod:`pdem.cycle`) both call :func:`update_marked`, so a periodic update done inside the
-compiled loop is the same operations on the same arrays as the stepper's, in the same order:
-the same bits. The loop then no longer returns to Python for each periodic update with work
-(nearly every one of a settling stack), which cost ~1 ms of interpreter a time against
-~1.5 ms of geometry for a few hundred contacts of the 10³ cube stack (docs/validation.md).
+An update is three kernel calls: :func:`begin_update`, the re-detection
+(:func:`.detect.refresh_contacts`) and :func:`end_update`. The stepper's update
+(:meth:`pdem.stepper.Stepper.refresh`) and the compiled run of steps (:mod:`pdem.cycle`)
+make the same three calls on the same arrays, so a periodic update done inside the compiled
+loop is the same bits as the stepper's (tests/unit/test_fused.py compares every column). The
+loop then no longer returns to Python for each periodic update with work (nearly every one of
+a settling stack). The calls are not wrapped in one kernel: numba optimises a kernel together
+with everything it calls, so each wrapper around the re-detection compiled it again (~6 s a
+layer in a fresh process, docs/validation.md).
 
 What an update does, in order: each marked contact's relative motion is zeroed and its
 relative pose recorded (:mod:`.staleness`), the marked contacts' stored spring energy is read,
-their planes and sub-contacts are found again (:func:`.detect.refresh_contacts`), new contacts
-on a joint plane take the set's joint (:func:`.joint_sets.set_joints`), held forces of the
-updated contacts are void, and the change of the stored energy is booked on the blocks
-(``WORK_GEOMETRY``). Contacts found apart keep their rows with no sub-contact: the caller
-drops them (:meth:`pdem.model.contacts.ContactStore.take_consumed`). A dropped contact's energy
-after the update is zero: it has no sub-contact left, so summing over the rows before they are
-dropped books the same numbers as summing over the kept ones.
+their planes and sub-contacts are found again, new contacts on a joint plane take the set's
+joint (:func:`.joint_sets.set_joints`), held forces of the updated contacts are void, and the
+change of the stored energy is booked on the blocks (``WORK_GEOMETRY``). Contacts found apart
+keep their rows with no sub-contact: the caller drops them
+(:meth:`pdem.model.contacts.ContactStore.take_consumed`). A dropped contact's energy after the
+update is zero: it has no sub-contact left, so summing over the rows before they are dropped
+books the same numbers as summing over the kept ones.
 """
 
 from __future__ import annotations
@@ -25,8 +28,6 @@ from collections import namedtuple
 import numpy as np
 
 from ..jit import kernel
-from ..model.contacts import Pairs, Subs
-from .detect import refresh_contacts
 from .forces import book_stored_energy, spring_energy
 from .joint_sets import set_joints
 from .rigid import WORK_GEOMETRY, energy_shares
@@ -34,23 +35,24 @@ from .staleness import mark_fresh
 
 # What an update reads besides the poses and the contacts: ``shapes``
 # (pdem.model.blocks.Shapes), ``planes`` (pdem.contact.detect.Planes), CTOL, the touch
-# fraction, the common-plane algorithm, whether an update of every contact trims its slack
-# (pdem.contact.detect.refresh_contacts), and ``sets`` (:data:`JointSets`, or None when no cut
-# names a joint).
-GeometryUpdate = namedtuple("GeometryUpdate", "shapes planes ctol touch_frac alg trim sets")
+# fraction, the common-plane algorithm, whether an update of every contact trims its slack and
+# whether the update may write over the old sub-contact rows (pdem.contact.detect
+# .refresh_contacts: not with zoned blocks, whose regrid reads them), and ``sets``
+# (:data:`JointSets`, or None when no cut names a joint).
+GeometryUpdate = namedtuple("GeometryUpdate",
+                            "shapes planes ctol touch_frac alg trim in_place sets")
 # the block faces' planes and cut tags, and each cut's joint row (pdem.contact.joint_sets)
 JointSets = namedtuple("JointSets", "face_start normals_local offsets_local face_tag cut_joint")
 
 
 @kernel
-def redetect(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo, in_place):
-    """The update of the contacts with ``todo[c] != 0`` up to its energy booking; returns
-    ``(keep, start, subs, before)``: which contacts stay, the new CSR start (a contact found
-    apart has no sub-contact), the new sub-contact columns (:data:`Subs`; with ``in_place``
-    the old ones, written over, when the layout allows) and the marked contacts' stored energy
-    before, in contact order (empty when there was no sub-contact: then :func:`book_update`
-    books the energy after, and no array is made at the start's first update, the set-up's
-    peak)."""
+def begin_update(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo):
+    """What an update of the contacts with ``todo[c] != 0`` does before their re-detection:
+    their relative motion zeroed and relative pose recorded; returns ``(before, new)``, their
+    stored energy before, in contact order (empty when there was no sub-contact: then
+    :func:`end_update` books the energy after, and no array is made at the start's first
+    update, the set-up's peak), and with joint sets the contacts never updated (found by a
+    search since), which may lie on a joint plane."""
     planes = up.planes
     nc = planes.ia.shape[0]
     for c in range(nc):
@@ -59,15 +61,22 @@ def redetect(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo, in_pla
     mark_fresh(x, q, R, planes.ia, planes.ib, rel_x, rel_q, todo)
     before = _marked_energies(pairs, subs, joints, todo) if pairs.sc_start[nc] > 0 \
         else np.empty(0)
-    new = _unseen(up.sets, planes.warm)
-    keep, start, pa, area, un, fs, us, dil, state, hist = refresh_contacts(
-        x, R, up.shapes, planes, pairs.sc_start, subs, todo, up.ctol, up.touch_frac, up.alg,
-        up.trim, in_place)
-    _set_joints(up.sets, new, keep, planes, x, R, up.ctol, pairs.joint)
-    for c in range(nc):
+    return before, _unseen(up.sets, planes.warm)
+
+
+@kernel
+def end_update(x, R, up, pairs, subs, joints, bodies, todo, keep, new, before, book):
+    """What an update does after the re-detection (:func:`.detect.refresh_contacts`, whose
+    ``keep`` and new CSR start and columns ``pairs``/``subs`` hold, found-apart contacts still
+    in their rows): a new contact kept on a joint plane takes the set's joint, the updated
+    contacts' held forces are void and, with ``book``, the change of their stored energy is
+    booked (:func:`book_update`; zoned blocks book theirs after the regrid)."""
+    _set_joints(up.sets, new, keep, up.planes, x, R, up.ctol, pairs.joint)
+    for c in range(todo.shape[0]):
         if todo[c] != 0:  # new sub-contacts: held forces are void
             pairs.frozen[c] = 0
-    return keep, start, Subs(pa, area, un, fs, us, dil, state, hist), before
+    if book:
+        book_update(bodies, pairs, subs, joints, todo, before)
 
 
 @kernel
@@ -118,7 +127,7 @@ def book_update(bodies, pairs, subs, joints, todo, before):
     """Book what the update changed in the marked contacts' stored energy on their blocks
     (``WORK_GEOMETRY``): no work is done, so the change is the geometry's. ``pairs``/``subs``
     after the update, found-apart contacts still in their rows (no sub-contact: zero energy);
-    ``before`` from :func:`redetect`. (An unmarked contact's change is 0, whose booking would
+    ``before`` from :func:`begin_update`. (An unmarked contact's change is 0, whose booking would
     add +0 to its blocks' sums and leave them as they are: they are not visited.)"""
     if before.shape[0] == 0:
         book_stored_energy(bodies, pairs, subs, joints, todo, WORK_GEOMETRY)
@@ -134,18 +143,6 @@ def book_update(bodies, pairs, subs, joints, todo, before):
         wa, wb = energy_shares(bodies, a, b)
         bodies.work[a, WORK_GEOMETRY] += wa * e
         bodies.work[b, WORK_GEOMETRY] += wb * e
-
-
-@kernel
-def update_marked(x, q, R, up, pairs, subs, joints, bodies, moved, rel_x, rel_q, todo):
-    """A rigid scene's update of the contacts with ``todo[c] != 0``, bookkeeping included;
-    returns ``(keep, pairs, subs)`` after it (``pairs`` with the new CSR start; found-apart
-    contacts still in their rows, to be dropped by the caller where ``keep`` is 0)."""
-    keep, start, subs, before = redetect(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q,
-                                         todo, True)
-    pairs = Pairs(pairs.ia, pairs.ib, pairs.joint, pairs.normal, start, pairs.held, pairs.frozen)
-    book_update(bodies, pairs, subs, joints, todo, before)
-    return keep, pairs, subs
 
 
 @kernel

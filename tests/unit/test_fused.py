@@ -102,7 +102,7 @@ def test_fused_runs_stop_at_the_events_they_must_not_skip(tmp_path):
 
 def test_compiled_run_does_the_periodic_contact_updates():
     """A compiled run does the periodic contact updates with work itself
-    (pdem.contact.update.update_marked) and carries on: the stepper's update runs only where a
+    (pdem.contact.update's three calls) and carries on: the stepper's update runs only where a
     compiled run stopped, and the state is bitwise that of the step-by-step run, whose stepper
     updates at every periodic step."""
     import pdem.stepper

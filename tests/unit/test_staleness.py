@@ -157,13 +157,13 @@ def _updates(scene: str, steps: int, monkeypatch) -> int:
     sim = Simulation(parse_scene(scene.replace("damping: none}", "damping: none, fused: false}")),
                      MPI.COMM_SELF, output=False)
     count = [0]
-    real = stepper.update_marked
+    real = stepper.refresh_contacts
 
     def counting(*args):
-        count[0] += int(np.count_nonzero(args[-1]))
+        count[0] += int(np.count_nonzero(args[6]))
         return real(*args)
 
-    monkeypatch.setattr(stepper, "update_marked", counting)
+    monkeypatch.setattr(stepper, "refresh_contacts", counting)
     sim.run(steps=steps)
     return count[0]
 
