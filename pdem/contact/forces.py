@@ -234,6 +234,15 @@ def contact_energies(pairs, subs, joints, which):
     return out
 
 
+@inline_kernel
+def book_on_blocks(bodies, a, b, e, column):
+    """Book a contact's energy ``e`` on its blocks a and b, ``work[:, column]``, by
+    :func:`pdem.contact.rigid.energy_shares`."""
+    wa, wb = energy_shares(bodies, a, b)
+    bodies.work[a, column] += wa * e
+    bodies.work[b, column] += wb * e
+
+
 @kernel
 def book_stored_energy(bodies, pairs, subs, joints, which, column):
     """``book_contact_energy(bodies, ia, ib, contact_energies(pairs, subs, joints, which),
@@ -241,11 +250,7 @@ def book_stored_energy(bodies, pairs, subs, joints, which, column):
     update books every contact's energy at the set-up's peak."""
     for c in range(pairs.ia.shape[0]):
         e = spring_energy(pairs, subs, joints, c) if which[c] != 0 else 0.0
-        a = pairs.ia[c]
-        b = pairs.ib[c]
-        wa, wb = energy_shares(bodies, a, b)
-        bodies.work[a, column] += wa * e
-        bodies.work[b, column] += wb * e
+        book_on_blocks(bodies, pairs.ia[c], pairs.ib[c], e, column)
 
 
 @kernel
@@ -254,8 +259,4 @@ def book_contact_energy(bodies, ia, ib, energy, column):
     (:func:`pdem.contact.rigid.energy_shares`): a geometry update's jump of the stored energy
     (``WORK_GEOMETRY``), or what contacts of blocks leaving the model held (``WORK_REMOVED``)."""
     for c in range(ia.shape[0]):
-        a = ia[c]
-        b = ib[c]
-        wa, wb = energy_shares(bodies, a, b)
-        bodies.work[a, column] += wa * energy[c]
-        bodies.work[b, column] += wb * energy[c]
+        book_on_blocks(bodies, ia[c], ib[c], energy[c], column)

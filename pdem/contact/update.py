@@ -28,9 +28,9 @@ from collections import namedtuple
 import numpy as np
 
 from ..jit import kernel
-from .forces import book_stored_energy, spring_energy
+from .forces import book_on_blocks, book_stored_energy, spring_energy
 from .joint_sets import set_joints
-from .rigid import WORK_GEOMETRY, energy_shares
+from .rigid import WORK_GEOMETRY
 from .staleness import mark_fresh
 
 # What an update reads besides the poses and the contacts: ``shapes``
@@ -138,11 +138,7 @@ def book_update(bodies, pairs, subs, joints, todo, before):
             continue
         e = spring_energy(pairs, subs, joints, c) - before[k]
         k += 1
-        a = pairs.ia[c]
-        b = pairs.ib[c]
-        wa, wb = energy_shares(bodies, a, b)
-        bodies.work[a, WORK_GEOMETRY] += wa * e
-        bodies.work[b, WORK_GEOMETRY] += wb * e
+        book_on_blocks(bodies, pairs.ia[c], pairs.ib[c], e, WORK_GEOMETRY)
 
 
 @kernel
