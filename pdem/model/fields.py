@@ -16,6 +16,7 @@ one line here.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,8 +37,9 @@ class Field:
 
     @property
     def width(self) -> int:
-        """Number of scalars per row."""
-        return int(np.prod(self.shape, dtype=np.int64))
+        """Number of scalars per row (read every step by the halo: math.prod, not np.prod's
+        ~5 us)."""
+        return math.prod(self.shape)
 
 
 F, F32, I64, I32, I8, U8 = np.float64, np.float32, np.int64, np.int32, np.int8, np.uint8

@@ -36,12 +36,12 @@ def copy_rows(columns, rows, buf, pack):
         col += w
 
 
-def _columns(arrays: dict[str, np.ndarray], fields) -> tuple | None:
-    """The fields' arrays as 2-D float64 views (one numba type for the compiled copy), or None
-    when one is not float64 (``still`` with solve.inactive: numpy copies it)."""
+def _columns(blocks, fields) -> tuple | None:
+    """The fields' arrays of ``blocks`` as 2-D float64 views (one numba type for the compiled
+    copy), or None when one is not float64 (``still`` with solve.inactive: numpy copies it)."""
     out = []
     for f in fields:
-        a = arrays[f.name]
+        a = getattr(blocks, f.name)
         if a.dtype != np.float64 or not a.flags.c_contiguous:
             return None
         out.append(a.reshape(a.shape[0], f.width))
@@ -76,10 +76,11 @@ class Halo:
         """Copy owners' state into the ghost rows (collective among neighbours)."""
         if not self.send and not self.recv:
             return
-        arrays = {f.name: getattr(blocks, f.name) for f in self.fields}
         # compiled copies: numpy's fancy indexing per field cost ~0.25 ms a step for ~1000
         # ghosts, 3 % of a 2-rank step of the 22^3 stack (bench/scaling.py)
-        columns = _columns(arrays, self.fields)
+        columns = _columns(blocks, self.fields)
+        arrays = None if columns is not None else {f.name: getattr(blocks, f.name)
+                                                   for f in self.fields}
         reqs = [self.comm.Irecv(buf, source=r, tag=11) for r, buf in self.rbuf.items()]
         for r, rows in self.send.items():
             if columns is None:
