@@ -23,7 +23,10 @@ write them) are accepted: repeated ids are merged and faces that collapse to an 
 Higher-order cells (``tetra10``, ``hexahedron20``, ...) are refused: dropping their mid-side
 nodes would silently straighten curved edges, so the user is asked for a linear mesh.
 
-This runs once at model build; it is plain per-cell numpy/Python.
+This runs once at model build. A cell of a fixed type with distinct nodes is checked by one
+compiled call (:mod:`pdem.geometry.cell_planes`, the same normals and offsets); any other
+cell, and any cell that call finds wrong, by the per-cell numpy code here, which words the
+error.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pdem.geometry.cell_planes import cell_planes, template
 from pdem.geometry.errors import GeometryError
 from pdem.geometry.polyhedron import ConvexPolyhedron, _face_area_vectors
 
@@ -81,6 +85,10 @@ CELL_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
     "wedge": WEDGE_FACES,
     "pyramid": PYRAMID_FACES,
 }
+
+# the same faces as CSR arrays, for the compiled check (pdem.geometry.cell_planes)
+CELL_TEMPLATES: dict[str, tuple[np.ndarray, np.ndarray]] = {
+    kind: template(faces) for kind, faces in CELL_FACES.items()}
 
 # A cell is selected by a callable ``select(index, kind, data) -> bool`` or by a mapping
 # ``{cell data name: value or collection of values}`` (every named array must match).
@@ -215,7 +223,11 @@ def cell_polyhedron(
     if bad.size:
         raise GeometryError(f"degenerate: face {bad[0]} has zero area (collapsed or self-crossing)")
     n = area_vec / area2[:, None]
-    d = np.bincount(face_of, np.einsum("ij,ij->i", v[fv], n[face_of])) / counts
+    # n . x at each face node, summed in a fixed order (einsum's order follows the CPU's
+    # vector width), as pdem.geometry.cell_planes sums it
+    p, q = v[fv], n[face_of]
+    dots = (p[:, 0] * q[:, 0] + p[:, 1] * q[:, 1]) + p[:, 2] * q[:, 2]
+    d = np.bincount(face_of, dots) / counts
     # The mean of the nodes is inside a convex cell: it decides which side of a face is out.
     h = n @ v.mean(axis=0) - d
     flat = np.flatnonzero(np.abs(h) <= tol)
@@ -225,7 +237,7 @@ def cell_polyhedron(
             f"degenerate: all nodes lie within {tol:.3g} m of the plane of face {flat[0]}, "
             f"zero volume"
         )
-    off = np.abs(np.einsum("ij,ij->i", v[fv], n[face_of]) - d[face_of])
+    off = np.abs(dots - d[face_of])
     warp = np.maximum.reduceat(off, face_start[:-1])
     bad = np.flatnonzero(warp > tol)
     if bad.size:
@@ -255,6 +267,30 @@ def cell_polyhedron(
     except GeometryError as exc:
         raise GeometryError(f"faces do not form a closed surface ({exc})") from None
     return poly
+
+
+def fixed_cell_polyhedron(points: np.ndarray, node_ids: np.ndarray, kind: str,
+                          rel_tol: float = REL_TOL, coord_eps: float = 0.0
+                          ) -> ConvexPolyhedron | None:
+    """:func:`cell_polyhedron` of a cell of a fixed type (``kind`` in :data:`CELL_FACES`) by
+    one compiled check (pdem.geometry.cell_planes): the same polyhedron, its arrays in one
+    buffer. None for any other cell, a collapsed one, or one a check refuses:
+    :func:`cell_polyhedron` then checks it and raises its own message.
+
+    ``points``: all mesh points, float64 (n, 3); ``node_ids``: the cell's point ids, int64,
+    in range."""
+    faces = CELL_TEMPLATES.get(kind)
+    if faces is None or len(node_ids) != faces[1].max() + 1:
+        return None
+    fs, fv = faces
+    ok, v, n, d, oriented = cell_planes(points, node_ids, fs, fv, float(rel_tol),
+                                        float(coord_eps))
+    if not ok:
+        return None
+    try:
+        return ConvexPolyhedron.from_csr(v, fs, oriented, normals=n, offsets=d, fresh=True)
+    except GeometryError:  # the faces do not close: worded by cell_polyhedron
+        return None
 
 
 # ---------------------------------------------------------------------------- cell data
@@ -477,10 +513,11 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
 
     def polyhedra(lo: int, hi: int) -> list[ConvexPolyhedron]:
         out = []
-        for _, _, _, where, node_ids, cell_faces in jobs[lo:hi]:
+        for _, kind, _, where, node_ids, cell_faces in jobs[lo:hi]:
             try:
-                out.append(cell_polyhedron(points, node_ids, cell_faces, rel_tol=rel_tol,
-                                           coord_eps=coord_eps))
+                poly = fixed_cell_polyhedron(points, node_ids, kind, rel_tol, coord_eps)
+                out.append(poly if poly is not None else cell_polyhedron(
+                    points, node_ids, cell_faces, rel_tol=rel_tol, coord_eps=coord_eps))
             except GeometryError as exc:
                 raise GeometryError(f"{where}: {exc}") from None
         return out
