@@ -60,7 +60,9 @@ def _is_rotation(R: np.ndarray, tol: float = 1e-9) -> bool:
     err = np.abs(R @ R.T - _EYE)
     if not (err <= tol + 1e-5 * _EYE).all():  # (NaN fails too)
         return False
-    return float(R[0] @ cross(R[1], R[2])) > 0.0
+    a, b, c = R.tolist()
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) \
+        + a[2] * (b[0] * c[1] - b[1] * c[0]) > 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -468,3 +468,26 @@ def test_cross_is_numpys_bit_for_bit():
                  (np.eye(3)[1], a), (np.array([1, 2, 3]), np.array([4, -5, 6]))):
         assert np.array_equal(cross(x, y), np.cross(x, y))
         assert cross(x, y).shape == np.cross(x, y).shape
+
+
+def test_rotation_check_is_allclose_and_a_positive_determinant():
+    """pdem.geometry.polyhedron._is_rotation by hand gives np.allclose's and det's answer:
+    rotations, reflections, near-rotations either side of the tolerance, any matrix, NaN."""
+    from pdem.geometry.polyhedron import _is_rotation
+
+    def reference(R, tol=1e-9):
+        return bool(np.allclose(R @ R.T, np.eye(3), atol=tol) and np.linalg.det(R) > 0.0)
+
+    rng = np.random.default_rng(3)
+    kinds = [lambda Q: Q, lambda Q: -Q, lambda Q: rng.standard_normal((3, 3)),
+             lambda Q: Q + rng.standard_normal((3, 3)) * 10.0 ** rng.uniform(-12, -3),
+             lambda Q: np.diag([1.0 + rng.uniform(-2e-5, 2e-5), 1.0, 1.0])]
+    seen = set()
+    for i in range(2000):
+        Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+        R = kinds[i % len(kinds)](Q)
+        if i == 7:
+            R[0, 0] = np.nan
+        assert _is_rotation(R) == reference(R), R
+        seen.add(reference(R))
+    assert seen == {True, False}
