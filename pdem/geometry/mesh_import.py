@@ -449,6 +449,127 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
     ``index``. For VTU files with polyhedra meshio groups the cells by node count, so
     ``index`` follows that grouping rather than the file order when node counts differ.
     """
+    table = read_cell_table(path, select=select, rel_tol=rel_tol)
+    polys = (share_work or (lambda w, work: work(0, len(w))))(np.ones(len(table)),
+                                                               table.polyhedra)
+    return [MeshCell(index=int(table.index[k]), kind=table.kind(k), poly=poly,
+                     data=table.data_of(k)) for k, poly in enumerate(polys)]
+
+
+@dataclass
+class CellTable:
+    """The selected 3D cells of a read mesh as columns, one row per cell in mesh order: what
+    every rank holds of every cell while the blocks are made (pdem.model.mesh_blocks), no
+    Python object a cell (a cell's data dict, name string and node array were ~15 us and a
+    few hundred bytes a cell on every rank). ``block[k]``/``row[k]``: selected cell k is row
+    ``row[k]`` of meshio's cell block ``blocks[block[k]]``; ``index[k]`` its mesh cell
+    index; ``data``: the scalar cell data, whole arrays per entry of ``blocks``."""
+
+    path: Path
+    cells: list  # meshio's cell blocks
+    blocks: list[int]
+    data: dict[str, list[np.ndarray]]
+    block: np.ndarray
+    row: np.ndarray
+    index: np.ndarray
+    points: np.ndarray
+    coord_eps: float
+    rel_tol: float
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def kind(self, k: int) -> str:
+        return self.cells[self.blocks[self.block[k]]].type
+
+    def value(self, name: str, k: int):
+        """Cell k's value of the scalar cell data ``name`` (a plain Python value)."""
+        return _python_value(self.data[name][self.block[k]][self.row[k]])
+
+    def data_of(self, k: int) -> dict:
+        return {name: self.value(name, k) for name in self.data}
+
+    def where(self, k: int) -> str:
+        return f"mesh {self.path}: cell {self.index[k]} ({self.kind(k)})"
+
+    def codes(self, name: str, label: Callable) -> tuple[np.ndarray, list[str]]:
+        """``(code, labels)``: ``labels[code[k]]`` is ``label(value)`` of cell k's ``name``
+        (equal labels one code, whatever the arrays' dtypes), labels in order of first
+        appearance by block; label is called once per distinct value of a block."""
+        code = np.empty(len(self), np.int64)
+        labels: dict[str, int] = {}
+        for b, (lo, hi) in self._block_ranges():
+            u, inv = np.unique(self.data[name][b][self.row[lo:hi]], return_inverse=True)
+            ids = np.array([labels.setdefault(label(_python_value(x)), len(labels))
+                            for x in u], np.int64)
+            code[lo:hi] = ids[inv.reshape(-1)]
+        return code, list(labels)
+
+    def _block_ranges(self):
+        """``(b, (lo, hi))``: the selected cells of each entry ``b`` of ``blocks`` with any
+        (they are in block order)."""
+        edges = np.searchsorted(self.block, np.arange(len(self.blocks) + 1))
+        for b in range(len(self.blocks)):
+            if edges[b] < edges[b + 1]:
+                yield b, (int(edges[b]), int(edges[b + 1]))
+
+    def nodes(self, k: int) -> tuple[np.ndarray, object]:
+        """Cell k's point ids and its faces (positions in those ids)."""
+        kind = self.kind(k)
+        data = self.cells[self.blocks[self.block[k]]].data[self.row[k]]
+        if not kind.startswith("polyhedron"):
+            return np.asarray(data, dtype=np.int64), CELL_FACES[kind]
+        # meshio gives a polyhedron as a list of faces of global point ids.
+        cell_faces = [np.asarray(f, dtype=np.int64) for f in data]
+        node_ids = np.concatenate(cell_faces) if cell_faces else np.empty(0, np.int64)
+        local = {}
+        for p in node_ids.tolist():
+            local.setdefault(p, len(local))
+        node_ids = np.array(list(local), dtype=np.int64)
+        return node_ids, [[local[p] for p in f.tolist()] for f in cell_faces]
+
+    def polyhedra(self, lo: int, hi: int) -> list[ConvexPolyhedron]:
+        """The polyhedra of the selected cells ``[lo, hi)`` (the work: ~30 us a cell of a
+        fixed type, ~0.2 ms another), in order; a bad cell raises, named."""
+        out = []
+        for k in range(lo, hi):
+            node_ids, faces = self.nodes(k)
+            try:
+                poly = fixed_cell_polyhedron(self.points, node_ids, self.kind(k),
+                                             self.rel_tol, self.coord_eps)
+                out.append(poly if poly is not None else cell_polyhedron(
+                    self.points, node_ids, faces, rel_tol=self.rel_tol,
+                    coord_eps=self.coord_eps))
+            except GeometryError as exc:
+                raise GeometryError(f"{self.where(k)}: {exc}") from None
+        return out
+
+
+def _selected_rows(select, keep, data_arrays, b: int, kind: str, first: int, n: int
+                   ) -> np.ndarray:
+    """The rows of meshio cell block entry ``b`` (``n`` cells of ``kind``, the first with
+    mesh index ``first``) that ``select`` keeps. A mapping is decided once per distinct
+    value of each named array (the same test as a cell's, by the same ``_matches``)."""
+    if select is None:
+        return np.arange(n)
+    if not isinstance(select, Mapping):  # a callable: asked per cell, with its data
+        return np.array([i for i in range(n) if keep(
+            first + i, kind, {name: _python_value(arrs[b][i])
+                              for name, arrs in data_arrays.items()})], np.int64)
+    mask = np.ones(n, bool)
+    for name, wanted in select.items():
+        u, inv = np.unique(data_arrays[name][b], return_inverse=True)
+        ok = np.array([_matches(_python_value(x), wanted) for x in u], bool)
+        mask &= ok[inv.reshape(-1)]
+    return np.flatnonzero(mask)
+
+
+def read_cell_table(path, *, select: Select | None = None, rel_tol: float = REL_TOL
+                    ) -> CellTable:
+    """:func:`read_mesh_cells`' reading and checks, its cells as a :class:`CellTable`
+    (their polyhedra not made yet: ``CellTable.polyhedra``). The same errors, in the same
+    order: the first selected cell of an unsupported type or with a node id out of range,
+    in mesh order."""
     path = Path(path)
     rel_tol = float(rel_tol)
     if not (np.isfinite(rel_tol) and rel_tol >= 0.0):
@@ -471,57 +592,41 @@ def read_mesh_cells(path, *, select: Select | None = None, rel_tol: float = REL_
     keep = _selector(select, list(data_arrays))
     first_index = np.concatenate([[0], np.cumsum([len(c) for c in mesh.cells])])
 
-    # the selected cells' nodes and faces, in mesh order; their polyhedra (the work: ~1 ms a
-    # cell) are made after, in shares when ``share_work`` splits them
-    jobs: list[tuple] = []
+    parts = []
     for k, b in enumerate(blocks):
         block = mesh.cells[b]
         kind = block.type
+        rows = _selected_rows(select, keep, data_arrays, k, kind, int(first_index[b]),
+                              len(block))
+        if len(rows) == 0:
+            continue
+        at = f"mesh {path}: cell {int(first_index[b] + rows[0])} ({kind})"
         is_poly = kind.startswith("polyhedron")
-        faces = CELL_FACES.get(kind)
-        for i in range(len(block)):
-            index = int(first_index[b] + i)
-            data = {name: _python_value(arrs[k][i]) for name, arrs in data_arrays.items()}
-            if not keep(index, kind, data):
-                continue
-            where = f"mesh {path}: cell {index} ({kind})"
-            if is_poly:
-                # meshio gives a polyhedron as a list of faces of global point ids.
-                cell_faces = [np.asarray(f, dtype=np.int64) for f in block.data[i]]
-                node_ids = np.concatenate(cell_faces) if cell_faces else np.empty(0, np.int64)
-                local = {}
-                for p in node_ids.tolist():
-                    local.setdefault(p, len(local))
-                node_ids = np.array(list(local), dtype=np.int64)
-                cell_faces = [[local[p] for p in f.tolist()] for f in cell_faces]
-            elif faces is None:
-                if kind.rstrip("0123456789") in CELL_FACES:
-                    raise GeometryError(
-                        f"{where}: higher-order cells are not supported (their mid-side nodes "
-                        f"may curve the edges); export a linear mesh, e.g. gmsh -order 1"
-                    )
+        if not is_poly and kind not in CELL_FACES:
+            if kind.rstrip("0123456789") in CELL_FACES:
                 raise GeometryError(
-                    f"{where}: 3D cell type not supported (supported: "
-                    f"{', '.join(CELL_FACES)}, polyhedron)"
+                    f"{at}: higher-order cells are not supported (their mid-side nodes "
+                    f"may curve the edges); export a linear mesh, e.g. gmsh -order 1"
                 )
-            else:
-                node_ids = np.asarray(block.data[i], dtype=np.int64)
-                cell_faces = faces
-            if node_ids.size and (node_ids.min() < 0 or node_ids.max() >= len(points)):
-                raise GeometryError(f"{where}: node id out of range (mesh has {len(points)} points)")
-            jobs.append((index, kind, data, where, node_ids, cell_faces))
-
-    def polyhedra(lo: int, hi: int) -> list[ConvexPolyhedron]:
-        out = []
-        for _, kind, _, where, node_ids, cell_faces in jobs[lo:hi]:
-            try:
-                poly = fixed_cell_polyhedron(points, node_ids, kind, rel_tol, coord_eps)
-                out.append(poly if poly is not None else cell_polyhedron(
-                    points, node_ids, cell_faces, rel_tol=rel_tol, coord_eps=coord_eps))
-            except GeometryError as exc:
-                raise GeometryError(f"{where}: {exc}") from None
-        return out
-
-    polys = (share_work or (lambda w, work: work(0, len(w))))(np.ones(len(jobs)), polyhedra)
-    return [MeshCell(index=index, kind=kind, poly=poly, data=data)
-            for (index, kind, data, _, _, _), poly in zip(jobs, polys, strict=True)]
+            raise GeometryError(
+                f"{at}: 3D cell type not supported (supported: "
+                f"{', '.join(CELL_FACES)}, polyhedron)"
+            )
+        if is_poly:  # ragged: cell by cell
+            bad = [i for i in rows.tolist()
+                   if (ids := np.concatenate([np.asarray(f, np.int64) for f in block.data[i]])
+                       if len(block.data[i]) else np.empty(0, np.int64)).size
+                   and (ids.min() < 0 or ids.max() >= len(points))]
+        else:
+            ids = np.asarray(block.data)[rows]
+            bad = rows[(ids.min(axis=1) < 0) | (ids.max(axis=1) >= len(points))].tolist()
+        if bad:
+            raise GeometryError(f"mesh {path}: cell {int(first_index[b] + bad[0])} ({kind}): "
+                                f"node id out of range (mesh has {len(points)} points)")
+        parts.append((k, rows, first_index[b] + rows))
+    cat = (lambda j, dtype: np.concatenate([p[j] for p in parts]).astype(dtype)) if parts \
+        else (lambda j, dtype: np.zeros(0, dtype))
+    block_of = np.concatenate([np.full(len(p[1]), p[0], np.int64) for p in parts]) if parts \
+        else np.zeros(0, np.int64)
+    return CellTable(path, mesh.cells, blocks, data_arrays, block_of, cat(1, np.int64),
+                     cat(2, np.int64), points, coord_eps, rel_tol)

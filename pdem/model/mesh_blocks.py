@@ -7,9 +7,11 @@ BlockSpecs with their names, groups and materials.
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..config import ConfigError
 from ..geometry import GeometryError
-from ..geometry.mesh_import import read_mesh_cells
+from ..geometry.mesh_import import read_cell_table
 from ..parallel.mpi import LOCAL, allgather, run_together, weighted_share
 from .rockmass import components
 
@@ -21,11 +23,9 @@ def _label(value) -> str:
     return str(value)
 
 
-def _value(scene, where, cell, key):
-    if key not in cell.data:
-        raise ConfigError([f"{where}: the mesh has no scalar cell data {key!r} (it has: "
-                           f"{', '.join(sorted(cell.data)) or 'none'})"])
-    return _label(cell.data[key])
+def _missing(where, table, key) -> ConfigError:
+    return ConfigError([f"{where}: the mesh has no scalar cell data {key!r} (it has: "
+                        f"{', '.join(sorted(table.data)) or 'none'})"])
 
 
 def mesh_blocks(scene, entry: int, block, comm=None) -> list:
@@ -34,7 +34,8 @@ def mesh_blocks(scene, entry: int, block, comm=None) -> list:
     share of the cells and the blocks whose first cell is in it, asking the other ranks for
     the cells joined to them that it lacks. In rank order the ranks' blocks are the list one
     process makes (``comm`` None: this process makes them all); an error is raised on every
-    rank, the same messages in the same order."""
+    rank, the same messages in the same order. Every rank reads the file; what it keeps of
+    every cell is columns (pdem.geometry.mesh_import.CellTable), no object a cell."""
     from .build import BlockSpec
     from .spread import Spread
 
@@ -44,53 +45,59 @@ def mesh_blocks(scene, entry: int, block, comm=None) -> list:
     select = None
     if m.select:
         select = {k: (v if isinstance(v, list) else [v]) for k, v in m.select.items()}
-    share = [0, 0]
-
-    def own_share(weights, work):
-        """The polyhedra of this rank's share of the cells, None for the others' cells."""
-        lo, hi = share[:] = weighted_share(comm.rank, comm.size, weights)
-        mine = run_together(comm, lambda: work(lo, hi))
-        return [None] * lo + list(mine) + [None] * (len(weights) - hi)
-
     try:
-        # (every rank reads the same file alike; a bad cell in a share is raised on every
-        # rank by own_share)
-        cells = read_mesh_cells(m.file, select=select, share_work=own_share)
+        # (every rank reads the same file alike)
+        table = read_cell_table(m.file, select=select)
     except GeometryError as exc:
         raise ConfigError([f"{where}: {exc}"]) from None
-    if not cells:
+    if not len(table):
         raise ConfigError([f"{where}: no cell of {m.file} is selected"])
-    groups: dict[str, list] = {}
-    for k, cell in enumerate(cells):
-        key = _value(scene, where, cell, m.cell_data_group) if m.cell_data_group else str(k)
-        groups.setdefault(key, []).append(k)
-    # the cells' polyhedra spread as the shares made them; this rank's groups (their first
-    # cell in its share) fetch the others
-    lo, hi = share
-    polys = Spread(comm, [c.poly for c in cells[lo:hi]])
-    mine = {key: members for key, members in groups.items() if lo <= members[0] < hi}
-    fetched = polys.fetch([k for members in mine.values() for k in members
-                           if not lo <= k < hi])
+    for key in (m.cell_data_group, m.group_data, m.material_data):
+        if key and key not in table.data:
+            raise _missing(where, table, key)
+    lo, hi = weighted_share(comm.rank, comm.size, np.ones(len(table)))
+
+    def make_polyhedra():
+        try:
+            return table.polyhedra(lo, hi)
+        except GeometryError as exc:
+            raise ConfigError([f"{where}: {exc}"]) from None
+
+    # (a bad cell in a share is raised on every rank)
+    polys = Spread(comm, run_together(comm, make_polyhedra))
+    # the joined blocks: cells of one label of cell_data_group (else each cell alone), a
+    # block's cells in mesh order, the blocks by their first cell
+    if m.cell_data_group:
+        code, keys = table.codes(m.cell_data_group, _label)
+        order = np.argsort(code, kind="stable")
+        cuts = np.flatnonzero(np.diff(code[order])) + 1
+        groups = sorted(np.split(order, cuts), key=lambda members: members[0])
+        mine = [(keys[code[g[0]]], g.tolist()) for g in groups if lo <= g[0] < hi]
+    else:
+        mine = [(str(k), [k]) for k in range(lo, hi)]
+    fetched = polys.fetch([k for _, members in mine for k in members if not lo <= k < hi])
+
+    def label(key, k):
+        return _label(table.value(key, k))
 
     def make():
         out, errors = [], []
-        for key, members in mine.items():
-            first = cells[members[0]]
-            group = _value(scene, where, first, m.group_data) if m.group_data else None
-            material = _value(scene, where, first, m.material_data) if m.material_data \
-                else None
+        for key, members in mine:
+            first = members[0]
+            index = int(table.index[first])
+            group = label(m.group_data, first) if m.group_data else None
+            material = label(m.material_data, first) if m.material_data else None
             if material is not None and material not in scene.materials:
-                errors.append(f"{where}: cell {first.index} has {m.material_data} = "
+                errors.append(f"{where}: cell {index} has {m.material_data} = "
                               f"{material!r}, not a material (defined: "
                               f"{', '.join(sorted(scene.materials))})")
             for k in members[1:]:
-                cell = cells[k]
                 for data, value in ((m.group_data, group), (m.material_data, material)):
-                    if data and _value(scene, where, cell, data) != value:
-                        errors.append(f"{where}: cells {first.index} and {cell.index} join "
-                                      f"into block {block.name}[{key}] but differ in "
+                    if data and label(data, k) != value:
+                        errors.append(f"{where}: cells {index} and {int(table.index[k])} "
+                                      f"join into block {block.name}[{key}] but differ in "
                                       f"{data!r}")
-            pieces = [cells[k].poly if lo <= k < hi else fetched[k] for k in members]
+            pieces = [polys.local[k - lo] if lo <= k < hi else fetched[k] for k in members]
             if len(components(pieces)) > 1:
                 errors.append(f"{where}: the cells with {m.cell_data_group} = {key} do not "
                               "all touch face to face (a joined block must be one connected "

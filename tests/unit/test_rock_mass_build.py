@@ -339,3 +339,58 @@ excavate:
     assert "cut 'J1': 1 joint faces" in err and "joint J1joint" in err
     assert "excavation at t = 0.5 s: 1 blocks, 0.125 m3" in err
     assert "smallest / median" in err
+
+
+def _row_of_hexes(tmp_path, n: int, gap_after: int | None = None, **cell_data):
+    """n unit hexahedra in a row along x (a gap of 1 m after cell ``gap_after``), as
+    ``row.vtu`` with the given cell data (one array per name, one value a cell)."""
+    xs = [float(i + (1 if gap_after is not None and i > gap_after else 0)) for i in range(n)]
+    pts, cells = [], []
+    for x in xs:
+        base = len(pts)
+        pts += [[x + a, b, c] for c in (0.0, 1.0) for b, a in ((0, 0), (0, 1), (1, 1), (1, 0))]
+        cells.append([base + k for k in range(8)])
+    meshio.write(tmp_path / "row.vtu", meshio.Mesh(
+        np.array(pts), [("hexahedron", np.array(cells))],
+        cell_data={k: [np.asarray(v)] for k, v in cell_data.items()}))
+
+
+def _mesh_scene(tmp_path, options: str):
+    return parse_scene(HEAD + f"""
+blocks: [{{name: m, mesh: {{file: row.vtu, {options}}}, material: rock}}]
+""", "scene.yaml", tmp_path)
+
+
+def test_mesh_cells_join_by_label_in_order_of_their_first_cell(tmp_path):
+    # labels 5, 5, 3, 3, 9: the blocks come in the order of their first cell (5 before 3),
+    # each one's cells in mesh order; select drops the cell labelled 9
+    _row_of_hexes(tmp_path, 5, pair=[5, 5, 3, 3, 9], zone=[1, 1, 1, 1, 2],
+                  kind=[2.0, 2.0, 1.0, 1.0, 1.0])
+    specs = expand_blocks(_mesh_scene(tmp_path, "cell_data_group: pair, group_data: kind, "
+                                                "select: {zone: 1}"))
+    assert [s.name for s in specs] == ["m[5]", "m[3]"]
+    assert [s.group for s in specs] == ["2", "1"]  # integral floats without the .0
+    assert [[round(float(p.centroid[0]), 6) for p in s.pieces] for s in specs] == \
+        [[0.5, 1.5], [2.5, 3.5]]
+
+
+@pytest.mark.parametrize("options, data, words", [
+    ("cell_data_group: nosuch", {"pair": [1, 1]},
+     ["blocks[0].mesh", "no scalar cell data 'nosuch' (it has: pair)"]),
+    ("material_data: mat", {"mat": [7, 7]}, ["cell 0 has mat = '7', not a material"]),
+    ("cell_data_group: pair, group_data: g", {"pair": [1, 1], "g": [1, 2]},
+     ["cells 0 and 1 join into block m[1] but differ in 'g'"]),
+    ("select: {zone: 3}", {"zone": [1, 2]}, ["no cell of", "is selected"]),
+])
+def test_bad_mesh_data_is_refused_naming_the_cells(tmp_path, options, data, words):
+    _row_of_hexes(tmp_path, 2, **data)
+    with pytest.raises(ConfigError) as err:
+        expand_blocks(_mesh_scene(tmp_path, options))
+    for w in words:
+        assert w in str(err.value), str(err.value)
+
+
+def test_mesh_cells_joined_but_apart_are_refused(tmp_path):
+    _row_of_hexes(tmp_path, 3, gap_after=0, pair=[1, 1, 2])
+    with pytest.raises(ConfigError, match=r"cells with pair = 1 do not all touch face to face"):
+        expand_blocks(_mesh_scene(tmp_path, "cell_data_group: pair"))
