@@ -564,18 +564,27 @@ def _selected_rows(select, keep, data_arrays, b: int, kind: str, first: int, n: 
     return np.flatnonzero(mask)
 
 
-def read_cell_table(path, *, select: Select | None = None, rel_tol: float = REL_TOL
-                    ) -> CellTable:
+def read_mesh(path):
+    """The meshio mesh of ``path`` (pdem's reading: meshio's failures and quirks handled,
+    :func:`_read`)."""
+    path = Path(path)
+    mesh = _read(path)
+    _fix_vtu_polyhedron_data(mesh, path)
+    return mesh
+
+
+def read_cell_table(path, *, select: Select | None = None, rel_tol: float = REL_TOL,
+                    read: Callable | None = None) -> CellTable:
     """:func:`read_mesh_cells`' reading and checks, its cells as a :class:`CellTable`
     (their polyhedra not made yet: ``CellTable.polyhedra``). The same errors, in the same
     order: the first selected cell of an unsupported type or with a node id out of range,
-    in mesh order."""
+    in mesh order. ``read(path)`` gives the mesh (default :func:`read_mesh`; under MPI, one
+    rank's reading sent to all, pdem.model.mesh_blocks)."""
     path = Path(path)
     rel_tol = float(rel_tol)
     if not (np.isfinite(rel_tol) and rel_tol >= 0.0):
         raise GeometryError(f"rel_tol must be a finite non-negative number, got {rel_tol}")
-    mesh = _read(path)
-    _fix_vtu_polyhedron_data(mesh, path)
+    mesh = (read or read_mesh)(path)
 
     # meshio's CellBlock knows its topological dimension (3 for polyhedra too)
     blocks = [b for b, c in enumerate(mesh.cells) if getattr(c, "dim", 0) == 3]

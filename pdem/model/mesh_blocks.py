@@ -11,8 +11,8 @@ import numpy as np
 
 from ..config import ConfigError
 from ..geometry import GeometryError
-from ..geometry.mesh_import import read_cell_table
-from ..parallel.mpi import LOCAL, allgather, run_together, weighted_share
+from ..geometry.mesh_import import read_cell_table, read_mesh
+from ..parallel.mpi import LOCAL, allgather, on_root, run_together, weighted_share
 from .rockmass import components
 
 
@@ -34,8 +34,9 @@ def mesh_blocks(scene, entry: int, block, comm=None) -> list:
     share of the cells and the blocks whose first cell is in it, asking the other ranks for
     the cells joined to them that it lacks. In rank order the ranks' blocks are the list one
     process makes (``comm`` None: this process makes them all); an error is raised on every
-    rank, the same messages in the same order. Every rank reads the file; what it keeps of
-    every cell is columns (pdem.geometry.mesh_import.CellTable), no object a cell."""
+    rank, the same messages in the same order. One rank reads the file and sends the mesh to
+    the others; what a rank keeps of every cell is columns
+    (pdem.geometry.mesh_import.CellTable), no object a cell."""
     from .build import BlockSpec
     from .spread import Spread
 
@@ -46,8 +47,9 @@ def mesh_blocks(scene, entry: int, block, comm=None) -> list:
     if m.select:
         select = {k: (v if isinstance(v, list) else [v]) for k, v in m.select.items()}
     try:
-        # (every rank reads the same file alike)
-        table = read_cell_table(m.file, select=select)
+        # one rank reads the file, every rank gets the mesh (a refusal raised on every rank)
+        table = read_cell_table(m.file, select=select,
+                                read=lambda path: on_root(comm, lambda: read_mesh(path)))
     except GeometryError as exc:
         raise ConfigError([f"{where}: {exc}"]) from None
     if not len(table):

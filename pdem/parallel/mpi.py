@@ -320,6 +320,24 @@ def run_together(comm, work):
     return result
 
 
+def on_root(comm, work, root: int = 0):
+    """``work()`` on ``root`` alone, its result sent to every rank; if it raised there, the
+    same exception is raised on every rank (collective). For a file every rank needs whole:
+    one rank reads it, not every rank of a cluster job at once from the shared file system
+    (a scene's mesh, pdem.model.mesh_blocks)."""
+    failure = sent = None
+    if comm.rank == root:
+        try:
+            sent = ("done", work())
+        except Exception as exc:  # noqa: BLE001 - every rank must hear of it
+            failure, sent = exc, _as_sent(exc)
+    sent = broadcast(comm, sent, root)
+    if sent[0] == "done":
+        return sent[1]
+    _raise_first(comm, [sent if r == root else None for r in range(comm.size)], failure)
+    raise AssertionError("unreachable")  # (_raise_first raised)
+
+
 def allgather_rows(comm, values: np.ndarray) -> np.ndarray:
     """Every rank's rows of ``values`` concatenated in rank order (the same dtype and row
     shape on every rank; a rank may have none): one Allgatherv of the raw bytes, not a pickle

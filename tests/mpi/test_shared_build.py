@@ -123,3 +123,35 @@ def test_a_meshs_cells_are_shared_and_a_bad_cell_named_on_every_rank(tmp_path):
         expand_blocks(bad, 10**6, None, comm)
     assert "cell 200 (hexahedron)" in str(err.value)
     comm.Barrier()
+
+
+def test_one_rank_reads_the_mesh_file_and_a_bad_file_is_refused_on_every_rank(tmp_path,
+                                                                              monkeypatch):
+    """Under MPI one rank reads a scene's mesh file (pdem.parallel.mpi.on_root), not every
+    rank at once from a cluster's shared file system; the blocks are those of one process. A
+    file that is not a mesh is the same one-line scene error on every rank."""
+    from pdem.geometry import mesh_import
+
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    if comm.rank == 0:
+        hex_mesh(f"{base}/good.vtu", 4)
+        with open(f"{base}/junk.vtu", "w") as f:
+            f.write("not a mesh\n")
+    comm.Barrier()
+    reads = []
+    real = mesh_import._read
+    monkeypatch.setattr(mesh_import, "_read", lambda path: reads.append(path) or real(path))
+    scene = parse_scene(MESHED.format(path=f"{base}/good.vtu"))
+    shared = expand_blocks(scene, 10**6, None, comm)
+    assert comm.allgather(len(reads)) == [1] + [0] * (comm.size - 1)
+    digests = comm.allgather(build_digest(shared))
+    alone = comm.bcast(build_digest(expand_blocks(scene, 10**6)) if comm.rank == 0 else None)
+    assert len(set(digests)) == 1 and digests[0] == alone
+    junk = parse_scene(MESHED.format(path=f"{base}/junk.vtu"))
+    with pytest.raises(ConfigError) as err:
+        expand_blocks(junk, 10**6, None, comm)
+    text = str(err.value)
+    assert "cannot read mesh" in text and "junk.vtu" in text
+    assert len(set(comm.allgather(text))) == 1
+    comm.Barrier()
