@@ -331,11 +331,39 @@ def on_root(comm, work, root: int = 0):
             sent = ("done", work())
         except Exception as exc:  # noqa: BLE001 - every rank must hear of it
             failure, sent = exc, _as_sent(exc)
-    sent = broadcast(comm, sent, root)
+    if comm.size > 1:
+        sent = _broadcast_large(comm, sent, root)
     if sent[0] == "done":
         return sent[1]
-    _raise_first(comm, [sent if r == root else None for r in range(comm.size)], failure)
-    raise AssertionError("unreachable")  # (_raise_first raised)
+    if failure is not None:  # root's own exception, as itself
+        raise failure
+    try:
+        exc = pickle.loads(sent[1]) if sent[1] is not None else None
+    except Exception:  # noqa: BLE001
+        exc = None
+    raise exc if isinstance(exc, BaseException) else RuntimeError(f"rank {root}: {sent[2]}")
+
+
+# bytes a broadcast of a large pickle sends at a time: below MPI's 2**31 count, whatever the
+# MPI version (a mesh of tens of millions of cells pickles to gigabytes)
+BCAST_CHUNK = 1 << 30
+
+
+def _broadcast_large(comm, value, root: int):
+    """``value`` of ``root`` on every rank, pickled once and sent in chunks of raw bytes;
+    a value that does not pickle becomes the error it raised (:func:`_as_sent`)."""
+    blob = None
+    if comm.rank == root:
+        try:
+            blob = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:  # noqa: BLE001 - every rank must hear of it
+            value = _as_sent(exc)
+            blob = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    n = comm.bcast(len(blob) if blob is not None else None, root=root)
+    buf = np.frombuffer(blob, np.uint8) if blob is not None else np.empty(n, np.uint8)
+    for at in range(0, n, BCAST_CHUNK):
+        comm.Bcast(buf[at:at + BCAST_CHUNK], root=root)
+    return value if comm.rank == root else pickle.loads(buf)
 
 
 def allgather_rows(comm, values: np.ndarray) -> np.ndarray:
