@@ -13,8 +13,14 @@ stale contacts (pdem.contact.staleness) and, if any, updates them by the stepper
 (:mod:`pdem.contact.update`), carrying on with the new sub-contact columns.
 Otherwise it returns after the first half and the stepper finishes that step in Python: a
 search, an update that found contacts apart (the stepper drops them from every column), a bad
-state, an event. Runs on several ranks never fuse: their halo and reductions run every step
-(docs/architecture.md).
+state, an event.
+
+On several ranks the loop makes the step's two MPI calls itself (pdem.parallel.native): the
+forward halo after the motion, and the step's reduction after the contact forces. A rank
+that needs Python for a step of its own (a search, a bad state) returns before the
+reduction and makes it in Python: the messages are the same, so the other ranks' compiled
+calls meet it. What the reduction says (migrate, stop, a bad state anywhere, the ratio
+target) ends the loop on every rank after the same step (docs/parallel.md).
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices, world_vertices
 from .jit import kernel
 from .model.contacts import Pairs, Subs
+from .parallel.native import allreduce_max, forward_halo
 
 # why a compiled run of steps returned (the stepper finishes the last step in Python)
 DONE = 0  # the step budget, a plugin's event step or time, or the ratio target was reached
@@ -35,6 +42,14 @@ NEEDS_PYTHON = 1  # a search, a periodic update the stepper must do, or a bad st
 # the last step's periodic update was done and found contacts apart: the stepper drops them
 # (the returned ``keep``) and finishes the step without updating again
 DROPS = 2
+# (several ranks) the step's reduction, made in the loop, ends the run of steps on every rank:
+# the stepper finishes the step with the reduced flags (``net.reduced``)
+REDUCED = 3
+# (several ranks) an MPI call in the loop failed (its error code is returned as ``bad``)
+MPI_FAILED = 4
+# the step's reduction: max unbalanced force, bad state, migration due, block out of the
+# domain, stop signal, folded grid, grid ratio (pdem.stepper.Stepper._second_half)
+STEP_FLAGS = 7
 
 
 @kernel
@@ -44,7 +59,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
                 speed, sleep_steps, force_frac, remap_at,
                 detect_every, refresh_tolerance, stop_at_update, speed_limit, speed_growth,
                 step, time, max_steps, stop_step, stop_time, ratio_target, ref_force, max_step,
-                todo):
+                todo, net, columns, rebuild_at):
     """Up to ``max_steps`` steps; returns ``(steps, step, time, why, bad, u_mig_max,
     redetected, keep, pairs, subs)``: ``bad`` and ``u_mig_max`` from the last step's
     :func:`pdem.dynamics.motion.motion_bookkeeping`, how many contacts the periodic updates
@@ -64,6 +79,16 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
     record with the true ``fixed`` flags when inactive blocks are held (``m``'s are
     ``still``; pdem.dynamics.inactive), else None. ``todo`` (uint8, one per contact): where a
     periodic update's staleness marks are written.
+
+    Several ranks: ``net`` (:class:`pdem.parallel.native.Net`) and ``columns`` (the halo
+    fields' arrays, :func:`pdem.parallel.halo.halo_columns`); ``rebuild_at``: the
+    ghost-rebuild measure that asks for a migration. A serial run passes an idle ``net``
+    (``single``, no neighbours: :func:`pdem.parallel.native.idle_net`) and the same columns,
+    so that a scene compiles the loop once for any rank count (~1 min a variant), or None
+    for both where a halo field is not float64 (``solve.inactive``, which does not fuse on
+    ranks). The step's budget and event limits end the loop (``DONE``) before the
+    reduction, a step that needs Python on this rank alone (``NEEDS_PYTHON``) too; after the
+    reduction ``REDUCED`` when its flags end the loop on every rank, ``DROPS`` as serial.
     """
     n_steps = 0
     redetected = 0
@@ -78,6 +103,14 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
         bad, u_mig_max = motion.motion_bookkeeping(m.dx, m.dtheta, radius, m.fixed, u_acc, u_geo,
                                            u_mig, m.v, m.x, speed_limit + speed_growth * time,
                                            max_step)
+        single = True  # one rank (with or without an idle ``net``: see the docstring)
+        if net is not None:
+            single = net.single
+            if not single:  # the ghosts' rows from their owners
+                rc = forward_halo(net, columns)
+                if rc != 0:
+                    why, bad = MPI_FAILED, rc
+                    break
         rotation_matrices(q, R)
         bodies.force[:] = 0.0
         bodies.moment[:] = 0.0
@@ -85,17 +118,31 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
         if m_true is not None:
             update_inactive(m_true, gravity, radius, calm, still, speed, sleep_steps, force_frac,
                             ref_force)
-        if bad >= 0 or _remap_due(u_acc, remap_at):
-            why = NEEDS_PYTHON
-            break
         periodic = step % detect_every == 0
-        if periodic and stop_at_update:
-            why = NEEDS_PYTHON
-            break
-        if n_steps >= max_steps or step >= stop_step or time >= stop_time or \
-                stats[motion.STAT_MAX_FORCE] / ref_force <= ratio_target:
-            why = DONE
-            break
+        own = bad >= 0 or _remap_due(u_acc, remap_at) or (periodic and stop_at_update)
+        done = n_steps >= max_steps or step >= stop_step or time >= stop_time
+        if single:
+            if own:
+                why = NEEDS_PYTHON
+                break
+            if done or stats[motion.STAT_MAX_FORCE] / ref_force <= ratio_target:
+                why = DONE
+                break
+        else:
+            if done:  # on every rank after the same step
+                why = DONE
+                break
+            if own:  # this rank makes the step's reduction in Python
+                why = NEEDS_PYTHON
+                break
+            if net is not None:  # (always, here)
+                rebuild = m.x.shape[0] > 0 and u_mig_max > rebuild_at
+                if _reduce(net, stats[motion.STAT_MAX_FORCE], rebuild) != 0:
+                    why = MPI_FAILED
+                    break
+                if _reduced_stop(net.reduced, ref_force, ratio_target):
+                    why = REDUCED
+                    break
         # second half, when no search is due
         # (pdem.stepper.Stepper._second_half with refresh(periodic=True): the stale contacts
         # are updated by the stepper's three calls, pdem.contact.update, inline here: a kernel
@@ -126,6 +173,27 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
                 why = DROPS
                 break
     return n_steps, step, time, why, bad, u_mig_max, redetected, keep, pairs, subs
+
+
+@kernel
+def _reduce(net, max_force, rebuild):
+    """The step's reduction (pdem.stepper.Stepper._second_half's flags, with no bad state,
+    no block out of the model domain, no signal, no grid): 0 or MPI's error code."""
+    f = net.flags
+    f[:] = 0.0
+    f[0] = max_force
+    f[2] = 1.0 if rebuild else 0.0
+    return allreduce_max(net)
+
+
+@kernel
+def _reduced_stop(red, ref_force, ratio_target):
+    """Whether the reduced flags end the run of steps: a bad state, a migration, a block
+    out of the domain, a signal or a folded grid on some rank, or the ratio target."""
+    for k in range(1, 6):
+        if red[k] != 0.0:
+            return True
+    return red[0] / ref_force <= ratio_target
 
 
 @kernel

@@ -7,6 +7,7 @@ import math
 import time as wallclock
 
 from .errors import OutputError, SimulationError
+from .parallel.mpi import min_over_ranks
 
 log = logging.getLogger("pdem")
 
@@ -31,15 +32,18 @@ class Run:
     def advance(self):
         """One step; blocks migrate after it when they moved far enough (collective)."""
         if self.stepper.advance():
-            for p in self.plugins:
-                p.before_migration(self)
-            self.state.rebalance()  # new cuts if the work is imbalanced (balance: rcb)
-            self.state.redistribute()
+            self._migrate()
+
+    def _migrate(self):
+        for p in self.plugins:
+            p.before_migration(self)
+        self.state.rebalance()  # new cuts if the work is imbalanced (balance: rcb)
+        self.state.redistribute()
 
     def _advance_to_event(self, end_step, end_time, ratio_target, steps_left):
-        """One step, or in a serial run the steps up to the next event (a plugin's horizon,
-        the end condition, a wall-clock slice that keeps progress lines and stop signals
-        prompt) in one compiled call (pdem.cycle)."""
+        """One step, or the steps up to the next event (a plugin's horizon, the end
+        condition, a wall-clock slice that keeps progress lines and stop signals prompt, on
+        several ranks also a migration) in one compiled call (pdem.cycle)."""
         s = self.state
         if not self.stepper.fusable():
             self.advance()
@@ -56,8 +60,12 @@ class Run:
         budget = max(1, int(FUSED_SLICE / max(self._step_seconds, 1e-9)))
         if steps_left is not None:
             budget = min(budget, steps_left)
+        if s.comm.size > 1:  # every rank's run of steps ends after the same step
+            budget = min_over_ranks(s.comm, budget)
         t0 = wallclock.perf_counter()
         done = self.stepper.advance_many(budget, stop_step, stop_time, ratio_target)
+        if self.stepper.migrate_due:
+            self._migrate()
         # seconds per step, for the next slice; a single step is measured too, else a slow
         # first call (compiling fused_steps) would leave the budget at one step for good
         if done >= 1:

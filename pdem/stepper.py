@@ -25,7 +25,7 @@ from .contact.forces import contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
 from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
-from .cycle import DROPS, fused_steps
+from .cycle import DONE, DROPS, MPI_FAILED, REDUCED, STEP_FLAGS, fused_steps
 from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
@@ -33,7 +33,9 @@ from .errors import SimulationError
 from .memory import large_blocks_mapped
 from .model.contacts import ContactStore, Subs, sub_columns
 from .model.csr import pair_key
-from .parallel import mpi
+from .model.fields import row_width
+from .parallel import mpi, native
+from .parallel.halo import halo_columns
 
 # u_acc trigger as a fraction of CTOL. 3DEC remaps at CTOL; at CTOL/2 no pair can close a gap
 # larger than CTOL unseen (each block moves less than CTOL/2 between searches), so a contact
@@ -62,6 +64,8 @@ class Stepper:
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
         self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
+        self.migrate_due = False  # a compiled run of steps on ranks ended with a migration due
+        self._net = None  # (halo, its pdem.parallel.native.Net) for compiled runs on ranks
         # contacts whose geometry was updated since the start (its own update included): a
         # cost figure (bench/fidelity.py)
         self.redetected = 0
@@ -281,21 +285,75 @@ class Stepper:
         return self._second_half()
 
     def fusable(self) -> bool:
-        """Whether steps may run in one compiled call (pdem.cycle): serial runs without
-        prescribed boundary motion, unless ``solve.fused`` is off."""
+        """Whether steps may run in one compiled call (pdem.cycle), unless ``solve.fused`` is
+        off: runs without prescribed boundary motion or zoned blocks; on several ranks also
+        where the ranks spin while they wait (pdem.parallel.mpi.configure_waits), every halo
+        field is float64 (not with solve.inactive) and MPI can be called from compiled code
+        (pdem.parallel.native.link, collective on its first call)."""
         s = self.s
-        return (s.comm.size == 1 and s.scene.solve.fused and s.grids is None
-                and not (s.boundary is not None and s.boundary.active))
+        if not (s.scene.solve.fused and s.grids is None
+                and not (s.boundary is not None and s.boundary.active)):
+            return False
+        if s.comm.size == 1:
+            return True
+        # (decided alike on every rank: link is collective)
+        return (s.comm.py2f() not in mpi._nonblocking and s.scene.solve.inactive is None
+                and native.link(s.comm))
 
     def advance_many(self, max_steps: int, stop_step: int | None = None,
                      stop_time: float | None = None, ratio_target: float | None = None) -> int:
         """Up to ``max_steps`` steps, ending early after the step that reaches ``stop_step`` or
-        ``stop_time`` or the ``ratio_target``; compiled when :meth:`fusable`, else one step.
-        Returns the steps done; after the last of them the state is as after :meth:`advance`
-        (which the caller must see as having returned False: serial runs never migrate)."""
+        ``stop_time`` or the ``ratio_target``, or (several ranks) after a step whose reduction
+        asks for a migration (``migrate_due``: the caller migrates) or stops the run; compiled
+        when :meth:`fusable`, else one step. Returns the steps done; every rank returns after
+        the same step. ``max_steps`` must be the same on every rank."""
+        self.migrate_due = False
         if max_steps <= 1 or not self.fusable():
-            self.advance()
+            self.migrate_due = self.advance()
             return 1
+        if self.s.comm.size == 1:
+            steps, why = self._fused(max_steps, stop_step, stop_time, ratio_target)
+            self._second_half(updated=why == DROPS)
+            return steps
+        done = 0
+        while True:
+            steps, why = self._fused(max_steps - done, stop_step, stop_time, ratio_target)
+            done += steps
+            if why == MPI_FAILED:
+                raise SimulationError(f"step {self.s.step}: an MPI call from compiled code "
+                                      f"failed (error code {self._bad}); PDEM_MPI_NATIVE=0 "
+                                      "keeps the steps in Python")
+            # after the reduction (in the loop) its flags finish the step; before it (a step
+            # this rank needed Python for, or the end of the run of steps) the reduction is
+            # made here and meets the other ranks' compiled one
+            reduced = self._net[1].reduced.copy() if why in (REDUCED, DROPS) else None
+            self.migrate_due = self._second_half(updated=why == DROPS, flags=reduced)
+            if why in (DONE, REDUCED) or self.migrate_due or self.stop_signal:
+                return done
+            # this rank alone left the loop for a step; the reduction said go on, so every
+            # other rank goes on too (its own budget and limits end it at the same step)
+            s = self.s
+            if done >= max_steps or (stop_step is not None and s.step >= stop_step) or \
+                    (stop_time is not None and s.time >= stop_time) or \
+                    (ratio_target is not None and s.ratio <= ratio_target):
+                return done
+
+    def _net_for(self, halo):
+        """The compiled MPI calls' record for this halo plan (made again after a migration);
+        a serial run's is idle."""
+        if self._net is None or self._net[0] is not halo:
+            if self.s.comm.size == 1:  # one compiled loop for any rank count
+                net = native.idle_net(row_width(halo.fields), STEP_FLAGS)
+            else:
+                net = native.make_net(self.s.comm, halo, STEP_FLAGS)
+            if net is None:  # (link found them on every rank)
+                raise SimulationError("internal: the MPI functions went missing")
+            self._net = (halo, net)
+        return self._net[1]
+
+    def _fused(self, max_steps: int, stop_step, stop_time, ratio_target):
+        """One compiled run of steps (pdem.cycle.fused_steps): (steps done, why it ended);
+        the contacts' columns are taken over when the loop updated them."""
         s = self.s
         hold_fixed(s)
         b = s.blocks
@@ -305,6 +363,10 @@ class Stepper:
         if s.damping.adaptive:  # its servo updates every 10 steps, in Python
             nxt = (s.step // 10 + 1) * 10
             stop_step = nxt if stop_step is None else min(stop_step, nxt)
+        columns = halo_columns(b, s.halo.fields) if s.halo is not None else None
+        net = self._net_for(s.halo) if columns is not None else None
+        if net is None and s.comm.size > 1:  # (fusable: only `still` is not float64)
+            raise SimulationError("internal: a halo field is not a float64 array")
         self.stats[:] = 0.0
         speed, sleep_steps, frac = inactive_args(s.scene)
         todo = np.empty(c.n, np.uint8)
@@ -324,7 +386,7 @@ class Stepper:
                     NO_STEP if stop_step is None else stop_step,
                     math.inf if stop_time is None else stop_time,
                     -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step,
-                    todo)
+                    todo, net, columns, 0.5 * r.margin)
         self.redetected += redetected
         if redetected:  # the loop updated contacts (pdem.contact.update): their new columns
             sub = sub_columns(subs)
@@ -333,9 +395,7 @@ class Stepper:
             s.contacts = ContactStore(c.arrays, sub, start)
             if why == DROPS:  # the last update found contacts apart
                 s.contacts = self._kept(s.contacts, keep)
-        # the last step's periodic update is done when the loop stopped for its dropped contacts
-        self._second_half(updated=why == DROPS)
-        return steps
+        return steps, why
 
     def _first_half(self):
         """Motion, the forward halo and the contact forces of a step."""
@@ -375,10 +435,11 @@ class Stepper:
             self.compute_forces(s.dt)
             self.update_inactive()
 
-    def _second_half(self, updated: bool = False) -> bool:
+    def _second_half(self, updated: bool = False, flags: np.ndarray | None = None) -> bool:
         """Contact search and updates, and the step's one reduction; True if blocks must
         migrate. After :meth:`_first_half` or a compiled run of steps (pdem.cycle), which
-        leaves ``u_mig`` and the state check to be redone here (both are cheap)."""
+        leaves ``u_mig`` and the state check to be redone here (both are cheap). ``flags``:
+        the reduction, made already by a compiled run of steps on several ranks."""
         s = self.s
         b = s.blocks
         n = s.n_owned
@@ -404,10 +465,11 @@ class Stepper:
             rebuild = bool(n) and u_mig_max > 0.5 * r.margin
             left = periodic and s.scene.domain is not None and domain.outside(s).any()
             signum = self.stop.signum if self.stop is not None else 0
-            flags = mpi.allreduce_max_array(s.comm, np.array(
-                [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild),
-                 float(left), float(signum), float(self._grid_bad + 1),
-                 s.grids.ratio if s.grids is not None else 0.0]))
+            if flags is None:  # (pdem.cycle._reduce makes the same STEP_FLAGS)
+                flags = mpi.allreduce_max_array(s.comm, np.array(
+                    [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild),
+                     float(left), float(signum), float(self._grid_bad + 1),
+                     s.grids.ratio if s.grids is not None else 0.0]))
         self.stop_signal = int(flags[4])
         if flags[5]:
             self._raise_folded(int(flags[5]) - 1)

@@ -17,6 +17,7 @@ from .mpi import wait_all
 # columns of a full halo row: the block fields declared with halo=True (pdem.model.fields); a
 # scene sends those of the features it uses (pdem.model.fields.halo_fields)
 ROW = row_width(HALO)
+HALO_TAG = 11  # the forward halo's messages (pdem.parallel.native sends the same)
 
 
 @kernel
@@ -36,7 +37,7 @@ def copy_rows(columns, rows, buf, pack):
         col += w
 
 
-def _columns(blocks, fields) -> tuple | None:
+def halo_columns(blocks, fields) -> tuple | None:
     """The fields' arrays of ``blocks`` as 2-D float64 views (one numba type for the compiled
     copy), or None when one is not float64 (``still`` with solve.inactive: numpy copies it)."""
     out = []
@@ -78,16 +79,16 @@ class Halo:
             return
         # compiled copies: numpy's fancy indexing per field cost ~0.25 ms a step for ~1000
         # ghosts, 3 % of a 2-rank step of the 22^3 stack (bench/scaling.py)
-        columns = _columns(blocks, self.fields)
+        columns = halo_columns(blocks, self.fields)
         arrays = None if columns is not None else {f.name: getattr(blocks, f.name)
                                                    for f in self.fields}
-        reqs = [self.comm.Irecv(buf, source=r, tag=11) for r, buf in self.rbuf.items()]
+        reqs = [self.comm.Irecv(buf, source=r, tag=HALO_TAG) for r, buf in self.rbuf.items()]
         for r, rows in self.send.items():
             if columns is None:
                 pack(arrays, self.fields, rows, self.sbuf[r])
             else:
                 copy_rows(columns, rows, self.sbuf[r], True)
-            reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=11))
+            reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=HALO_TAG))
         wait_all(self.comm, reqs)
         for r, rows in self.recv.items():
             if columns is None:

@@ -149,6 +149,15 @@ def allreduce_max_array(comm, values: np.ndarray) -> np.ndarray:
     return values
 
 
+def min_over_ranks(comm, value: int) -> int:
+    """The smallest of every rank's ``value`` (an int)."""
+    if comm.size == 1:
+        return value
+    from mpi4py import MPI
+
+    return int(comm.allreduce(int(value), op=MPI.MIN))
+
+
 def allreduce_sum_array(comm, values: np.ndarray) -> np.ndarray:
     """Element-wise sum over ranks (floating-point: reproducible for a fixed rank count)."""
     if comm.size == 1:
