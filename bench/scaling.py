@@ -9,7 +9,9 @@ cubes, default 22^3 = 10648, split along x with ``parallel.dims [size, 1, 1]``, 
 uniform grid choose_dims picks) or ``rcb`` (``parallel.balance: rcb``, bench/balance.py)),
 times ``--steps`` steps after ``--warmup`` steps, and prints block-steps/s, the strong-scaling
 efficiency t1 / (p t_p), the halo bytes each rank sends per step (``load_report``) and the
-per-phase timers of every rank. On a 2-core machine the 2-rank figures are the real thing; on
+per-phase timers of every rank. Ranks step in the compiled loop (``fused``) with the halo and
+the reduction called from it (pdem.parallel.native); ``PDEM_MPI_NATIVE=0`` in the environment
+measures the Python path. On a 2-core machine the 2-rank figures are the real thing; on
 an oversubscribed one they are not. ``--repeat R`` runs the rank counts R times, alternating,
 and prints each round's rates and efficiency and their median: one 200-step window on a
 shared machine swings by tens of percent (docs/parallel.md, Scaling).
