@@ -137,36 +137,37 @@ def _address(a):
 
 
 @kernel
+def _post(net, fn, rows, peer, k):
+    """``MPI_Isend`` (``fn`` 0) or ``MPI_Irecv`` (1) of the buffer ``rows`` to or from rank
+    ``peer``, its request the ``k``-th; MPI's error code."""
+    return _call7(net.fn[fn], net.wide, (
+        _address(rows), np.int64(rows.size), net.double, np.int64(peer),
+        np.int64(HALO_TAG), net.comm, _address(net.requests) + k * net.req_size))
+
+
+@kernel
 def forward_halo(net, columns):
     """:meth:`pdem.parallel.halo.Halo.forward` compiled: receive the ghosts' rows, send the
     owned rows the neighbours ghost, wait for all, unpack. Returns MPI's error code (0)."""
-    k = 0
-    width = net.rbuf.shape[1]
-    for j in range(net.recv_rank.shape[0]):
-        lo, hi = net.recv_start[j], net.recv_start[j + 1]
-        rc = _call7(net.fn[1], net.wide, (
-            _address(net.rbuf[lo:]), (hi - lo) * width, net.double,
-            np.int64(net.recv_rank[j]), np.int64(HALO_TAG), net.comm,
-            _address(net.requests) + k * net.req_size))
+    n_recv = net.recv_rank.shape[0]
+    for j in range(n_recv):
+        rc = _post(net, 1, net.rbuf[net.recv_start[j]:net.recv_start[j + 1]],
+                   net.recv_rank[j], j)
         if rc != 0:
             return rc
-        k += 1
     for j in range(net.send_rank.shape[0]):
         lo, hi = net.send_start[j], net.send_start[j + 1]
         copy_rows(columns, net.send_rows[lo:hi], net.sbuf[lo:hi], True)
-        rc = _call7(net.fn[0], net.wide, (
-            _address(net.sbuf[lo:]), (hi - lo) * width, net.double,
-            np.int64(net.send_rank[j]), np.int64(HALO_TAG), net.comm,
-            _address(net.requests) + k * net.req_size))
+        rc = _post(net, 0, net.sbuf[lo:hi], net.send_rank[j], n_recv + j)
         if rc != 0:
             return rc
-        k += 1
+    k = n_recv + net.send_rank.shape[0]
     if k:
         rc = _call3(net.fn[2], net.wide, (np.int64(k), _address(net.requests),
                                           _address(net.statuses)))
         if rc != 0:
             return rc
-    for j in range(net.recv_rank.shape[0]):
+    for j in range(n_recv):
         lo, hi = net.recv_start[j], net.recv_start[j + 1]
         copy_rows(columns, net.recv_rows[lo:hi], net.rbuf[lo:hi], False)
     return 0
