@@ -30,7 +30,8 @@ from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
-from .memory import large_blocks_mapped
+from .jit import drop_linking_ir
+from .memory import large_blocks_mapped, return_freed_memory
 from .model.contacts import ContactStore, Subs, sub_columns
 from .model.csr import pair_key
 from .model.fields import row_width
@@ -66,6 +67,7 @@ class Stepper:
         self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
         self.migrate_due = False  # a compiled run of steps on ranks ended with a migration due
         self._net = None  # (halo, its pdem.parallel.native.Net) for compiled runs on ranks
+        self._dropped_ir = False  # the compiled loop's inlining IR freed (pdem.jit)
         # contacts whose geometry was updated since the start (its own update included): a
         # cost figure (bench/fidelity.py)
         self.redetected = 0
@@ -387,6 +389,10 @@ class Stepper:
                     math.inf if stop_time is None else stop_time,
                     -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step,
                     todo, net, columns, 0.5 * r.margin)
+        if not self._dropped_ir:  # after its first call: loaded (or compiled and saved)
+            drop_linking_ir(fused_steps)
+            return_freed_memory()
+            self._dropped_ir = True
         self.redetected += redetected
         if redetected:  # the loop updated contacts (pdem.contact.update): their new columns
             sub = sub_columns(subs)
