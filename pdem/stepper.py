@@ -25,7 +25,7 @@ from .contact.forces import contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
 from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
-from .cycle import DONE, DROPS, MPI_FAILED, REDUCED, STEP_FLAGS, fused_steps
+from .cycle import DONE, DROPS, MPI_FAILED, NEEDS_PYTHON, REDUCED, STEP_FLAGS, fused_steps
 from .dynamics import motion
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
@@ -43,6 +43,9 @@ from .parallel.halo import halo_columns
 # always exists before two blocks touch.
 REMAP_FRACTION = 0.5
 NO_STEP = 2**62  # no step bound for a compiled run of steps
+# most steps taken in Python before the compiled loop is tried again, after it returned
+# after its first step again and again (Stepper.advance_many)
+PYTHON_RUN = 64
 
 
 def motion_record(b, n: int, still: bool = False) -> motion.Motion:
@@ -68,6 +71,9 @@ class Stepper:
         self.migrate_due = False  # a compiled run of steps on ranks ended with a migration due
         self._net = None  # (halo, its pdem.parallel.native.Net) for compiled runs on ranks
         self._dropped_ir = False  # the compiled loop's inlining IR freed (pdem.jit)
+        self._python_run = 0  # steps taken in Python after the loop's last 1-step return
+        self._python_left = 0  # of them, still to take (advance_many)
+        self.python_steps = 0  # steps advance_many took in Python so far
         # contacts whose geometry was updated since the start (its own update included): a
         # cost figure (bench/fidelity.py)
         self.redetected = 0
@@ -305,36 +311,55 @@ class Stepper:
     def advance_many(self, max_steps: int, stop_step: int | None = None,
                      stop_time: float | None = None, ratio_target: float | None = None) -> int:
         """Up to ``max_steps`` steps, ending early after the step that reaches ``stop_step`` or
-        ``stop_time`` or the ``ratio_target``, or (several ranks) after a step whose reduction
-        asks for a migration (``migrate_due``: the caller migrates) or stops the run; compiled
-        when :meth:`fusable`, else one step. Returns the steps done; every rank returns after
-        the same step. ``max_steps`` must be the same on every rank."""
+        ``stop_time`` or the ``ratio_target``, or after a step whose reduction asks for a
+        migration (``migrate_due``: the caller migrates) or stops the run; compiled runs of
+        steps when :meth:`fusable` (one step else). Returns the steps done; every rank returns
+        after the same step. ``max_steps`` must be the same on every rank.
+
+        A step that needs Python on this rank (a search, an update that dropped contacts)
+        is finished here and the steps go on. Where the compiled loop keeps returning after
+        its first step, entering it costs more than a step in Python (~20 us of argument
+        checks for a few-block scene), so the next steps are taken in Python, twice as many
+        each time it happens again (:data:`PYTHON_RUN` at most), then the loop is tried
+        again: both paths give the same bits and make the same MPI calls."""
         self.migrate_due = False
         if max_steps <= 1 or not self.fusable():
             self.migrate_due = self.advance()
             return 1
-        if self.s.comm.size == 1:
-            steps, why = self._fused(max_steps, stop_step, stop_time, ratio_target)
-            self._second_half(updated=why == DROPS)
-            return steps
+        s = self.s
+        several = s.comm.size > 1
         done = 0
         while True:
-            steps, why = self._fused(max_steps - done, stop_step, stop_time, ratio_target)
-            done += steps
-            if why == MPI_FAILED:
-                raise SimulationError(f"step {self.s.step}: an MPI call from compiled code "
-                                      f"failed (error code {self._bad}); PDEM_MPI_NATIVE=0 "
-                                      "keeps the steps in Python")
-            # after the reduction (in the loop) its flags finish the step; before it (a step
-            # this rank needed Python for, or the end of the run of steps) the reduction is
-            # made here and meets the other ranks' compiled one
-            reduced = self._net[1].reduced.copy() if why in (REDUCED, DROPS) else None
-            self.migrate_due = self._second_half(updated=why == DROPS, flags=reduced)
-            if why in (DONE, REDUCED) or self.migrate_due or self.stop_signal:
+            if self._python_left > 0:
+                self._python_left -= 1
+                self.python_steps += 1
+                self._first_half()
+                self.migrate_due = self._second_half()
+                done += 1
+            else:
+                steps, why = self._fused(max_steps - done, stop_step, stop_time, ratio_target)
+                done += steps
+                if why == MPI_FAILED:
+                    raise SimulationError(f"step {s.step}: an MPI call from compiled code "
+                                          f"failed (error code {self._bad}); "
+                                          "PDEM_MPI_NATIVE=0 keeps the steps in Python")
+                if why == NEEDS_PYTHON and steps == 1:
+                    self._python_run = min(2 * self._python_run or 1, PYTHON_RUN)
+                    self._python_left = self._python_run
+                elif steps > 1:
+                    self._python_run = 0
+                # after the reduction (in the loop) its flags finish the step; before it (a
+                # step this rank needed Python for, or the end of the run of steps) it is made
+                # here and meets the other ranks' compiled one
+                reduced = self._net[1].reduced.copy() \
+                    if several and why in (REDUCED, DROPS) else None
+                self.migrate_due = self._second_half(updated=why == DROPS, flags=reduced)
+                if why in (DONE, REDUCED):  # on every rank after this step
+                    return done
+            if self.migrate_due or self.stop_signal:
                 return done
-            # this rank alone left the loop for a step; the reduction said go on, so every
-            # other rank goes on too (its own budget and limits end it at the same step)
-            s = self.s
+            # the reduction said go on: so does every other rank, until its own budget and
+            # limits end its steps after the same step as these
             if done >= max_steps or (stop_step is not None and s.step >= stop_step) or \
                     (stop_time is not None and s.time >= stop_time) or \
                     (ratio_target is not None and s.ratio <= ratio_target):
