@@ -106,7 +106,7 @@ def catalogue_bytes() -> int:
     """Bytes a block of the per-block fields every rank gathers at set-up (pdem.state's
     GATHERED: the catalogue and the envelopes), held until the first distribution."""
     from pdem.model.fields import BLOCK
-    from pdem.state import GATHERED
+    from pdem.selection import GATHERED
 
     return sum(f.width * np.dtype(f.dtype).itemsize for f in BLOCK if f.name in GATHERED)
 

@@ -31,8 +31,10 @@ import math
 
 import numpy as np
 
+from .config import ConfigError
 from .dynamics import motion
 from .dynamics.rotation import quat_to_matrix
+from .selection import selected, set_block_fields
 
 COVER_COS = 1.0 - 1e-6  # antiparallel faces: n_a . n_b < -COVER_COS
 _BIT = {"x": motion.VFIX_X, "y": motion.VFIX_Y, "z": motion.VFIX_Z}
@@ -82,11 +84,9 @@ class Boundary:
     def add_velocity(self, s, cond, gids, t0: float, motion_too: bool = True) -> None:
         """Prescribe ``cond`` on ``gids`` (global store and this rank's rows); ``motion_too``:
         also set the velocities (a restart takes them from its checkpoint)."""
-        from .stages import _set
-
         code = vfix_code(cond)
         self.release(gids)
-        _set(s, gids, fixed=0, vfix=code)
+        set_block_fields(s, gids, fixed=0, vfix=code)
         if cond.history is not None:
             self.histories.append([np.asarray(gids, np.int64), code, cond.history, t0])
         if not motion_too:
@@ -94,7 +94,7 @@ class Boundary:
         if code == motion.VFIX_ALL:
             v0 = history_velocity(cond.history, 0.0) if cond.history is not None \
                 else np.array(cond.velocity, float)
-            _set(s, gids, v=v0, w=cond.angular_velocity)
+            set_block_fields(s, gids, v=v0, w=cond.angular_velocity)
             b = s.blocks
             if b is not None:
                 for r in np.nonzero(np.isin(b.gid, gids))[0]:  # L of the prescribed spin
@@ -106,7 +106,7 @@ class Boundary:
             for c in cond.components:
                 k = "xyz".index(c)
                 for store in (s.glob, s.share, s.blocks):
-                    if store is not None and "v" in vars(store):  # see stages._set
+                    if store is not None and "v" in vars(store):  # see selection.set_block_fields
                         store.v[np.isin(store.gid, gids), k] = v0[k]
 
     def prescribe(self, s) -> None:
@@ -259,9 +259,6 @@ def exposed_faces(g, gids: np.ndarray, ctol: float):
 
 def apply_scene(s) -> None:
     """The scene's ``boundary:`` on a new model state (every rank alike)."""
-    from .config import ConfigError
-    from .stages import selected
-
     s.boundary = Boundary()
     bc = s.scene.boundary
     for j, cond in enumerate(bc.velocity):

@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     from mpi4py import MPI
 
     from .errors import UserError
-    from .parallel.mpi import install_abort_hook, setup_logging
+    from .mpi import install_abort_hook, setup_logging
 
     comm = MPI.COMM_WORLD
     log = setup_logging(comm)
@@ -159,7 +159,7 @@ def _fail_during_run(comm, exc, sim) -> None:
                 print(f"pdem: {exc}", file=sys.stderr)
             return
         raise exc
-    from .parallel.mpi import abort_with_message
+    from .mpi import abort_with_message
 
     abort_with_message(comm, exc)
 

@@ -12,10 +12,11 @@ import logging
 
 import numpy as np
 
+from . import mpi
 from .contact.forces import book_contact_energy, contact_energies
 from .dynamics import motion
 from .dynamics.energy import kinetic_per_block
-from .parallel import mpi
+from .selection import set_block_fields
 
 log = logging.getLogger("pdem")
 
@@ -40,21 +41,6 @@ def take_out(state, bodies) -> None:
     code = DELETED if state.scene.domain.action == "delete" else FROZEN
     gids = np.concatenate(mpi.allgather(state.comm, b.gid[rows].copy())).astype(np.int64)
     remove_blocks(state, bodies, gids, code, "left the model domain")
-
-
-def set_block_fields(state, gids, **values) -> None:
-    """Set block fields of ``gids`` in this rank's rows (if any), in its build share until
-    the first distribution, and in the scene's store where it keeps that field
-    (pdem.state.CATALOGUE at set-up, RUN_CATALOGUE after; its rows are the gids)."""
-    gids = np.asarray(gids, np.int64)
-    for store in (state.glob, state.share, state.blocks):
-        if store is None:
-            continue
-        hit = gids if store is state.glob else np.isin(store.gid, gids)
-        for key, v in values.items():
-            column = vars(store).get(key)
-            if column is not None:
-                column[hit] = v
 
 
 def remove_blocks(state, bodies, gids: np.ndarray, code: int, why: str) -> None:

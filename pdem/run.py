@@ -7,7 +7,8 @@ import math
 import time as wallclock
 
 from .errors import OutputError, SimulationError
-from .parallel.mpi import min_over_ranks
+from .mpi import min_over_ranks
+from .plugins.checkpoints import stop_checkpoint
 
 log = logging.getLogger("pdem")
 
@@ -138,8 +139,6 @@ class Run:
         stopped = self.stepper.stop_signal
         checkpoint = None
         if stopped:
-            from .plugins.checkpoints import stop_checkpoint
-
             checkpoint = stop_checkpoint(self)
         elapsed = wallclock.perf_counter() - t0
         summary = {"steps": s.step - s0, "time": s.time, "ratio": s.ratio, "wall": elapsed,

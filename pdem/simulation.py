@@ -13,6 +13,7 @@ from .io.paths import check_writable
 from .memory import reuse_large_blocks
 from .plugins import default_plugins
 from .run import Run
+from .stages import replay_stages, run_stages
 from .state import ModelState
 from .stepper import Stepper
 
@@ -39,8 +40,6 @@ class Simulation:
             self.stepper.start()
         else:
             if scene.stages:  # the model the checkpoint's stages had made, then its state
-                from .stages import replay_stages
-
                 replay_stages(self.state, checkpoint["attrs"])
             self.state.restore(checkpoint)
             # the start's cuts (balance: rcb) fit the scene's start, not the checkpoint's
@@ -96,8 +95,6 @@ class Simulation:
         """March to the scene's end (every stage not done, for a staged scene), or for the
         given model time / step count."""
         if self.state.scene.stages and time is None and steps is None:
-            from .stages import run_stages
-
             summaries = run_stages(self.runner)
             last = dict(summaries[-1]) if summaries else {"steps": 0, "stopped": 0,
                                                           "checkpoint": None}

@@ -17,67 +17,17 @@ import math
 import numpy as np
 
 from .config import ConfigError
-from .config.resolve import _estimated_stiffness, _timestep, timestep_report
+from .config.stages import stage_scene
 from .contact.laws import joint_table
 from .domain import DELETED, remove_blocks
-from .domain import set_block_fields as _set
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
-from .model.blocks import BlockStore
-from .parallel.mpi import allgather_rows
-from .state import TIMESTEP_FIELDS
+from .plugins.checkpoints import stage_checkpoint
+from .resolve import estimated_stiffness, scene_timestep, timestep_report
+from .selection import selected, set_block_fields, timestep_rows
+from .strength import factor_of_safety
 
 log = logging.getLogger("pdem")
-
-
-def stage_scene(scene, k: int):
-    """The scene as stage ``k`` runs it: joints changed by stages 0..k, and the solve settings
-    (end condition, damping, mass scaling) of stage ``k``."""
-    joints = dict(scene.joints)
-    for st in scene.stages[:k + 1]:
-        for name, changes in st.joints.items():
-            joints[name] = joints[name].model_copy(update=changes)
-            type(joints[name]).model_validate(joints[name].model_dump())  # bounds checked
-    st = scene.stages[k]
-    update = {}
-    if st.solve is not None:
-        update = {key: getattr(st.solve, key) for key in ("time", "steps", "ratio", "max_steps")}
-        if st.solve.damping is not None:
-            update["damping"] = st.solve.damping
-        if st.solve.mass_scaling is not None:
-            update["mass_scaling"] = st.solve.mass_scaling
-    return scene.model_copy(update={"joints": joints,
-                                    "solve": scene.solve.model_copy(update=update)})
-
-
-def selected(state, sel) -> np.ndarray:
-    """Gids of the blocks a :class:`pdem.config.schema.Selection` names, in gid order (every
-    rank alike; collective once the blocks are distributed). A range selects by the scene's
-    centroids (the blocks' ``x0``): a selection does not depend on the motion. Each rank
-    selects among the blocks of its build share before they are distributed, among those it
-    owns after, and the ranks gather the gids selected (no rank keeps the centroids of blocks
-    it does not hold, pdem.state.CATALOGUE); a scene built whole on every rank selects
-    among all."""
-    g = state.glob
-    whole = "x" in vars(g)
-    if whole:
-        gids = np.arange(g.n)
-        x, out = g.x, g.out
-    elif state.share is not None:  # set-up: the build share (its blocks have not moved)
-        sh = state.share
-        gids, x, out = sh.gid, sh.x, sh.out
-    else:
-        b, n = state.blocks, state.n_owned
-        gids, x, out = b.gid[:n], b.x0[:n], b.out[:n]
-    keep = out == 0
-    if sel.names is not None or sel.groups is not None:
-        keep &= state.specs.matching(gids, sel.names, sel.groups)
-    if sel.range is not None:
-        keep &= np.all((x >= sel.range.box.min) & (x <= sel.range.box.max), axis=1)
-    mine = gids[keep].astype(np.int64)
-    if whole:
-        return mine
-    return np.sort(allgather_rows(state.comm, mine))
 
 
 def stage_changes(s, k: int, motion: bool = True) -> None:
@@ -93,10 +43,10 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
         gids = selected(s, sel)
         if not len(gids):
             raise ConfigError([f"{s.scene.at('stages', k, key)}: selects no block"])
-        _set(s, gids, fixed=fixed, vfix=0)
+        set_block_fields(s, gids, fixed=fixed, vfix=0)
         s.boundary.release(gids)
         if fixed and motion:
-            _set(s, gids, v=0.0, w=0.0, L=0.0)
+            set_block_fields(s, gids, v=0.0, w=0.0, L=0.0)
     for j, pv in enumerate(st.velocity):
         gids = selected(s, pv)
         if not len(gids):
@@ -113,7 +63,7 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
         gids = selected(s, pf)
         if not len(gids):
             raise ConfigError([f"{s.scene.at('stages', k, 'force', j)}: selects no block"])
-        _set(s, gids, applied_force=pf.force)
+        set_block_fields(s, gids, applied_force=pf.force)
     _solve_settings(s, staged, k, report=motion)
     s.stage = k
 
@@ -153,31 +103,18 @@ def apply_stage(run, k: int) -> None:
     run.stepper.refresh(all_contacts=False)
 
 
-def timestep_rows(s):
-    """``(rows, n)``: the blocks whose timestep fields (pdem.state.TIMESTEP_FIELDS, and gid)
-    this rank reads and sets, its own (reduced over the ranks) the first ``n``: the blocks it
-    holds, owned first (views: a mass scale set on them is the blocks'), or before the first
-    distribution its build share (or every block, when every rank built every block)."""
-    b = s.blocks
-    if b is not None:
-        return BlockStore.catalogue({k: getattr(b, k)[:b.n]
-                                     for k in ("gid", *TIMESTEP_FIELDS)}), s.n_owned
-    rows = s.share if s.share is not None else s.glob
-    return rows, len(rows.gid)
-
-
 def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     """Timestep, mass scaling and damping of a stage (every rank alike). The mass-scale
     factors are recomputed from the stage's joints and fixed/free blocks, on every rank
     alike; a restart replays this (:func:`replay_stages`), so they need no checkpoint."""
     rows, n = timestep_rows(s)
     rows.mscale[:] = 1.0
-    stiffness = _estimated_stiffness(s.specs, s.joints, rows.gid)
+    stiffness = estimated_stiffness(s.specs, s.joints, rows.gid)
     names = s.specs.names  # read by index, in messages
     st = s.scene.stages[k].solve
     key = s.scene.at("stages", k, "solve", "mass_scaling", "timestep") \
         if st is not None and st.mass_scaling is not None else "solve.mass_scaling.timestep"
-    s.dt = _timestep(staged, rows, stiffness, names, key, s.comm, n)
+    s.dt = scene_timestep(staged, rows, stiffness, names, key, s.comm, n)
     if report:
         for line in timestep_report(staged, rows, stiffness, s.dt, names, s.comm, n):
             log.info("stage %d: %s", k + 1, line)
@@ -191,8 +128,6 @@ def run_stages(run) -> list[dict]:
     """Every stage not yet done (collective); a checkpoint after each. A restarted run had
     its earlier stages' changes replayed before its checkpoint was restored
     (:func:`replay_stages`) and continues a stage in progress where it stopped."""
-    from .plugins.checkpoints import stage_checkpoint
-
     s = run.state
     stages = s.scene.stages
     summaries = []
@@ -205,8 +140,6 @@ def run_stages(run) -> list[dict]:
             apply_stage(run, k)
             s.stage_started, s.stage_t0, s.stage_step0 = k, s.time, s.step
         if st.factor_of_safety is not None:
-            from .strength import factor_of_safety
-
             summary = factor_of_safety(run, k)
         else:
             sv = st.solve

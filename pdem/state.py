@@ -19,15 +19,17 @@ import numpy as np
 from .boundary import apply_scene
 from .config import ConfigError, Scene
 from .config.load import dump_scene
-from .config.preflight import check_derived, machine_memory, preflight, rescaled
-from .config.resolve import Resolved, contact_tolerance, resolve
 from .contact.algorithms import ALGORITHMS
 from .contact.cellspace import CellSpace
 from .contact.laws import joint_table
+from .deformable.columns import GRID_WIDTH
+from .deformable.store import GridStore
 from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose, thinnest_width
 from .errors import UserError
-from .io.checkpoint import new_run_id
+from .io.checkpoint import CheckpointReader, new_run_id, written_contacts
+from .io.layout import even_share, h5py_has_mpi, writer_range
+from .io.surfaces import body_surfaces
 from .memory import map_large_blocks, return_freed_memory
 from .model.blocks import BlockStore
 from .model.build import SpecTable, block_store, expand_blocks, geometry_columns
@@ -35,9 +37,12 @@ from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, halo_fields, held_width
 from .model.runs import RunColumn
+from .mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
 from .parallel.decomposition import make_decomposition
 from .parallel.migrate import place_contacts, rebuild, route_contacts
-from .parallel.mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
+from .preflight import check_derived, machine_memory, preflight, rescaled
+from .resolve import REMAP_FRACTION, Resolved, contact_tolerance, resolve
+from .selection import CATALOGUE, GATHERED, RUN_CATALOGUE
 from .timers import Timers
 
 # a block may move up to this fraction of the thinnest piece's width in one step (see
@@ -52,54 +57,20 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
     first seen already overlapping by up to the two blocks' motion in that step; a block passes
     through another only when that overlap reaches about half the thinner one's width (the
     common plane then lies past its middle and pushes it out on the far side)."""
-    from .stepper import REMAP_FRACTION
-
     return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
-
-# the per-block fields of every block each rank holds during set-up (the scene's store, by
-# gid, its rows: no gid column): the flags a boundary condition or a stage sets (fixed,
-# vfix, out). The
-# rest each rank reads of its build share: the resolve, the timestep and mass scaling and the
-# start checks (envelopes, velocities, applied forces, mass, inertia, radius; reduced over the
-# ranks: maxima and minima, exact sums, an exact distributed median for the log;
-# pdem.config.resolve, pdem.config.preflight), the selections (pdem.stages.selected: gids
-# gathered), the initial decomposition (the shares' centroids), the output's initial
-# centroids and groups (the writer's range is the share: ``writer_static``); a boundary
-# condition or a stage sets fields on the share too (pdem.domain.set_block_fields), and the
-# mass scaling its factors. 3 bytes a block, the set-up's one O(N) transient (215 with every
-# field the set-up read gathered)
-CATALOGUE = ("fixed", "vfix", "out")
-# what the ranks gather of it
-GATHERED = CATALOGUE
-# what of it a rank keeps once the blocks are distributed (ModelState._distributed_from_scene)
-# and the output is open (pdem.simulation): two bytes a scene block, read by the rebuild
-# (which contacts travel: fixed), the checkpoint (which copy of a contact is written: fixed)
-# and the excavations (out). A stage's start reads the blocks each rank holds (its
-# selections: gids gathered; its timestep and mass scaling: reduced over the ranks); a stage,
-# a boundary condition or the domain sets fields on the blocks a rank holds
-# (pdem.domain.set_block_fields). The store's rows stay by gid (``glob.n`` is the scene's
-# block count).
-RUN_CATALOGUE = ("fixed", "out")
-# the per-block fields the timestep and mass scaling read (pdem.stages.timestep_rows)
-TIMESTEP_FIELDS = ("mass", "inertia", "radius", "fixed", "mscale")
-
 
 def needs_whole_scene(scene: Scene, comm) -> bool:
     """Whether set-up needs every block's geometry on every rank: a boundary stress finds
     the exposed faces of its blocks among all blocks (pdem.boundary), and without parallel
     h5py rank 0 writes every block's surface."""
-    from .io.writer import _h5py_has_mpi
-
     stress = bool(scene.boundary.stress) or any(st.stress for st in scene.stages)
-    return stress or (comm.size > 1 and not _h5py_has_mpi())
+    return stress or (comm.size > 1 and not h5py_has_mpi())
 
 
 def build_share(comm, n: int) -> tuple[int, int]:
     """The gids ``[lo, hi)`` whose store this rank builds at set-up: an even share, the
-    output writer's (pdem.io.writer.writer_range with parallel h5py)."""
-    from .io.writer import _share
-
-    return _share(comm.rank, comm.size, n)
+    output writer's (pdem.io.layout.writer_range with parallel h5py)."""
+    return even_share(comm.rank, comm.size, n)
 
 
 def scene_catalogue(comm, share) -> BlockStore:
@@ -112,8 +83,6 @@ def zoned_grids(scene: Scene, comm, specs, first_gid: int):
     """The grids of the zoned blocks among ``specs`` (None for a scene without ``zones``)."""
     if not any(b.zones is not None for b in scene.blocks):
         return None
-    from .deformable.store import GridStore
-
     return GridStore.build(scene, specs, first_gid)
 
 
@@ -163,7 +132,7 @@ class ModelState:
                                            held=held_width(scene.solve.inactive is not None))
         self.halo = None
         self.cells = None
-        self.estimate = None  # pre-flight cost estimate (pdem.config.preflight), set by create
+        self.estimate = None  # pre-flight cost estimate (pdem.preflight), set by create
         self.check_overlaps = False  # refuse blocks overlapping at start (Stepper.start)
         # keep the whole scene's geometry after set-up (pdem check's report; Simulation)
         self.keep_scene_geometry = False
@@ -193,7 +162,7 @@ class ModelState:
         :meth:`distribute_initial`. ``whole`` (or a scene that reads every block's faces, see
         :func:`needs_whole_scene`): every rank builds every block, as ``pdem check`` does."""
         map_large_blocks()  # arrays freed during set-up go back to the system (pdem.memory)
-        configure_waits(comm)  # oversubscribed ranks sleep while they wait (pdem.parallel.mpi)
+        configure_waits(comm)  # oversubscribed ranks sleep while they wait (pdem.mpi)
         # refuse a scene too large for the machine before its blocks exist (docs/limits.md);
         # the smallest node's memory, so that every rank refuses alike (no rank left waiting)
         memory = min(allgather(comm, machine_memory()))
@@ -255,8 +224,6 @@ class ModelState:
 
     def empty_contacts(self) -> ContactStore:
         """A store of no contacts with this scene's sub-contact columns."""
-        from .deformable.store import GRID_WIDTH
-
         return ContactStore.empty(self.joints.hist_width,
                                   GRID_WIDTH if self.grids is not None else 0,
                                   held_width(self.scene.solve.inactive is not None))
@@ -326,9 +293,6 @@ class ModelState:
         """After the first distribution from the scene's store: take the output writer's
         share of the surfaces, then drop the rest of the scene's geometry (the start's
         contact search and first update then run without it: the set-up's peak)."""
-        from .io.writer import writer_range
-        from .plugins.output import body_surfaces
-
         if self.glob.has_geometry and self.output_surfaces:  # else from the build share
             lo, hi = writer_range(self.comm, self.glob.n)
             self.writer_mesh = body_surfaces(self.glob, lo, hi)
@@ -377,8 +341,6 @@ class ModelState:
         after), with what set-up changed on the scene's per-block fields since it was built
         (boundary conditions, mass scaling, a restart's removed blocks); the output writer
         takes its surfaces first (the build share is the writer's, :func:`build_share`)."""
-        from .plugins.output import body_surfaces
-
         s, self.share = self.share, None
         for k in CATALOGUE:  # the rest was set on the share itself
             if k in vars(self.glob):
@@ -539,8 +501,6 @@ class ModelState:
 
     def _reader(self, path, by_share: bool = False):
         """The checkpoint opened on every rank (collective), or one line of why not."""
-        from .io.checkpoint import CheckpointReader
-
         return self._checked(lambda: CheckpointReader(path, self.comm, by_share), path)
 
     def _checked(self, read, path):
@@ -563,8 +523,6 @@ class ModelState:
         and every rank raises alike). The first ten in contact-key order, as one rank
         checking every pair would find them; pairs of two fixed blocks (never in contact)
         are not checked."""
-        from .io.checkpoint import written_contacts
-
         c = self.contacts
         tol = self.resolved.overlap_tolerance
         bad = np.nonzero(written_contacts(self) & (c.gap < -tol))[0] if c.n else []

@@ -17,8 +17,7 @@ import math
 
 import numpy as np
 
-from . import domain
-from .config.resolve import TOUCH_FRACTION
+from . import domain, mpi
 from .contact import forces
 from .contact.detect import Planes, refresh_contacts
 from .contact.forces import contact_energies, contact_forces
@@ -26,22 +25,24 @@ from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
 from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
 from .cycle import DONE, DROPS, MPI_FAILED, NEEDS_PYTHON, REDUCED, STEP_FLAGS, fused_steps
+from .deformable.contact import contact_forces_grid
+from .deformable.subcontacts import carry_grid_columns
 from .dynamics import motion
+from .dynamics.diagnosis import explain
 from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
+from .insitu import initialise
 from .jit import drop_linking_ir
 from .memory import large_blocks_mapped, return_freed_memory
 from .model.contacts import ContactStore, Subs, sub_columns
 from .model.csr import pair_key
 from .model.fields import row_width
-from .parallel import mpi, native
+from .parallel import native
 from .parallel.halo import halo_columns
+from .plugins.energy import energy_totals
+from .resolve import REMAP_FRACTION, TOUCH_FRACTION
 
-# u_acc trigger as a fraction of CTOL. 3DEC remaps at CTOL; at CTOL/2 no pair can close a gap
-# larger than CTOL unseen (each block moves less than CTOL/2 between searches), so a contact
-# always exists before two blocks touch.
-REMAP_FRACTION = 0.5
 NO_STEP = 2**62  # no step bound for a compiled run of steps
 # most steps taken in Python before the compiled loop is tried again, after it returned
 # after its first step again and again (Stepper.advance_many)
@@ -93,8 +94,6 @@ class Stepper:
         if s.check_overlaps:
             s.check_initial_overlaps()
         if s.scene.insitu is not None:  # joints start loaded by the in-situ stress
-            from .insitu import initialise
-
             initialise(s)
         self.compute_forces(0.0)
         b = s.blocks
@@ -203,8 +202,6 @@ class Stepper:
             s.contacts = self._kept(ContactStore(c.arrays, sub, start), keep)
             return
         # zoned blocks: sub-contacts at their surface gridpoints, found after the update
-        from .deformable.subcontacts import carry_grid_columns
-
         # the kept sub-contacts keep their gridpoints
         sub["sc_grid"] = carry_grid_columns(c.sub["sc_grid"], c.sc_start, start, todo)
         all_kept = keeps_all(keep)
@@ -269,8 +266,6 @@ class Stepper:
             contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                            b.still)
             return
-        from .deformable.contact import contact_forces_grid
-
         g.force[:] = 0.0
         contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                             g.record(b, c))
@@ -295,7 +290,7 @@ class Stepper:
     def fusable(self) -> bool:
         """Whether steps may run in one compiled call (pdem.cycle), unless ``solve.fused`` is
         off: runs without prescribed boundary motion or zoned blocks; on several ranks also
-        where the ranks spin while they wait (pdem.parallel.mpi.configure_waits), every halo
+        where the ranks spin while they wait (pdem.mpi.configure_waits), every halo
         field is float64 (not with solve.inactive) and MPI can be called from compiled code
         (pdem.parallel.native.link, collective on its first call)."""
         s = self.s
@@ -530,9 +525,6 @@ class Stepper:
     def _raise_non_finite(self, row: int):
         """Every rank raises the same SimulationError, naming the first bad block (by gid) and
         what the energy budget says made it (pdem.dynamics.diagnosis)."""
-        from .dynamics.diagnosis import explain
-        from .plugins.energy import energy_totals
-
         s = self.s
         b = s.blocks
         mine = (int(b.gid[row]), float(np.sqrt((b.v[row] ** 2).sum()))) if row >= 0 else None

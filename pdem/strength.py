@@ -27,12 +27,13 @@ import math
 
 import numpy as np
 
+from . import mpi
+from .config.stages import stage_scene
 from .contact.laws import joint_table
 from .errors import UserError
 from .model.blocks import take_rows
 from .model.fields import MIGRATE
-from .parallel import mpi
-from .stages import stage_scene
+from .plugins.checkpoints import stop_checkpoint
 
 log = logging.getLogger("pdem")
 
@@ -193,7 +194,5 @@ def factor_of_safety(run, k: int) -> dict:
                "stopped": stopped, "checkpoint": None, "factor": factor, "bounded": bounded,
                "trials": trials, "mechanism": mechanism, "block_safety": safety}
     if stopped:
-        from .plugins.checkpoints import stop_checkpoint
-
         summary["checkpoint"] = stop_checkpoint(run)
     return summary

@@ -1,6 +1,7 @@
 """Scene files: schema, loading and error messages with key paths."""
 
-from .load import ConfigError, dump_scene, load_scene, parse_scene
+from .errors import ConfigError
+from .load import dump_scene, load_scene, parse_scene
 from .schema import Scene
 
 __all__ = ["ConfigError", "Scene", "dump_scene", "load_scene", "parse_scene"]

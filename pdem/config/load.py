@@ -10,20 +10,9 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from ..errors import UserError
+from ..contact.laws import JOINT_LAWS
+from .errors import ConfigError
 from .schema import Scene
-
-
-class ConfigError(UserError, ValueError):
-    """A scene file that cannot be used; ``str()`` is the message shown to the user."""
-
-    def __init__(self, messages: list[str], source: str = "scene"):
-        self.messages = messages
-        self.source = source
-        super().__init__(f"{source}: invalid scene\n" + "\n".join(f"  - {m}" for m in messages))
-
-    def __reduce__(self):  # pickled by its messages (sent between ranks, pdem.parallel.mpi)
-        return type(self), (self.messages, self.source)
 
 
 def _line_index(text: str) -> dict[tuple, int]:
@@ -87,8 +76,6 @@ def _unwrap(annotation):
 def _law_tag(loc: tuple) -> str | None:
     """The joint-law tag pydantic puts after ``joints.NAME`` (the discriminated union of the
     registered laws' parameters), or None."""
-    from ..contact.laws import JOINT_LAWS
-
     if len(loc) > 2 and loc[0] == "joints" and loc[2] in JOINT_LAWS:
         return str(loc[2])
     return None
@@ -114,8 +101,6 @@ def _messages(err: ValidationError, lines: dict[tuple, int]) -> list[str]:
         line = lines.get(loc) or lines.get(loc[:-1]) if loc else None
         if e["type"] == "extra_forbidden":
             if tag is not None and len(loc) == 3:
-                from ..contact.laws import JOINT_LAWS
-
                 model = JOINT_LAWS[tag].params
             else:
                 model = _model_at(loc[:-1])

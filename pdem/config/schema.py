@@ -12,14 +12,18 @@ from pydantic import (
     PositiveInt,
     PrivateAttr,
     Tag,
+    ValidationError,
     field_validator,
     model_serializer,
     model_validator,
 )
 
 from ..contact.algorithms import ALGORITHMS
+from ..contact.laws import JOINT_LAWS
+from ..deformable.constitutive import ZONE_MODELS
 from ..dynamics.damping import DAMPING
 from ..strict import Strict
+from .sizes import parse_bytes
 
 # Hard bounds where double precision, not physics, ends (docs/limits.md): products of a few
 # such numbers (a volume, an inertia, a kinetic energy) stay finite. A coordinate or length
@@ -66,10 +70,6 @@ class Material(Strict):
                              "deformable blocks)")
         if self.poisson is None:
             raise ValueError("poisson: needed with young")
-        from pydantic import ValidationError
-
-        from ..deformable.constitutive import ZONE_MODELS
-
         try:
             model = ZONE_MODELS[self.model or "elastic"]
         except KeyError as exc:
@@ -102,8 +102,6 @@ class Material(Strict):
 
 def _joint_law_union():
     """The union of the registered joint laws' parameter models, told apart by ``model``."""
-    from ..contact.laws import JOINT_LAWS
-
     models = tuple(law.params for law in JOINT_LAWS.values())
     if len(models) == 1:
         return models[0]
@@ -777,8 +775,6 @@ class Limits(Strict):
     @classmethod
     def _size(cls, v):
         if v != "auto":
-            from .preflight import parse_bytes
-
             parse_bytes(v)
         return v
 

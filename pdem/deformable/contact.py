@@ -36,7 +36,7 @@ Grid = namedtuple("Grid", "dindex vel force sc_node sc_w")
 
 
 @inline_kernel
-def _closest_on_triangle(px, py, pz, a, b, c):
+def closest_on_triangle(px, py, pz, a, b, c):
     """Barycentric weights (wa, wb, wc) of the point of triangle abc closest to p, and the
     squared distance (Ericson, Real-Time Collision Detection 5.1.5)."""
     abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
@@ -105,7 +105,7 @@ def locate(ia, ib, ka, kb, sc_start, pa, x, R, face_start, fvert_start, face_ver
                     n0 = vnode[face_verts[j]]
                     n1 = vnode[face_verts[j + 1]]
                     n2 = vnode[face_verts[j + 2]]
-                    wa, wb, wc, d2 = _closest_on_triangle(px, py, pz, nodes[n0], nodes[n1],
+                    wa, wb, wc, d2 = closest_on_triangle(px, py, pz, nodes[n0], nodes[n1],
                                                           nodes[n2])
                     if d2 < best:
                         best = d2

@@ -18,93 +18,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.polyhedron import ConvexPolyhedron
+from ..mpi import allgather, gather
+from ..parallel.halo import RowHalo
 from .body import DeformableBody
-from .mesh import tetrahedralise
-from .motion import critical_timestep, scaled_masses
-from .zones import gravity_forces
-
-
-def surface_polyhedron(poly: ConvexPolyhedron, mesh) -> tuple[ConvexPolyhedron, np.ndarray]:
-    """The block as its surface grid: vertices the surface gridpoints (ascending node id),
-    faces the surface triangles (in ``mesh.surface`` order) on their block face's exact plane.
-    Returns (polyhedron, surface node ids)."""
-    surf_nodes = np.unique(mesh.surface)
-    tris = np.searchsorted(surf_nodes, mesh.surface)
-    normals = np.asarray(poly.normals)[mesh.surface_face]
-    offsets = np.asarray(poly.offsets)[mesh.surface_face]
-    return ConvexPolyhedron.from_faces(mesh.nodes[surf_nodes], list(tris), normals, offsets), \
-        surf_nodes
-
-
-def zone_specs(scene, specs) -> None:
-    """Zone every zoned block's shape (``blocks[i].zones``): its spec's one piece becomes the
-    surface polyhedron, ``spec.zoning`` the (mesh, surface node ids). Specs without pieces
-    (outside a build share) are left alone."""
-    from ..config import ConfigError
-
-    errors = []
-    for s in specs:
-        z = s.spec.zones
-        if z is None or s.pieces is None:
-            continue
-        if len(s.pieces) != 1:
-            errors.append(f"blocks[{s.entry}] ({s.name!r}).zones: the block is joined from "
-                          f"{len(s.pieces)} convex pieces; zoned blocks must be convex yet")
-            continue
-        mesh = tetrahedralise(s.pieces[0], z.size)
-        poly, surf = surface_polyhedron(s.pieces[0], mesh)
-        s.pieces = [poly]
-        s.zoning = (mesh, surf)
-    if errors:
-        raise ConfigError(errors)
-
-
-def identity_frames(geometry: dict, arr: dict, specs) -> None:
-    """Zoned rows of a freshly built store: pose the identity (the body frame is the world
-    frame shifted to the centroid), piece geometry in that frame, and every edge its own
-    direction (the fast common plane's directions; merging parallel ones would change their
-    count as the surface deforms)."""
-    g = geometry
-    dirs, counts = [], []
-    for r, s in enumerate(specs):
-        k = g["piece_start"][r]
-        e0, e1 = g["edge_start"][k], g["edge_start"][k + 1]
-        if getattr(s, "zoning", None) is None:
-            dirs.append(g["edirs_local"][g["edir_start"][k]:g["edir_start"][k + 1]])
-            counts.append(len(dirs[-1]))
-            continue
-        poly = s.pieces[0]
-        c = arr["x"][r]
-        v0, v1 = g["vert_start"][k], g["vert_start"][k + 1]
-        f0, f1 = g["face_start"][k], g["face_start"][k + 1]
-        g["verts_local"][v0:v1] = poly.vertices - c
-        g["normals_local"][f0:f1] = poly.normals
-        g["offsets_local"][f0:f1] = poly.offsets - poly.normals @ c
-        arr["q"][r] = (1.0, 0.0, 0.0, 0.0)
-        ends = g["verts_local"][g["edges"][e0:e1]]
-        d = ends[:, 1] - ends[:, 0]
-        dirs.append(d / np.linalg.norm(d, axis=1)[:, None])
-        counts.append(e1 - e0)
-    # one-piece blocks only reach here with zones (joined zoned blocks are refused)
-    g["edirs_local"] = np.concatenate(dirs).reshape(-1, 3) if dirs else g["edirs_local"]
-    g["edir_start"] = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-
+from .columns import TRI, W
+from .contact import Grid, refresh_pieces
+from .motion import critical_timestep, cycle, scaled_masses
+from .subcontacts import regrid
+from .zones import gravity_forces, zone_geometry
 
 # margin under the grids' Gershgorin step (a guaranteed bound of the elastic grid with its
 # joint springs; the margin covers the coupling to rigid blocks through their contacts)
 GRID_FRAC = 0.9
-
-
-# columns of the sub-contacts' ``sc_grid`` (scenes with zoned blocks only): the block-local
-# gridpoint of the zoned side the sub-contact sits at (-1: none), then for side A and side B
-# the block-local gridpoints of the surface triangle it lies on and their weights (a rigid
-# side's are unused). Block-local, so that they travel with the contact between ranks and
-# into checkpoints; :meth:`GridStore.record` turns them into the flat indices the kernel reads.
-GRID_WIDTH = 13
-_GNODE = 0
-_TRI = (slice(1, 4), slice(7, 10))
-_W = (slice(4, 7), slice(10, 13))
 
 
 class ZonedGrid:
@@ -231,8 +156,6 @@ class GridStore:
         Gershgorin step is a bound."""
         import dataclasses
 
-        from ..parallel.mpi import allgather
-
         self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
         if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
@@ -272,8 +195,6 @@ class GridStore:
         """The per-step forward of the ghost grids' gridpoints (positions and velocities),
         along the blocks' halo plan (``halo.send``/``halo.recv``: rows in gid order on both
         sides)."""
-        from ..parallel.halo import RowHalo
-
         def nodes_of(rows):
             d = self.dindex[rows]
             d = d[d >= 0]
@@ -294,8 +215,6 @@ class GridStore:
     def regrid(self, old, new, todo, b, tol):
         """Sub-contacts of the updated contacts of zoned blocks at their gridpoints
         (:func:`pdem.deformable.subcontacts.regrid`)."""
-        from .subcontacts import regrid
-
         return regrid(self, old, new, todo, b, tol)
 
     def rigid_fixed(self, fixed: np.ndarray) -> np.ndarray:
@@ -308,8 +227,6 @@ class GridStore:
     def sync(self, b, ghosts: bool = False) -> None:
         """Block rows and piece geometry from the gridpoints: of the owned grids (after a
         grid step) or of the ghosts (after their forward)."""
-        from .contact import refresh_pieces
-
         part = slice(self.n_owned, None) if ghosts else slice(0, self.n_owned)
         rows = self.rows[part]
         if not len(rows):
@@ -328,8 +245,6 @@ class GridStore:
         """The contact kernel's :class:`~pdem.deformable.contact.Grid`: the sub-contacts'
         gridpoints (flat) and weights from their ``sc_grid`` columns, turned afresh when the
         contact store changed."""
-        from .contact import Grid
-
         if self.located is not contacts:
             g = contacts.sub["sc_grid"]
             counts = np.diff(contacts.sc_start)
@@ -341,9 +256,9 @@ class GridStore:
                 zoned = d >= 0
                 base = np.where(zoned, self.node_start[np.maximum(d, 0)], 0)
                 self.sc_node[:, side] = np.where(zoned[:, None],
-                                                 g[:, _TRI[side]].astype(np.int64)
+                                                 g[:, TRI[side]].astype(np.int64)
                                                  + base[:, None], 0)
-                self.sc_w[:, side] = np.where(zoned[:, None], g[:, _W[side]], 0.0)
+                self.sc_w[:, side] = np.where(zoned[:, None], g[:, W[side]], 0.0)
             self.located = contacts
         return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w)
 
@@ -376,8 +291,6 @@ class GridStore:
         """What :meth:`write` writes of this rank's owned grids (collective): the table of
         every writing rank's grids (gid, gridpoint and zone counts) and this rank's arrays;
         on one writer (``parallel`` False, several ranks) rank 0 gets every rank's arrays."""
-        from ..parallel.mpi import allgather, gather
-
         own = range(self.n_owned)
         mine = {"gid": np.array([self.gids[d] for d in own], np.int64),
                 "n_nodes": np.array([len(self.bodies[d].nodes) for d in own], np.int64),
@@ -431,8 +344,6 @@ class GridStore:
         the ranks by the restore) if the file has no such grids."""
         import h5py
 
-        from .zones import zone_geometry
-
         with h5py.File(path, "r") as f:
             if "grids" not in f or "n_nodes" not in f["grids"]:
                 raise ValueError("no grids of this scene's zoned blocks (a checkpoint of "
@@ -459,7 +370,5 @@ class GridStore:
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:
-    from .motion import cycle
-
     return cycle(1, dt, b.nodes, b.vel, b.mass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
                  b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping, b.unbalanced)

@@ -37,8 +37,8 @@ import numpy as np
 from ..jit import kernel
 from ..model import csr
 from ..model.contacts import ContactStore
-from .contact import _closest_on_triangle
-from .store import _GNODE, _TRI, _W
+from .columns import GNODE, TRI, W
+from .contact import closest_on_triangle, locate
 
 
 @kernel
@@ -91,7 +91,7 @@ def _triangle_outside(p, tris, normals, offsets):
     best = np.inf
     out = 0.0
     for t in range(tris.shape[0]):
-        _, _, _, d2 = _closest_on_triangle(p[0], p[1], p[2], tris[t, 0], tris[t, 1],
+        _, _, _, d2 = closest_on_triangle(p[0], p[1], p[2], tris[t, 0], tris[t, 1],
                                            tris[t, 2])
         if d2 < best:
             best = d2
@@ -145,7 +145,7 @@ def carry_grid_columns(old: np.ndarray, old_start: np.ndarray, start: np.ndarray
     their sub-contacts and so their columns; the updated ones' are void (-1 gridpoint) until
     :func:`regrid` sets those of the zoned blocks' contacts."""
     out = np.zeros((int(start[-1]), old.shape[1]))
-    out[:, _GNODE] = -1.0
+    out[:, GNODE] = -1.0
     kept = np.nonzero(todo == 0)[0]
     src, _ = csr.take(old_start, kept)
     dst, _ = csr.take(start, kept)
@@ -202,11 +202,11 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
         for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist", "sc_grid"):
             a = new.sub[k]
             sub[k] = np.zeros((m,) + a.shape[1:], a.dtype)
-        sub["sc_grid"][:, _GNODE] = nodes
+        sub["sc_grid"][:, GNODE] = nodes
         j = int(np.searchsorted(old_keys, keys[c]))
         if j < old.n and old_keys[j] == keys[c]:
             o0, o1 = old.sc_start[j], old.sc_start[j + 1]
-            where = {int(g): o0 + i for i, g in enumerate(old_grid[o0:o1, _GNODE]) if g != -1}
+            where = {int(g): o0 + i for i, g in enumerate(old_grid[o0:o1, GNODE]) if g != -1}
             for i, g in enumerate(nodes):
                 s = where.get(int(g))
                 if s is not None:
@@ -254,8 +254,6 @@ def _corners_into(grid, b, ro, ko, rd, kd, u, tol):
 def _locate(grid, c: ContactStore, redo: np.ndarray, b) -> None:
     """The triangles and weights (``sc_grid``) of the sub-contacts of the contacts ``redo``
     on their zoned sides, at the gridpoints now."""
-    from .contact import locate
-
     n = c.n_sub
     sc_node = np.zeros((n, 2, 3), np.int64)
     sc_w = np.zeros((n, 2, 3))
@@ -270,5 +268,5 @@ def _locate(grid, c: ContactStore, redo: np.ndarray, b) -> None:
         d = grid.dindex[blk[rows]]
         zoned = done & (d >= 0)
         base = grid.node_start[np.maximum(d, 0)]
-        g[zoned, _TRI[side]] = (sc_node[zoned, side] - base[zoned, None]).astype(float)
-        g[zoned, _W[side]] = sc_w[zoned, side]
+        g[zoned, TRI[side]] = (sc_node[zoned, side] - base[zoned, None]).astype(float)
+        g[zoned, W[side]] = sc_w[zoned, side]

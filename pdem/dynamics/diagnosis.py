@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..parallel.mpi import allgather
+from ..mpi import allgather
 
 
 def deepest_contact(state, gid: int):

@@ -462,7 +462,7 @@ def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, spe
     blocks (0 if none).
 
     ``max_step``: the motion per step the contact search can follow. The search runs after
-    the step in which a block's ``u_acc`` passes CTOL/2 (pdem.stepper.REMAP_FRACTION), so a
+    the step in which a block's ``u_acc`` passes CTOL/2 (pdem.resolve.REMAP_FRACTION), so a
     pair not yet in contact can overlap by at most the step's motion before its contact exists;
     a block moving more in one step can land inside or beyond a thin block unseen (tunnelling,
     tests/extremes/test_extreme_impact.py). The stepper passes ``state.max_step``

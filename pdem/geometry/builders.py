@@ -7,7 +7,7 @@ from itertools import combinations
 import numpy as np
 
 from pdem.geometry.errors import GeometryError
-from pdem.geometry.hull import _hull_faces, convex_hull, default_tolerance
+from pdem.geometry.hull import convex_hull, default_tolerance, hull_faces
 from pdem.geometry.polyhedron import ConvexPolyhedron, newell_normal
 
 # Box faces over corner ids (bit 0 = x, bit 1 = y, bit 2 = z), CCW seen from outside.
@@ -19,7 +19,7 @@ _BOX_FACES = [
     [0, 2, 3, 1],  # -z
     [4, 5, 7, 6],  # +z
 ]
-_BOX_NORMALS = np.array(
+BOX_NORMALS = np.array(
     [[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]], dtype=np.float64
 )
 
@@ -47,7 +47,7 @@ def box(lo, hi) -> ConvexPolyhedron:
     bits = (np.arange(8)[:, None] >> np.arange(3)) & 1
     verts = np.where(bits == 1, hi, lo)
     offsets = np.concatenate([[-lo[0], hi[0], -lo[1], hi[1], -lo[2], hi[2]]])
-    return ConvexPolyhedron.from_faces(verts, _BOX_FACES, _BOX_NORMALS, offsets)
+    return ConvexPolyhedron.from_faces(verts, _BOX_FACES, BOX_NORMALS, offsets)
 
 
 def from_vertices(points, tol: float | None = None) -> ConvexPolyhedron:
@@ -137,7 +137,7 @@ def from_planes(normals, offsets, bounds=None) -> ConvexPolyhedron:
     N, d = N / nrm[:, None], d / nrm
     if bounds is not None:
         lo, hi = (np.asarray(b, dtype=np.float64).reshape(3) for b in bounds)
-        N = np.concatenate([N, _BOX_NORMALS])
+        N = np.concatenate([N, BOX_NORMALS])
         d = np.concatenate([d, [-lo[0], hi[0], -lo[1], hi[1], -lo[2], hi[2]]])
     m_user = len(N)
     # A large box around everything turns "unbounded" into "touches the big box", which can
@@ -145,7 +145,7 @@ def from_planes(normals, offsets, bounds=None) -> ConvexPolyhedron:
     # intersection, so it never cuts a bounded polyhedron.
     pts = _triple_points(N, d)
     big = 10.0 * max(np.abs(pts).max() if len(pts) else 0.0, np.abs(d).max(), 1.0)
-    N = np.concatenate([N, _BOX_NORMALS])
+    N = np.concatenate([N, BOX_NORMALS])
     d = np.concatenate([d, np.full(6, big)])
     dscale = float(np.abs(d[:m_user]).max())
     pts = _triple_points(N, d)
@@ -157,7 +157,7 @@ def from_planes(normals, offsets, bounds=None) -> ConvexPolyhedron:
     if len(feas) < 4:
         raise GeometryError("half-space intersection is empty or has zero volume")
     try:
-        used, faces, _ = _hull_faces(feas, None)
+        used, faces, _ = hull_faces(feas, None)
     except GeometryError as exc:
         raise GeometryError(f"half-space intersection has zero volume ({exc})") from exc
     v = feas[used]

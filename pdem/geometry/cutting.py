@@ -23,9 +23,9 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from pdem.geometry.builders import _BOX_NORMALS
+from pdem.geometry.builders import BOX_NORMALS
 from pdem.geometry.errors import GeometryError
-from pdem.geometry.hull import _hull_faces, default_tolerance
+from pdem.geometry.hull import default_tolerance, hull_faces
 from pdem.geometry.polyhedron import ConvexPolyhedron
 from pdem.jit import kernel
 
@@ -214,7 +214,7 @@ class _Cut:
         kept = np.concatenate(
             [np.flatnonzero(side <= 0), nv + np.flatnonzero(~np.isnan(self.points[nv:, 0]))]
         )
-        used, faces, _ = _hull_faces(self.points[kept], None)
+        used, faces, _ = hull_faces(self.points[kept], None)
         v = self.points[kept][used]
         cand_n = np.concatenate([poly.normals, n[None, :]])
         cand_d = np.concatenate([poly.offsets, [d]])
@@ -606,7 +606,7 @@ def box_planes(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     hi = np.asarray(hi, dtype=np.float64).reshape(3)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(hi <= lo):
         raise GeometryError(f"box needs finite lo < hi in every axis, got lo={lo}, hi={hi}")
-    return _BOX_NORMALS.copy(), np.array([-lo[0], hi[0], -lo[1], hi[1], -lo[2], hi[2]])
+    return BOX_NORMALS.copy(), np.array([-lo[0], hi[0], -lo[1], hi[1], -lo[2], hi[2]])
 
 
 def cylinder_planes(start, end, radius: float, sides: int = 16) -> tuple[np.ndarray, np.ndarray]:

@@ -290,7 +290,7 @@ def _merge_faces(hull: _TriHull, tol: float) -> tuple[list[list[int]], set[int]]
     return polys, dropped
 
 
-def _hull_faces(points, tol: float | None) -> tuple[np.ndarray, list[list[int]], float]:
+def hull_faces(points, tol: float | None) -> tuple[np.ndarray, list[list[int]], float]:
     """Hull of ``points``: used point indices (ascending) and faces over those indices."""
     p0 = _as_points(points)
     tol = default_tolerance(p0) if tol is None else float(tol)
@@ -345,13 +345,13 @@ def convex_hull(points, tol: float | None = None) -> ConvexPolyhedron:
         Fewer than 4 points, NaN/inf, or all points coincident/collinear/coplanar.
     """
     p = _as_points(points)
-    used, faces, _ = _hull_faces(p, tol)
+    used, faces, _ = hull_faces(p, tol)
     return ConvexPolyhedron.from_faces(p[used], faces)
 
 
 def hull_vertex_indices(points, tol: float | None = None) -> np.ndarray:
     """Indices (ascending) of the input points that are vertices of the convex hull."""
-    return _hull_faces(points, tol)[0]
+    return hull_faces(points, tol)[0]
 
 
 def check_convex(points, tol: float | None = None, boundary: bool = False) -> np.ndarray:
@@ -380,7 +380,7 @@ def check_convex(points, tol: float | None = None, boundary: bool = False) -> np
     """
     p = _as_points(points)
     tol = default_tolerance(p) if tol is None else float(tol)
-    used, faces, _ = _hull_faces(p, tol)
+    used, faces, _ = hull_faces(p, tol)
     if boundary:
         return np.setdiff1d(np.arange(len(p)), used).astype(np.int64)
     poly = ConvexPolyhedron.from_faces(p[used], faces)

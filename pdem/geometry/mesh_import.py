@@ -42,7 +42,7 @@ import numpy as np
 
 from pdem.geometry.cell_planes import cell_planes, template
 from pdem.geometry.errors import GeometryError
-from pdem.geometry.polyhedron import ConvexPolyhedron, _face_area_vectors
+from pdem.geometry.polyhedron import ConvexPolyhedron, face_area_vectors
 
 # Relative tolerance: a face node may lie this fraction of the cell's bounding-box diagonal
 # off its face plane (or outside another face's plane) and still count as on it. Loose
@@ -217,7 +217,7 @@ def cell_polyhedron(
     face_start = np.concatenate([[0], np.cumsum(counts)])
     fv = np.concatenate([np.asarray(loop, dtype=np.int64) for loop in loops])
     face_of = np.repeat(np.arange(len(loops)), counts)
-    area_vec = _face_area_vectors(v, face_start, fv)  # Newell: 2 * area * unit normal
+    area_vec = face_area_vectors(v, face_start, fv)  # Newell: 2 * area * unit normal
     area2 = np.linalg.norm(area_vec, axis=1)
     bad = np.flatnonzero(area2 <= 2.0 * tol * diag)  # area below a tol-wide sliver's
     if bad.size:

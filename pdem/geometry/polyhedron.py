@@ -38,7 +38,7 @@ def newell_normal(points: np.ndarray) -> np.ndarray:
     return cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
 
 
-def _face_area_vectors(v: np.ndarray, face_start: np.ndarray, face_verts: np.ndarray):
+def face_area_vectors(v: np.ndarray, face_start: np.ndarray, face_verts: np.ndarray):
     """``2 * area * unit normal`` of every face, from its triangle fan (vectorised Newell)."""
     tri = fan_triangles(face_start, face_verts)
     a = v[tri[:, 0]]
@@ -182,7 +182,7 @@ class ConvexPolyhedron:
                 raise GeometryError("face vertex id out of range")
             edges = build_half_edges(len(v), face_start, face_verts).edges
         if normals is None:
-            n = _face_area_vectors(v, face_start, face_verts)
+            n = face_area_vectors(v, face_start, face_verts)
             norm = np.linalg.norm(n, axis=1)
             if np.any(norm == 0.0):
                 raise GeometryError("a face has zero area")

@@ -32,7 +32,8 @@ from ..model.fields import (
     SUB_HIST,
     select,
 )
-from ..parallel.mpi import allgather, barrier, gather
+from ..mpi import allgather, barrier, gather
+from .layout import even_share
 
 FORMAT = "checkpoint"
 # 2: contact rows (ia, ib) no longer stored, joint-law history columns (subcontacts/sc_hist),
@@ -329,9 +330,7 @@ class CheckpointReader:
     def contact_share(self, rank: int, size: int) -> tuple[int, int, np.ndarray]:
         """Rank ``rank``'s contiguous share ``[c0, c1)`` of the contact rows and their
         sub-contact counts (checked): what it reads of the contacts (:meth:`contact_range`)."""
-        from .writer import _share
-
-        c0, c1 = _share(rank, size, self.n_contacts)
+        c0, c1 = even_share(rank, size, self.n_contacts)
         return c0, c1, self._counts(c0, c1)
 
     def contact_blocks(self, c0: int, c1: int) -> dict[str, np.ndarray]:

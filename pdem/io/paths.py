@@ -7,7 +7,7 @@ import os
 import tempfile
 
 from ..errors import UserError
-from ..parallel.mpi import broadcast
+from ..mpi import broadcast
 
 
 def _problem(path: str) -> str | None:

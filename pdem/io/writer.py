@@ -7,7 +7,7 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import h5py
 import numpy as np
@@ -17,6 +17,9 @@ from mpi4py import MPI
 from ..dynamics.kinematics import rotation_matrices
 from ..model.fields import OUTPUT, row_width
 from . import joints
+from . import layout as row_layout
+from .layout import even_share
+from .surfaces import BodyMesh
 from .xdmf import CELL_FIELDS, CONTACT_VIEWED, SUB_VIEWED, VIEWED_SERIES, view_path, write_xdmf
 from .zones import POINT_SERIES, ZONE_SERIES, ZONE_VIEWED, ZoneLayout, zone_layout, zone_values
 
@@ -52,10 +55,6 @@ def _cols(rows: np.ndarray, name: str) -> np.ndarray:
     return rows[:, col:col + w]
 
 
-def _h5py_has_mpi() -> bool:
-    return bool(h5py.get_config().mpi)
-
-
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(n, 3, 3)`` of unit quaternions ``(n, 4)`` ``(w, x, y, z)``.
 
@@ -66,76 +65,6 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     R = np.empty((len(q), 3, 3))
     rotation_matrices(q, R)
     return R
-
-
-def _share(rank: int, size: int, n: int) -> tuple[int, int]:
-    """Contiguous share ``[lo, hi)`` of ``n`` rows for ``rank``."""
-    return rank * n // size, (rank + 1) * n // size
-
-
-class BodyMesh(NamedTuple):
-    """Every block's surface in its body frame, flat: vertices ``verts[vert_start[b]:
-    vert_start[b+1]]``; faces in block order, ``face_len`` vertex ids each (block-local,
-    counter-clockwise from outside) in ``face_verts``, ``face_block`` the block of each."""
-
-    vert_start: np.ndarray
-    verts: np.ndarray
-    face_len: np.ndarray
-    face_block: np.ndarray
-    face_verts: np.ndarray
-
-    @staticmethod
-    def from_lists(body_vertices, body_faces) -> BodyMesh:
-        """From per-block vertex arrays and face lists (checked: shapes)."""
-        verts = [np.asarray(v, dtype=np.float64) for v in body_vertices]
-        for b, v in enumerate(verts):
-            if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
-                raise ValueError(f"body_vertices[{b}]: shape {v.shape}, expected (nv, 3)")
-        nv = np.array([len(v) for v in verts], dtype=np.int64)
-        face_len = np.array([len(f) for faces in body_faces for f in faces], dtype=np.int64)
-        face_block = np.repeat(np.arange(len(body_faces)), [len(faces) for faces in body_faces])
-        flat = np.fromiter(
-            (i for faces in body_faces for f in faces for i in f), np.int64, int(face_len.sum())
-        )
-        mesh = BodyMesh(np.concatenate([[0], np.cumsum(nv)]).astype(np.int64),
-                        np.concatenate(verts) if verts else np.zeros((0, 3)), face_len,
-                        face_block.astype(np.int64), flat)
-        bad = mesh.bad_face()
-        if bad is not None:
-            b = int(face_block[bad])
-            k = bad - int(np.searchsorted(face_block, b))
-            raise ValueError(f"body_faces[{b}][{k}] = {list(body_faces[b][k])}: need >= 3 "
-                             f"vertex ids < {nv[b]}")
-        return mesh
-
-    def blocks(self, lo: int, hi: int) -> BodyMesh:
-        """The surfaces of blocks ``lo .. hi-1`` (block and vertex ids from 0)."""
-        f0, f1 = np.searchsorted(self.face_block, [lo, hi])
-        fv = np.concatenate([[0], np.cumsum(self.face_len)])
-        v0, v1 = self.vert_start[lo], self.vert_start[hi]
-        return BodyMesh(self.vert_start[lo:hi + 1] - v0, self.verts[v0:v1],
-                        self.face_len[f0:f1], self.face_block[f0:f1] - lo,
-                        self.face_verts[fv[f0]:fv[f1]])
-
-    def bad_face(self) -> int | None:
-        """The first face with fewer than 3 vertices or a vertex id outside its block's."""
-        nv = np.diff(self.vert_start)
-        vert_block = np.repeat(self.face_block, self.face_len)
-        bad = self.face_len < 3
-        bad_v = (self.face_verts < 0) | (self.face_verts >= nv[vert_block])
-        if bad.any() or bad_v.any():
-            bad |= np.bincount(np.repeat(np.arange(len(self.face_len)), self.face_len), bad_v,
-                               len(bad)) > 0
-            return int(np.flatnonzero(bad)[0])
-        return None
-
-
-def writer_range(comm, n: int) -> tuple[int, int]:
-    """The gids ``[lo, hi)`` whose surfaces this rank's OutputWriter assembles and writes (an
-    even share; in the fallback without parallel h5py, rank 0 all of them)."""
-    if _h5py_has_mpi():
-        return _share(comm.rank, comm.size, n)
-    return (0, n) if comm.rank == 0 else (n, n)
 
 
 def _fan_triangulate(mesh: BodyMesh) -> tuple[np.ndarray, np.ndarray]:
@@ -280,7 +209,7 @@ class OutputWriter:
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
         self.comm = comm
         rank, size = comm.rank, comm.size
-        has_mpi = _h5py_has_mpi()
+        has_mpi = row_layout.h5py_has_mpi()
         if parallel is None:
             parallel = has_mpi
             if not has_mpi and rank == 0:
@@ -301,7 +230,7 @@ class OutputWriter:
         # Rank r assembles and writes gids [bounds[r], bounds[r+1]); in the fallback, rank 0
         # holds them all.
         if self.parallel:
-            self._bounds = np.array([_share(r, size, n)[0] for r in range(size)] + [n])
+            self._bounds = np.array([even_share(r, size, n)[0] for r in range(size)] + [n])
         else:
             self._bounds = np.array([0] + [n] * size)
         self._lo, self._hi = int(self._bounds[rank]), int(self._bounds[rank + 1])
@@ -380,7 +309,7 @@ class OutputWriter:
             self._write_texts(g, key, texts)
         # gid and block_id from the rank's rows alone: an arange of every block was the
         # writer's one O(N) array on every rank (8 bytes a block)
-        lo, hi = _share(self.comm.rank, self.comm.size, n) if self.parallel else (0, n)
+        lo, hi = even_share(self.comm.rank, self.comm.size, n) if self.parallel else (0, n)
         self._write(g.create_dataset("gid", (n,), dtype=np.int64), (lo,), np.arange(lo, hi))
         self._series = {fd.output: series(f"blocks/{fd.output}", (n, *fd.shape), fd.dtype)
                         for fd in OUTPUT}
@@ -426,7 +355,7 @@ class OutputWriter:
         if width is None:
             width = max(len(str(t).encode("utf-8")) for t in texts)
         dset = group.create_dataset(key, (n,), dtype=h5py.string_dtype("utf-8", max(1, width)))
-        lo, hi = _share(self.comm.rank, self.comm.size, n) if self.parallel else (0, n)
+        lo, hi = even_share(self.comm.rank, self.comm.size, n) if self.parallel else (0, n)
         mine = np.array([str(texts[i]).encode("utf-8") for i in range(lo, hi)],
                         dtype=f"S{max(1, width)}")
         self._write(dset, (lo,), mine)
@@ -434,7 +363,7 @@ class OutputWriter:
     def _write_static(self, dset: h5py.Dataset, data: np.ndarray) -> None:
         """Each rank writes its contiguous share of the rows of a dataset all ranks know."""
         if self.parallel:
-            lo, hi = _share(self.comm.rank, self.comm.size, len(data))
+            lo, hi = even_share(self.comm.rank, self.comm.size, len(data))
         else:
             lo, hi = 0, len(data)
         self._write(dset, (lo,) + (0,) * (data.ndim - 1), data[lo:hi])
@@ -805,7 +734,7 @@ class OutputWriter:
         if need > self._pool:
             pool = f["xdmf/index"]
             pool.resize(need, axis=0)
-            lo, hi = _share(self.comm.rank, self.comm.size, need - self._pool) if self.parallel \
+            lo, hi = even_share(self.comm.rank, self.comm.size, need - self._pool) if self.parallel \
                 else (0, need - self._pool)
             self._write(pool, (self._pool + lo,), np.arange(self._pool + lo, self._pool + hi))
             self._pool = need

@@ -66,7 +66,7 @@ class BlockStore:
     @classmethod
     def catalogue(cls, arrays: dict[str, np.ndarray]) -> BlockStore:
         """A store of the given per-block fields only (no others allocated, no geometry):
-        the scene's fields every rank keeps for every block (pdem.state.CATALOGUE)."""
+        the scene's fields every rank keeps for every block (pdem.selection.CATALOGUE)."""
         store = cls.__new__(cls)
         store.__dict__.update(arrays)
         return store
@@ -74,7 +74,7 @@ class BlockStore:
     @property
     def n(self) -> int:
         # the scene's store after set-up keeps no gid column (its rows are the gids) but
-        # always ``fixed`` (pdem.state.RUN_CATALOGUE)
+        # always ``fixed`` (pdem.selection.RUN_CATALOGUE)
         column = self.__dict__.get("gid")
         return len(column if column is not None else self.fixed)
 

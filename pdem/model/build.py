@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import ConfigError
 from ..config.schema import Block, BoxShape, Scene
+from ..deformable.zoning import identity_frames, zone_specs
 from ..dynamics.rotation import quat_to_matrix
 from ..geometry import (
-    ConvexPolyhedron,
     GeometryError,
     box,
     check_convex,
@@ -20,119 +19,17 @@ from ..geometry import (
     from_vertices,
     prism,
 )
-from ..parallel.mpi import LOCAL, allgather, run_together
+from ..geometry.concave import convex_pieces
+from ..mpi import LOCAL, allgather, run_together
 from ..registry import Registry
 from .blocks import VERT_ROW, BlockStore
 from .fields import BLOCK, allocate
+from .mesh_blocks import mesh_blocks
 from .names import NameColumn
+from .rockmass import build_rock_mass
 from .runs import RunColumn
+from .spec import BlockSpec
 from .speclist import RemoteRun, SpecList, UnbuiltRun, spec_parts, spec_summary
-
-
-@dataclass
-class BlockSpec:
-    """One expanded block of the scene: its name, convex pieces (world frame) and scene entry.
-
-    Most blocks are one convex piece; a joined (concave) block is several, moving as one
-    rigid body (3DEC's leader/follower groups). ``parent``: the name of the scene block it was
-    cut from (its own name if uncut)."""
-
-    name: str
-    entry: int  # index in scene.blocks
-    pieces: list[ConvexPolyhedron]
-    spec: Block
-    parent: str = ""
-    # model time at which the block is excavated (None: it stays), see pdem.model.rockmass
-    excavate_at: float | None = None
-    # index of the stage whose start removes the block (None: no stage does)
-    excavate_stage: int | None = None
-    # group and material when not the scene entry's (mesh cells carry their own)
-    group_name: str | None = None
-    material_name: str | None = None
-    # a zoned block's (TetMesh, surface node ids), pdem.deformable.store.zone_specs
-    zoning: tuple | None = None
-
-    def drop_pieces(self) -> None:
-        """Drop the pieces unmeasured, keeping their count: a block outside this rank's build
-        share in a scene whose cuts, joins, excavations or meshes made every block on every
-        rank (pdem.state); its scalars are then the gathered columns' (:class:`SpecTable`)."""
-        if self.pieces is not None:
-            self._n_pieces = len(self.pieces)
-            self.pieces = None
-
-    def release(self) -> None:
-        """Drop the pieces (after set-up their geometry lives with the blocks' owners, see
-        pdem.state.ModelState.release_scene_geometry), keeping the scalars later stages
-        read: volume, surface area, largest face, piece count."""
-        if self.pieces is None:
-            return
-        areas = self.face_areas
-        self._volume = self.volume
-        self._surface = float(areas.sum())
-        self._max_face = float(areas.max())
-        self._n_pieces = len(self.pieces)
-        self.pieces = None
-
-    @property
-    def n_pieces(self) -> int:
-        return self._n_pieces if self.pieces is None else len(self.pieces)
-
-    @property
-    def surface(self) -> float:
-        return self._surface if self.pieces is None else float(self.face_areas.sum())
-
-    @property
-    def max_face(self) -> float:
-        """The area of the block's largest face."""
-        return self._max_face if self.pieces is None else float(self.face_areas.max())
-
-    @property
-    def group(self) -> str:
-        return self.group_name if self.group_name is not None else self.spec.group
-
-    @property
-    def material(self) -> str:
-        return self.material_name if self.material_name is not None else self.spec.material
-
-    @property
-    def shape(self) -> ConvexPolyhedron:
-        """The block's single convex piece (joined blocks have no single shape)."""
-        if self.pieces is None:
-            raise ValueError(f"block {self.name!r}: its shape was released after set-up (the "
-                             "geometry lives in the store of the rank holding the block)")
-        if len(self.pieces) != 1:
-            raise ValueError(f"block {self.name!r} is joined from {len(self.pieces)} pieces")
-        return self.pieces[0]
-
-    @property
-    def volume(self) -> float:
-        if self.pieces is None:
-            return self._volume
-        return sum(p.volume for p in self.pieces)
-
-    @property
-    def centroid(self) -> np.ndarray:
-        return sum(p.volume * np.asarray(p.centroid) for p in self.pieces) / self.volume
-
-    @property
-    def face_areas(self) -> np.ndarray:
-        return np.concatenate([p.face_areas() for p in self.pieces])
-
-    def principal_frame(self):
-        """(body-frame pieces, centroid, R, principal moments per unit density) of the rigid
-        body; ``world = R @ body + centroid``. One piece: the piece's own principal frame."""
-        if len(self.pieces) == 1:
-            body, c, R, moments = self.pieces[0].principal_frame()
-            return [body], c, R, moments
-        c = self.centroid
-        inertia = np.zeros((3, 3))
-        for p in self.pieces:  # parallel-axis theorem, per unit density
-            d = np.asarray(p.centroid) - c
-            inertia += np.asarray(p.inertia) + p.volume * (d @ d * np.eye(3) - np.outer(d, d))
-        moments, R = np.linalg.eigh(inertia)
-        if np.linalg.det(R) < 0.0:
-            R[:, 2] = -R[:, 2]
-        return [p.transformed(R.T, -c @ R) for p in self.pieces], c, R, moments
 
 
 class SpecView:
@@ -432,8 +329,6 @@ def _box(p):
 def _polyhedron(p):
     pts = np.asarray(p.vertices, float)
     if p.faces is not None:  # a closed surface, possibly concave: its convex pieces
-        from ..geometry.concave import convex_pieces
-
         pieces = convex_pieces(pts, p.faces)
         yield None, pieces if len(pieces) > 1 else pieces[0]
         return
@@ -540,8 +435,6 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
     for i, b in enumerate(scene.blocks):
         kind = b.shape_kind
         if kind == "mesh":
-            from .mesh_blocks import mesh_blocks
-
             segments += [(True, out), (False, mesh_blocks(scene, i, b, comm))]
             out = []
             continue
@@ -578,8 +471,6 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
     # the cuts, joins and excavations work on the list spread over the ranks; then each rank
     # keeps its build share's blocks and the others' names and scalars (``share``), or gets
     # every block
-    from .rockmass import build_rock_mass
-
     spread = build_rock_mass(scene, [*segments, (True, out)], max_blocks, comm)
     del out, segments
     if share is not None:
@@ -595,8 +486,6 @@ def _zone(scene: Scene, comm, specs) -> None:
     """Zone the zoned blocks among ``specs`` (those with pieces; collective: an error on one
     rank is raised on every rank)."""
     if any(b.zones is not None for b in scene.blocks):
-        from ..deformable.store import zone_specs
-
         run_together(comm, lambda: zone_specs(scene, specs))
 
 
@@ -606,15 +495,6 @@ def lazy_scene(scene: Scene) -> bool:
     return not (scene.cuts or scene.join or scene.excavate
                 or any(st.excavate for st in scene.stages)
                 or any(b.mesh is not None for b in scene.blocks))
-
-
-def unbuilt_spec(b: Block, entry: int, k: int) -> BlockSpec:
-    """Member ``k`` of family entry ``b`` outside this rank's build share: no pieces (one
-    convex piece when built; its geometric scalars come from the rank that builds it)."""
-    name = f"{b.name}[{k}]"
-    spec = BlockSpec(name, entry, None, b, parent=name)
-    spec._n_pieces = 1
-    return spec
 
 
 def _fixed(spec, arr, r):
@@ -770,8 +650,6 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
         edirs_local=edirs,
     )
     if any(s.zoning is not None for s in specs):
-        from ..deformable.store import identity_frames
-
         identity_frames(geometry, arr, specs)
     return BlockStore(arr, geometry), groups
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact.forces import normal_forces as law_normal_forces
 from . import csr
 from .fields import CONTACT, HELD_WIDTH, SUB, allocate
 
@@ -65,7 +66,7 @@ class ContactStore:
     @staticmethod
     def empty(hist_width: int = 0, grid_width: int = 0, held: int = HELD_WIDTH) -> ContactStore:
         """No contacts; ``grid_width``: the zoned blocks' sub-contact columns ``sc_grid``
-        (pdem.deformable.store.GRID_WIDTH; absent in scenes without zoned blocks); ``held``:
+        (pdem.deformable.columns.GRID_WIDTH; absent in scenes without zoned blocks); ``held``:
         the columns of ``held`` (pdem.model.fields.held_width: 0 without solve.inactive).
         Contacts added to a store take its columns and dtypes."""
         sub = allocate(SUB, 0)
@@ -102,10 +103,8 @@ class ContactStore:
         """Each sub-contact's normal force by its joint law in its stored state (overlap,
         dilation, state bits), as the force step computed it; ``joints``: the scene's
         ``Joints.kernel_args``."""
-        from ..contact.forces import normal_forces
-
         fn = np.zeros(self.n_sub)
-        normal_forces(self.pairs(), self.subs(), joints, fn)
+        law_normal_forces(self.pairs(), self.subs(), joints, fn)
         return fn
 
     def take(self, idx: np.ndarray) -> ContactStore:

@@ -163,7 +163,7 @@ SUB: tuple[Field, ...] = (
 # the laws a scene uses (width 0 when none), see pdem.contact.laws.
 SUB_HIST = Field("sc_hist", (0,), F, "law-defined", "joint-law history columns", **_D)
 # Scenes with zoned blocks: each sub-contact's gridpoint and triangle weights on the zoned
-# side(s), pdem.deformable.store.GRID_WIDTH columns (absent in other scenes)
+# side(s), pdem.deformable.columns.GRID_WIDTH columns (absent in other scenes)
 SUB_GRID = Field("sc_grid", (0,), F, "1", "zoned blocks: the sub-contact's gridpoint and its "
                  "triangles' gridpoints and weights (block-local)", **_D)
 

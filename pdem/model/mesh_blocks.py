@@ -12,8 +12,10 @@ import numpy as np
 from ..config import ConfigError
 from ..geometry import GeometryError
 from ..geometry.mesh_import import read_cell_table, read_mesh
-from ..parallel.mpi import LOCAL, allgather, on_root, run_together, weighted_share
+from ..mpi import LOCAL, allgather, on_root, run_together, weighted_share
 from .rockmass import components
+from .spec import BlockSpec
+from .spread import Spread
 
 
 def _label(value) -> str:
@@ -37,9 +39,6 @@ def mesh_blocks(scene, entry: int, block, comm=None) -> list:
     rank, the same messages in the same order. One rank reads the file and sends the mesh to
     the others; what a rank keeps of every cell is columns
     (pdem.geometry.mesh_import.CellTable), no object a cell."""
-    from .build import BlockSpec
-    from .spread import Spread
-
     comm = LOCAL if comm is None else comm
     m = block.mesh
     where = scene.at("blocks", entry, "mesh")

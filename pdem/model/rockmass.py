@@ -42,7 +42,7 @@ from ..geometry.cutting import (
 )
 from ..geometry.hull import default_tolerance
 from ..geometry.intersection import halfspace_volume
-from ..parallel.mpi import allgather, run_together
+from ..mpi import allgather, run_together
 from .spread import Spread
 
 # Relative sliver size: pieces thinner than this fraction of the cut block's size (cube root

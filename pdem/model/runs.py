@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mpi import allgather, allgather_rows
+
 # one run costs its start (int64) and its value; a column is kept as runs only when that is
 # at most this fraction of the plain array (else the lookups' searchsorted buys nothing)
 RUNS_WORTH = 0.5
@@ -55,8 +57,6 @@ class RunColumn:
         gather their runs, not their rows, when runs are worth keeping (an ``array:``'s
         volumes: a few runs, not 8 bytes of every block on every rank); the same column as
         ``RunColumn`` of the rows gathered."""
-        from ..parallel.mpi import allgather, allgather_rows
-
         v = np.ascontiguousarray(np.asarray(values))
         starts = run_starts(v)
         parts = allgather(comm, (len(v), starts, v[starts]))

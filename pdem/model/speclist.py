@@ -6,7 +6,7 @@ and index alone (name ``entry[k]``, one convex piece, the entry's group and mate
 Python object for each of them was ~250 bytes of every scene block on every rank until the
 spec table was built (bench/scale.py's ``spec_bytes``): 10 GB a rank at 4·10⁷ blocks. Here
 they are a run ``(entry, first index, count)``; indexing and iteration still give a
-:class:`pdem.model.build.BlockSpec` (made on the fly, without pieces), and the spec table
+:class:`pdem.model.spec.BlockSpec` (made on the fly, without pieces), and the spec table
 and the block store read the runs as such (:meth:`SpecList.parts`).
 """
 
@@ -17,6 +17,9 @@ from collections.abc import Iterator, Sequence
 from typing import NamedTuple
 
 import numpy as np
+
+from .names import NameColumn
+from .spec import BlockSpec, unbuilt_spec
 
 
 class UnbuiltRun(NamedTuple):
@@ -55,9 +58,7 @@ class RemoteRun(NamedTuple):
     blocks: list  # the scene's ``blocks:`` entries (not sent: each rank's own)
 
     def spec(self, j: int):
-        """Block ``j`` of the run as a released :class:`pdem.model.build.BlockSpec`."""
-        from .build import BlockSpec
-
+        """Block ``j`` of the run as a released :class:`pdem.model.spec.BlockSpec`."""
         entry = int(self.entry[j])
         name = self.names[j]
         k = int(self.parent[j])
@@ -83,8 +84,6 @@ def _indexed(values) -> tuple[list, np.ndarray]:
 def spec_summary(specs: list) -> dict:
     """The fields of a :class:`RemoteRun` (but ``blocks``) of built ``specs``: what the other
     ranks keep of them (~30 bytes a block and the names' runs, pdem.model.names)."""
-    from .names import NameColumn
-
     parents, parent = _indexed(s.parent for s in specs if s.parent != s.name)
     own = np.array([s.parent == s.name for s in specs], bool)
     full = np.full(len(specs), -1, np.int32)
@@ -195,8 +194,6 @@ class SpecList(Sequence):
             return part[j]
         if isinstance(part, RemoteRun):
             return part.spec(j)
-        from .build import unbuilt_spec
-
         return unbuilt_spec(part.block, part.entry, part.k0 + j)
 
     def __getitem__(self, i):
@@ -210,8 +207,6 @@ class SpecList(Sequence):
         return self._spec(g)
 
     def __iter__(self):
-        from .build import unbuilt_spec
-
         for _, part in self.parts():
             if isinstance(part, list):
                 yield from part

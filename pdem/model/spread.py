@@ -18,7 +18,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..parallel.mpi import LOCAL, allgather, alltoall, weighted_share
+from ..mpi import LOCAL, allgather, allgather_rows, alltoall, weighted_share
 
 
 class Spread:
@@ -82,8 +82,6 @@ class Spread:
 
     def gathered(self, values) -> np.ndarray:
         """A per-spec column of this slice, every rank's concatenated (gid order)."""
-        from ..parallel.mpi import allgather_rows
-
         return allgather_rows(self.comm, np.asarray(values))
 
     def counts(self, key) -> Counter:

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..jit import kernel
 from ..model.fields import HALO, pack, row_width, unpack
-from .mpi import wait_all
+from ..mpi import wait_all
 
 # columns of a full halo row: the block fields declared with halo=True (pdem.model.fields); a
 # scene sends those of the features it uses (pdem.model.fields.halo_fields)

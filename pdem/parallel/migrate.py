@@ -24,8 +24,8 @@ from ..model import csr
 from ..model.blocks import BlockStore, pack, take_rows, unpack, whole_message
 from ..model.contacts import ContactStore
 from ..model.fields import HALO, MIGRATE
+from ..mpi import allgather, alltoall, alltoall_rows
 from .halo import Halo
-from .mpi import allgather, alltoall, alltoall_rows
 
 
 def _boxes(x, radius, pad):

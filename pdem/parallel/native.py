@@ -31,6 +31,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from ..errors import UserError
 from ..jit import kernel
 from .halo import HALO_TAG, copy_rows
 
@@ -176,7 +177,7 @@ def forward_halo(net, columns):
 @kernel
 def allreduce_max(net):
     """``net.reduced`` = the element-wise maximum of every rank's ``net.flags`` (the step's
-    reduction, :func:`pdem.parallel.mpi.allreduce_max_array`). Returns MPI's error code."""
+    reduction, :func:`pdem.mpi.allreduce_max_array`). Returns MPI's error code."""
     return _call6(net.fn[3], net.wide, (
         _address(net.flags), _address(net.reduced), np.int64(net.flags.shape[0]),
         net.double, net.op_max, net.comm))
@@ -252,8 +253,6 @@ def idle_net(width: int, n_flags: int) -> Net:
 
 def enabled() -> bool:
     """``PDEM_MPI_NATIVE`` (default 1): 0 keeps every rank's steps in Python."""
-    from ..errors import UserError
-
     v = os.environ.get("PDEM_MPI_NATIVE", "1").strip().lower() or "1"
     if v not in ("0", "1", "off", "on", "no", "yes", "false", "true"):
         raise UserError(f"PDEM_MPI_NATIVE: must be 0 or 1 (got {v!r})")

@@ -15,7 +15,7 @@ from ..dynamics import motion
 from ..dynamics.diagnosis import explain
 from ..dynamics.energy import kinetic_per_block
 from ..errors import SimulationError, writing
-from ..parallel.mpi import allgather, exact_sum
+from ..mpi import allgather, exact_sum
 from .base import Plugin, next_multiple
 
 log = logging.getLogger("pdem")

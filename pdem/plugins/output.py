@@ -7,32 +7,18 @@ import json
 import numpy as np
 
 from .. import __version__
-from ..config.resolve import mass_scaling_summary
 from ..config.schema import MassScaling
 from ..contact.laws import FAILED
 from ..errors import writing
 from ..io.checkpoint import written_contacts
-from ..io.writer import BodyMesh, OutputWriter, quat_to_matrix, writer_range
+from ..io.layout import writer_range
+from ..io.surfaces import body_surfaces
+from ..io.writer import OutputWriter, quat_to_matrix
 from ..model import csr
 from ..model.fields import OUTPUT
+from ..resolve import mass_scaling_summary
+from ..selection import timestep_rows
 from .base import Plugin, interval_steps, next_multiple
-
-
-def body_surfaces(store, lo: int = 0, hi: int | None = None) -> BodyMesh:
-    """The surfaces of rows ``lo .. hi-1`` of a store (default: all) in their body frame, flat:
-    a joined block's pieces side by side. Vectorised over the store's CSR geometry (a block's
-    pieces, vertices and faces are consecutive rows)."""
-    hi = store.n if hi is None else hi
-    first_piece = store.piece_start[lo:hi + 1]
-    vert_start = store.vert_start[first_piece]  # each block's first vertex row (and the end)
-    face_start = store.face_start[first_piece]
-    face_block = np.repeat(np.arange(hi - lo), np.diff(face_start))
-    fv0, fv1 = store.fvert_start[face_start[0]], store.fvert_start[face_start[-1]]
-    face_len = np.diff(store.fvert_start[face_start[0]:face_start[-1] + 1])
-    vert_of = np.repeat(face_block, face_len)
-    return BodyMesh(vert_start - vert_start[0],
-                    store.verts_local[vert_start[0]:vert_start[-1]].copy(), face_len,
-                    face_block, store.face_verts[fv0:fv1] - vert_start[vert_of])
 
 
 def owned_zoned(grids) -> list | None:
@@ -59,14 +45,12 @@ def _static_fields(state) -> dict:
 
 def _mass_scaling_attrs(state) -> dict:
     """Root attributes of partial mass scaling: the step it sets and the inertia it added
-    (pdem.config.resolve.mass_scaling_summary). Runs without stages only: a stage sets its
+    (pdem.resolve.mass_scaling_summary). Runs without stages only: a stage sets its
     own scaling at its start (and a restart's factors may be a stage's), which the log
     reports."""
     ms = state.scene.solve.mass_scaling
     if not isinstance(ms, MassScaling) or state.scene.stages:
         return {}
-    from ..stages import timestep_rows
-
     rows, n = timestep_rows(state)  # each rank its own blocks', summed over the ranks
     r = mass_scaling_summary(rows, state.comm, n)
     g = r["max_block"]

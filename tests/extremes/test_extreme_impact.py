@@ -13,7 +13,7 @@ contact exists. Two ways through a thin block were found:
   v sqrt(m / (kn A)) (32 cm for kn = 1e8) into the plate, past the middle of the block, and
   the common plane then pushes it out on the far side, whatever the step.
 
-Both are refused before the run (pdem.config.preflight: start speed x dt <= CTOL/2, and the
+Both are refused before the run (pdem.preflight: start speed x dt <= CTOL/2, and the
 impact overlap <= a tenth of the block); inside those limits a 100 m/s block bounces off a
 2 mm plate. Speeds reached during a run are checked by motion_bookkeeping's ``max_step``.
 """
@@ -25,10 +25,10 @@ import math
 import numpy as np
 import pytest
 
+from pdem import preflight as pf
 from pdem.cases import make_simulation
 from pdem.cases.extremes import RHO, thrown_at_plate
 from pdem.config import ConfigError
-from pdem.config import preflight as pf
 from pdem.dynamics import motion
 from pdem.dynamics.motion import motion_bookkeeping
 from pdem.errors import SimulationError

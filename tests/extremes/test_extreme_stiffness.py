@@ -1,7 +1,7 @@
 """Joint stiffness from 1e4 to 1e14 Pa/m under a 1 m cube resting on a fixed floor (issue 10).
 
 Soft joints whose static overlap m g / (kn A) is more than a tenth of the block are refused
-before the run (pdem.config.preflight); from 1e6 Pa/m up the cube settles (local damping, to an
+before the run (pdem.preflight); from 1e6 Pa/m up the cube settles (local damping, to an
 unbalanced-force ratio of 1e-6) at the closed-form overlap, the automatic timestep shrinking as
 1 / sqrt(kn). A stiffness that makes the requested model time an absurd number of steps is
 refused naming the step count.

@@ -16,10 +16,11 @@ from mpi4py import MPI
 from support import collective, on_rank0
 from test_decomposition import pile_scene
 
+from pdem import mpi
 from pdem.config import parse_scene
 from pdem.cycle import DROPS, NEEDS_PYTHON
 from pdem.errors import UserError
-from pdem.parallel import mpi, native
+from pdem.parallel import native
 from pdem.parallel.halo import Halo, halo_columns
 from pdem.simulation import Simulation
 from pdem.stepper import Stepper

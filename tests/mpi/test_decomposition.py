@@ -454,7 +454,8 @@ def test_build_by_share_matches_whole_build(extra):
     from pdem.cases.rock_mass import l_on_stack_scene
     from pdem.config import parse_scene
     from pdem.model.blocks import pack
-    from pdem.state import CATALOGUE, RUN_CATALOGUE, ModelState
+    from pdem.selection import CATALOGUE, RUN_CATALOGUE
+    from pdem.state import ModelState
 
     comm = MPI.COMM_WORLD
     text = l_on_stack_scene().replace("material: rock, group: stack}",

@@ -1,7 +1,7 @@
 """The timestep, the mass scaling and the start-up log read each rank's own blocks and reduce
-over the ranks (pdem.config.resolve): no rank gathers every block's mass, inertia or radius.
+over the ranks (pdem.resolve): no rank gathers every block's mass, inertia or radius.
 On 2-4 ranks, against one process reading every block: the exact distributed k-th smallest
-and first-extreme helpers (pdem.parallel.mpi), and for each way a scene sets its step (auto,
+and first-extreme helpers (pdem.mpi), and for each way a scene sets its step (auto,
 given, partial and static mass scaling) the step, every block's mass scale, the log's lines
 and a refused partial scaling's message, at set-up (the build shares) and at a stage's start
 (the blocks each rank owns).
@@ -17,7 +17,7 @@ from mpi4py import MPI
 
 from pdem.config import parse_scene
 from pdem.errors import UserError
-from pdem.parallel.mpi import first_extreme, kth_smallest
+from pdem.mpi import first_extreme, kth_smallest
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
 
@@ -71,7 +71,8 @@ MODES = {
 def _start(comm, text, caplog):
     """The state after set-up and its first stage's settings, the log's timestep lines, and
     every block's mass scale by gid (gathered here, for the comparison only)."""
-    from pdem.stages import _solve_settings, stage_scene
+    from pdem.config.stages import stage_scene
+    from pdem.stages import _solve_settings
     from pdem.state import ModelState
 
     caplog.clear()

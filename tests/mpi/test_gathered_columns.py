@@ -13,7 +13,7 @@ import pytest
 from mpi4py import MPI
 
 from pdem.model.runs import RunColumn
-from pdem.parallel.mpi import allgather_rows
+from pdem.mpi import allgather_rows
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(120, method="thread")]
 

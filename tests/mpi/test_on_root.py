@@ -1,4 +1,4 @@
-"""pdem.parallel.mpi.on_root: one rank's work sent to every rank (a scene's mesh file read
+"""pdem.mpi.on_root: one rank's work sent to every rank (a scene's mesh file read
 once), in chunks of raw bytes when large; a failure there, or a result that does not pickle,
 raised on every rank, none left waiting.
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pdem.parallel import mpi
+from pdem import mpi
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(120, method="thread")]
 

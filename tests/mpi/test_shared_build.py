@@ -127,7 +127,7 @@ def test_a_meshs_cells_are_shared_and_a_bad_cell_named_on_every_rank(tmp_path):
 
 def test_one_rank_reads_the_mesh_file_and_a_bad_file_is_refused_on_every_rank(tmp_path,
                                                                               monkeypatch):
-    """Under MPI one rank reads a scene's mesh file (pdem.parallel.mpi.on_root), not every
+    """Under MPI one rank reads a scene's mesh file (pdem.mpi.on_root), not every
     rank at once from a cluster's shared file system; the blocks are those of one process. A
     file that is not a mesh is the same one-line scene error on every rank."""
     from pdem.geometry import mesh_import

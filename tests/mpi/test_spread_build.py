@@ -22,7 +22,7 @@ from pdem.config import ConfigError, parse_scene
 from pdem.model import spread as spread_module
 from pdem.model.build import SpecTable, block_store, expand_blocks, geometry_columns
 from pdem.model.spread import Spread
-from pdem.parallel.mpi import run_together, weighted_share
+from pdem.mpi import run_together, weighted_share
 from pdem.state import build_share
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]

@@ -81,9 +81,9 @@ def test_selections_and_stage_fields_gathered_from_the_owners():
     each rank among the blocks it owns and gathered, and a stage's timestep fields are
     gathered from the owners: the same gids, and the same bits, as the whole scene's store
     built on one rank; the range selects blocks owned by several ranks."""
+    from pdem.selection import TIMESTEP_FIELDS, selected
     from pdem.simulation import Simulation
-    from pdem.stages import selected
-    from pdem.state import TIMESTEP_FIELDS, ModelState
+    from pdem.state import ModelState
 
     comm = MPI.COMM_WORLD
     scene = with_parallel(ROW_STAGES, [comm.size, 1, 1], None)

@@ -1,4 +1,4 @@
-"""How ranks wait for the per-step messages (pdem.parallel.mpi.configure_waits): spinning in
+"""How ranks wait for the per-step messages (pdem.mpi.configure_waits): spinning in
 MPI where every rank has a core, testing and sleeping where the node is oversubscribed; the
 halo and the step's reduction give the same values either way."""
 
@@ -12,7 +12,7 @@ import pytest
 from mpi4py import MPI
 from support import collective
 
-from pdem.parallel import mpi
+from pdem import mpi
 from pdem.parallel.halo import Halo
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]

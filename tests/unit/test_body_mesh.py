@@ -1,4 +1,4 @@
-"""The output's block surfaces (pdem.plugins.output.body_surfaces), taken flat from the scene's
+"""The output's block surfaces (pdem.io.surfaces.body_surfaces), taken flat from the scene's
 store, are each block's principal-frame pieces as the per-block definition gives them."""
 
 from __future__ import annotations
@@ -8,9 +8,8 @@ import pytest
 
 from pdem.cases.rock_mass import l_on_stack_scene
 from pdem.config import parse_scene
-from pdem.io.writer import BodyMesh
+from pdem.io.surfaces import BodyMesh, body_surfaces
 from pdem.model.build import block_store, expand_blocks
-from pdem.plugins.output import body_surfaces
 
 PILE = """
 name: pile

@@ -257,7 +257,7 @@ def test_balance_setting():
 def test_weighted_share_is_contiguous_complete_and_balanced():
     """Shares of weighted items: contiguous, covering every item once in rank order, each
     within one item's weight of an even share; all-zero weights split by count."""
-    from pdem.parallel.mpi import weighted_share
+    from pdem.mpi import weighted_share
 
     rng = np.random.default_rng(3)
     for size in (1, 2, 3, 7):

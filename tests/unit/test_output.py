@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-import pdem.io.writer as writer_mod
 from pdem.io import OutputWriter, centroids_path, read_xdmf, summarise
+from pdem.io import layout as row_layout
 from pdem.io.xdmf import CELL_FIELDS, VIEWED_SERIES, view_path
 
 
@@ -223,7 +223,7 @@ def test_input_order_does_not_matter(tmp_path, snaps, out):
 
 
 def test_fallback_warns_once_when_h5py_lacks_mpi(tmp_path, snaps, monkeypatch):
-    monkeypatch.setattr(writer_mod, "_h5py_has_mpi", lambda: False)
+    monkeypatch.setattr(row_layout, "h5py_has_mpi", lambda: False)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         write_file(tmp_path / "nompi.h5", snaps)

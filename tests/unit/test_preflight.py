@@ -9,7 +9,8 @@ import pytest
 
 from pdem.cli import main
 from pdem.config import ConfigError, parse_scene
-from pdem.config.preflight import estimate, parse_bytes, preflight
+from pdem.config.sizes import parse_bytes
+from pdem.preflight import estimate, preflight
 
 BASE = """
 materials: {rock: {density: 2600}}

@@ -11,9 +11,9 @@ from mpi4py import MPI
 
 from pdem.cases.stacks import cube_stack_scene
 from pdem.config import parse_scene
-from pdem.config.resolve import TOUCH_FRACTION
 from pdem.contact.detect import SHORT_RUN, Planes, refresh_contacts
 from pdem.model.contacts import Subs
+from pdem.resolve import TOUCH_FRACTION
 from pdem.simulation import Simulation
 
 OUT = ("keep", "start", "pa", "area", "un", "fs", "us", "dil", "state", "hist")

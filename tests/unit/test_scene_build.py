@@ -145,9 +145,9 @@ def _bits(a):
 
 
 def test_vectorised_setup_is_bitwise_the_per_block_definition():
-    from pdem.config.resolve import surface_areas
     from pdem.geometry import box
     from pdem.model.build import _array, unique_directions
+    from pdem.resolve import surface_areas
 
     scene = parse_scene(BITWISE_SCENE)
     specs = expand_blocks(scene)

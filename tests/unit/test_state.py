@@ -91,7 +91,7 @@ def test_restart_continues_history_schedule_and_state(tmp_path):
 def test_exact_sum_does_not_depend_on_how_rows_are_split():
     """The energy budget's reduction: correctly rounded, so any partition gives the same bits
     (a plain sum of these values depends on the order); a rank with no rows takes part."""
-    from pdem.parallel.mpi import exact_sum
+    from pdem.mpi import exact_sum
 
     rng = np.random.default_rng(5)
     v = rng.normal(size=(1000, 3)) * 10.0 ** rng.integers(-8, 8, size=(1000, 1))
@@ -175,7 +175,7 @@ def test_scene_store_keeps_only_the_run_catalogue_after_set_up(tmp_path):
     per-block fields are gone, the centroids, masses and inertias too. A stage then still
     stops blocks by a selection (asking the owners) and deletes one leaving the domain: the
     changes reach the blocks a rank holds and the fields the store kept."""
-    from pdem.state import CATALOGUE, RUN_CATALOGUE
+    from pdem.selection import CATALOGUE, RUN_CATALOGUE
 
     text = """
 name: staged

@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from pdem.io import OutputWriter, read_xdmf, zones_path
-from pdem.io.writer import _h5py_has_mpi
+from pdem.io.layout import h5py_has_mpi
 from pdem.io.xdmf import contacts_path
 from pdem.io.zones import ZONE_VIEWED, zone_layout
 
@@ -186,7 +186,7 @@ def test_zones_sidecar(out):
 
 
 def test_gather_fallback_writes_the_same_file(tmp_path, out):
-    if not _h5py_has_mpi():
+    if not h5py_has_mpi():
         pytest.skip("h5py without MPI: the fixture already used the fallback")
     write(tmp_path / "gathered.h5", parallel=False)
     a, b = contents(tmp_path / "gathered.h5"), contents(out[0])

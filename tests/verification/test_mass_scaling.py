@@ -39,9 +39,9 @@ from pdem.cases.pebble import (
     sliding_acceleration,
     static_overlap,
 )
-from pdem.config.resolve import MAX_SCALED_MASS_FRACTION
 from pdem.dynamics.timestep import critical_steps
 from pdem.errors import UserError
+from pdem.resolve import MAX_SCALED_MASS_FRACTION
 
 DT = 9.0e-5
 PARTIAL = f"{{timestep: {DT!r}}}"
@@ -70,12 +70,12 @@ def test_only_the_pebble_is_scaled_and_the_step_is_dt():
     assert b.mscale[r["big"]] == 1.0
     assert b.mscale[r["pebble"]] == pytest.approx(S_PEBBLE, rel=1e-12)
     # the per-block criterion the factors meet: every free block is stable at DT
-    from pdem.config.resolve import _estimated_stiffness
-    from pdem.state import TIMESTEP_FIELDS
+    from pdem.resolve import estimated_stiffness
+    from pdem.selection import TIMESTEP_FIELDS
 
     g = s.state.scene_fields(TIMESTEP_FIELDS)  # every block's, from its owner
     assert g is not s.state.glob and np.array_equal(g.gid, np.arange(len(s.specs)))
-    k = _estimated_stiffness(s.specs, s.state.joints)
+    k = estimated_stiffness(s.specs, s.state.joints)
     own = critical_steps(g.mass, k, 0.1, g.inertia, g.radius, g.mscale)[g.fixed == 0]
     assert own.min() >= DT * (1.0 - 1e-12)
     # 0.5 s: 2.5 million steps unscaled, 5556 with partial scaling

@@ -14,19 +14,19 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..dynamics.damping import DAMPING
-from ..dynamics.kinematics import refresh_pose
-from ..dynamics.timestep import (
+from .config.schema import MassScaling
+from .dynamics.damping import DAMPING
+from .dynamics.kinematics import refresh_pose
+from .dynamics.timestep import (
     critical_steps,
     limiting_block,
     mass_scale_factors,
     timestep_extremes,
     timestep_from_extremes,
 )
-from ..errors import UserError
-from ..geometry import face_areas
-from ..parallel.decomposition import choose_dims
-from ..parallel.mpi import (
+from .errors import UserError
+from .geometry import face_areas
+from .mpi import (
     LOCAL,
     allgather,
     allreduce_max_array,
@@ -35,12 +35,16 @@ from ..parallel.mpi import (
     first_extreme,
     kth_smallest,
 )
-from .schema import MassScaling
+from .parallel.decomposition import choose_dims
 
 log = logging.getLogger("pdem")
 
 # vertices within this fraction of CTOL of the common plane count as touching it
 TOUCH_FRACTION = 0.5
+# u_acc trigger of a block's remap into the cell space (pdem.stepper), as a fraction of CTOL.
+# 3DEC remaps at CTOL; at CTOL/2 no pair can close a gap larger than CTOL unseen (each block
+# moves less than CTOL/2 between searches), so a contact always exists before two blocks touch.
+REMAP_FRACTION = 0.5
 # partial mass scaling is refused when the blocks it would scale carry more than this share
 # of the free blocks' mass: the dynamics of most of the model would then be the scaled one
 # (use a smaller timestep, or mass_scaling: true for a static solve)
@@ -117,7 +121,7 @@ def surface_areas(specs) -> np.ndarray:
     return surf
 
 
-def _estimated_stiffness(specs, joints, gids=None) -> np.ndarray:
+def estimated_stiffness(specs, joints, gids=None) -> np.ndarray:
     """Per block, the stiffness of contacts on a third of its surface (top and bottom of a
     cube): the timestep must be stable before the first contact forms, and must not depend
     on which contacts a rank holds. ``gids``: of these blocks only (a SpecTable's)."""
@@ -129,13 +133,13 @@ def _estimated_stiffness(specs, joints, gids=None) -> np.ndarray:
         return kmax * surf / 3.0
 
 
-def _timestep(scene, rows, k, names=None, key: str = "solve.mass_scaling.timestep",
+def scene_timestep(scene, rows, k, names=None, key: str = "solve.mass_scaling.timestep",
               comm=LOCAL, n: int | None = None) -> float:
     """The step (eq. 87 + rotational bound); with mass scaling, sets ``rows.mscale`` (eq. 89;
     partial: only the blocks whose own critical step is below ``timestep``).
 
     ``rows``: the per-block fields (gid, mass, inertia, radius, fixed, mscale) of the blocks
-    this rank holds, ``k`` their stiffness estimates (:func:`_estimated_stiffness`, from the
+    this rank holds, ``k`` their stiffness estimates (:func:`estimated_stiffness`, from the
     blocks' surfaces and the stiffest joint, not from the contacts of the moment: the same on
     every rank and after a restart, which recomputes them from the scene, and each stage's at
     its start, see pdem.stages). The first ``n`` rows (default all) are this rank's own, the
@@ -233,8 +237,8 @@ def timestep_report(scene, rows, k, dt: float, names, comm=LOCAL,
                     n: int | None = None) -> list[str]:
     """The start-up log lines about the step: which block limits it and by how much (no mass
     scaling or a fixed dt), or the inertia partial mass scaling added. ``rows``, ``k``,
-    ``comm``, ``n``: as :func:`_timestep`'s (the median of the blocks' critical steps by an
-    exact distributed selection, pdem.parallel.mpi.kth_smallest)."""
+    ``comm``, ``n``: as :func:`scene_timestep`'s (the median of the blocks' critical steps by an
+    exact distributed selection, pdem.mpi.kth_smallest)."""
     ts = scene.solve.timestep
     ms = scene.solve.mass_scaling
     n = len(rows.mass) if n is None else n
@@ -336,10 +340,10 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
     cell_size = exact_mean(comm, ext.max(axis=1, initial=0.0)) if cs.cell_size == "auto" \
         else float(cs.cell_size)
     # the timestep's reads of this rank's rows (mass, inertia, radius, fixed; mscale set)
-    k = _estimated_stiffness(specs, joints, rows.gid if hasattr(specs, "surface") else None)
+    k = estimated_stiffness(specs, joints, rows.gid if hasattr(specs, "surface") else None)
     # a SpecTable's names column (read by index, in messages), or a list's
     names = specs.names if hasattr(specs, "names") else [sp.name for sp in specs]
-    dt = _timestep(scene, rows, k, names, comm=comm)
+    dt = scene_timestep(scene, rows, k, names, comm=comm)
     for line in timestep_report(scene, rows, k, dt, names, comm):
         log.info("%s", line)
     # Runaway threshold: no block can honestly move faster than its start speed plus a fall

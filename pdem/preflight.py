@@ -23,8 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..parallel.mpi import LOCAL, allgather
-from .load import ConfigError
+from .config.errors import ConfigError
+from .config.sizes import parse_bytes
+from .model.blocks import VERT_ROW
+from .model.fields import BLOCK, CONTACT, HELD_WIDTH, SUB, held_width
+from .mpi import LOCAL, allgather
 
 log = logging.getLogger("pdem")
 
@@ -55,7 +58,7 @@ MAX_STATIC_OVERLAP = 0.1
 # never reached
 MAX_TIME_STEPS = 2**52
 # a block may move at most this fraction of CTOL in one step: the search runs when a block's
-# accumulated motion passes CTOL/2 (pdem.stepper.REMAP_FRACTION), so a block that jumps further
+# accumulated motion passes CTOL/2 (pdem.resolve.REMAP_FRACTION), so a block that jumps further
 # in one step can land inside (or beyond) a thin block before any contact exists (tunnelling;
 # tests/extremes/test_extreme_impact.py)
 MAX_STEP_MOTION = 0.5
@@ -72,31 +75,6 @@ def _bytes_text(n: float) -> str:
         if n >= size:
             return f"{n / size:.3g} {unit}"
     return f"{n:.0f} B"
-
-
-_UNITS = {"b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "tb": 1e12,
-          "kib": 2**10, "mib": 2**20, "gib": 2**30, "tib": 2**40}
-
-
-def parse_bytes(value) -> float:
-    """``limits.max_memory_per_rank``: a number of bytes or text like ``8 GiB``, ``500MB``."""
-    if isinstance(value, bool):
-        raise ValueError(f"expected a size like '8 GiB' (got {value!r})")
-    if isinstance(value, int | float):
-        n = float(value)
-    else:
-        text = str(value).strip().lower().replace(" ", "")
-        num = text.rstrip("kmgtib")
-        unit = text[len(num):] or "b"
-        if unit not in _UNITS:
-            raise ValueError(f"unknown unit {unit!r} (use B, kB, MB, GB, TB, KiB, MiB, GiB, TiB)")
-        try:
-            n = float(num) * _UNITS[unit]
-        except ValueError:
-            raise ValueError(f"expected a size like '8 GiB' (got {value!r})") from None
-    if not (math.isfinite(n) and n > 0):
-        raise ValueError(f"must be a finite size > 0 (got {value!r})")
-    return n
 
 
 def machine_memory() -> float:
@@ -156,9 +134,6 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
     """The scene's cost from its entries alone (nothing built); also (entry, blocks) per entry.
     ``memory``: the physical memory to plan for (default: this machine's); ``whole``: every
     rank builds every block's store (pdem.state.needs_whole_scene), else its share."""
-    from ..model.blocks import VERT_ROW
-    from ..model.fields import BLOCK, CONTACT, HELD_WIDTH, SUB, held_width
-
     block_row = _row_bytes(BLOCK)
     # the declared rows (the contacts' ``held`` has columns only with solve.inactive)
     contact_row = _row_bytes(CONTACT) + SUBS_PER_CONTACT * _row_bytes(SUB) \

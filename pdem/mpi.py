@@ -15,7 +15,8 @@ import traceback
 
 import numpy as np
 
-from ..jit import kernel
+from .errors import UserError
+from .jit import kernel
 
 
 class RankFilter(logging.Filter):
@@ -61,12 +62,7 @@ def install_abort_hook(comm) -> None:
 
 def abort_with_message(comm, exc: BaseException) -> None:
     """Print this rank's error in one write, let the launcher forward it, abort every rank."""
-    import os
-    import time
-
-    from .. import errors
-
-    if isinstance(exc, errors.UserError):
+    if isinstance(exc, UserError):
         text = f"pdem: error on rank {comm.rank}: {exc}\n"
     else:
         text = f"pdem: internal error on rank {comm.rank}:\n" + "".join(
@@ -101,8 +97,6 @@ def configure_waits(comm) -> bool:
     not). Decided per node: on a cluster only an oversubscribed node's ranks sleep."""
     mode = os.environ.get("PDEM_MPI_WAIT", "auto").strip().lower() or "auto"
     if mode not in WAIT_MODES:
-        from ..errors import UserError
-
         raise UserError(f"PDEM_MPI_WAIT: must be one of {', '.join(WAIT_MODES)} (got {mode!r})")
     if comm.size == 1:
         return False
