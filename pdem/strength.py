@@ -2,9 +2,10 @@
 ``model factor-of-safety``.
 
 From the equilibrium state the stage starts in, trial solves run with every joint's strength
-divided by F: ``tan(friction) / F``, ``cohesion / F``, ``tension / F`` (fields of those names;
-angles through their tangents). A trial is **stable** when the unbalanced-force ratio falls
-below ``ratio`` within ``max_steps`` and no block moved more than ``max_displacement``; when
+divided by F: the parameters each joint law declares (``JointLaw.strength``), angles through
+their tangents (``tan(friction) / F``), strengths divided (``cohesion / F``, ``tension / F``).
+A trial is **stable** when the unbalanced-force ratio falls below ``ratio`` within
+``max_steps`` and no block moved more than ``max_displacement``; when
 the ratio has not fallen by then, it is stable if the motion died away (the largest
 displacement grew by at most half as much in the second half of the budget as in the first)
 and **unstable** if it went on (a sliding mechanism); beyond ``max_displacement`` it is
@@ -29,7 +30,7 @@ import numpy as np
 
 from . import mpi
 from .config.stages import stage_scene
-from .contact.laws import joint_table
+from .contact.laws import JOINT_LAWS, joint_table
 from .errors import UserError
 from .model.blocks import take_rows
 from .model.fields import MIGRATE
@@ -39,19 +40,22 @@ log = logging.getLogger("pdem")
 
 
 def reduced_joints(joints: dict, factor: float, names=None) -> dict:
-    """The scene's joints with their strength divided by ``factor`` (``names``: only these)."""
+    """The scene's joints with their strength divided by ``factor`` (``names``: only these):
+    the parameters each joint's law declares (``JointLaw.strength``), angles through their
+    tangents, strengths divided. A joint whose law declares no strength is a UserError."""
     out = {}
     for name, j in joints.items():
         if names is not None and name not in names:
             out[name] = j
             continue
-        update = {}
-        for key, value in j.model_dump().items():
-            if key.endswith("friction") and isinstance(value, float):
-                update[key] = math.degrees(math.atan(math.tan(math.radians(value)) / factor))
-            elif key in ("cohesion", "tension"):
-                update[key] = value / factor
-        out[name] = j.model_copy(update=update)
+        law = JOINT_LAWS[j.model]
+        strength = law.strength
+        if strength is None or not (strength.angles or strength.strengths):
+            raise UserError(
+                f"joints.{name}: no factor of safety with this joint: its law {law.name!r} "
+                "declares no strength to reduce (JointLaw.strength); name the joints to weaken "
+                "in factor_of_safety.joints, without this one, or declare the law's strength")
+        out[name] = j.model_copy(update=strength.reduced(j, factor))
     return out
 
 

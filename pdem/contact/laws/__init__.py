@@ -1,7 +1,10 @@
 """Joint laws: the registry, the scene's joint table and the statically dispatched update.
 
-A joint law is one module exposing ``LAW = JointLaw(name, params, history, table, update)``
-plus one line in :data:`JOINT_LAWS` below. ``update`` is a numba kernel with the signature
+A joint law is one module exposing ``LAW = JointLaw(name, params, history, table, update,
+energy, strength=Strength(...))`` plus one line in :data:`JOINT_LAWS` below. ``strength``
+declares which parameters a factor-of-safety search reduces (:class:`.base.Strength`: angles
+through their tangents, strengths divided); :data:`JOINT_LAWS` refuses a law without it.
+``update`` is a numba kernel with the signature
 
     update(p, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz, state)
         -> (fn, dil, state, fx, fy, fz)
@@ -37,12 +40,28 @@ from numba.extending import overload
 from ...jit import inline_kernel
 from ...registry import Registry
 from . import continuously_yielding, coulomb
-from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
+from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams, Strength
 
 __all__ = ["FAILED", "JOINT_LAWS", "OPEN", "SLIPPING", "JointLaw", "JointParams", "JointTable",
-           "apply_law", "joint_dissipation", "joint_table", "law_energy", "law_stays_open"]
+           "Strength", "apply_law", "joint_dissipation", "joint_table", "law_energy",
+           "law_stays_open"]
 
-JOINT_LAWS: Registry[JointLaw] = Registry("joint law")
+
+class _JointLaws(Registry[JointLaw]):
+    """The joint-law registry: a law must say what strength reduction weakens (its
+    ``strength``), so that a factor of safety never silently leaves a law at full strength."""
+
+    def register(self, name: str, entry: JointLaw) -> JointLaw:
+        if entry.strength is None:
+            raise ValueError(
+                f"joint law {name!r} declares no strength: give JointLaw(..., "
+                "strength=Strength(angles=(...), strengths=(...))) the friction angles and the "
+                "strengths (cohesion, tension) of its Params that a factor-of-safety search "
+                "reduces, or strength=Strength() for a law without strength")
+        return super().register(name, entry)
+
+
+JOINT_LAWS: Registry[JointLaw] = _JointLaws("joint law")
 JOINT_LAWS.register("coulomb", coulomb.LAW)
 JOINT_LAWS.register("continuously_yielding", continuously_yielding.LAW)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -21,6 +22,33 @@ class JointParams(Strict):
 
     kn: PositiveFloat
     ks: PositiveFloat
+
+
+@dataclass(frozen=True)
+class Strength:
+    """Which parameters of a joint law strength reduction (a ``factor_of_safety:`` stage,
+    pdem.strength) weakens at a factor F, by name in the law's ``params``: ``angles``
+    (friction angles, degrees) through their tangents, ``tan(phi) / F``; ``strengths``
+    (cohesion, tension: stresses) divided, ``c / F``. Every other parameter (stiffnesses,
+    dilation, length and stress scales) keeps its value. A parameter that may be null (an
+    optional angle that defaults to another) is left null. ``Strength()``, nothing declared:
+    a law without strength, whose joints a factor-of-safety search refuses."""
+
+    angles: tuple[str, ...] = ()
+    strengths: tuple[str, ...] = ()
+
+    def reduced(self, params: JointParams, factor: float) -> dict:
+        """The reduced values at ``factor``, as a ``model_copy`` update of ``params``."""
+        update = {}
+        for key in self.angles:
+            value = getattr(params, key)
+            if value is not None:
+                update[key] = math.degrees(math.atan(math.tan(math.radians(value)) / factor))
+        for key in self.strengths:
+            value = getattr(params, key)
+            if value is not None:
+                update[key] = value / factor
+        return update
 
 
 @dataclass(frozen=True)
@@ -44,7 +72,11 @@ class JointLaw:
     True only when ``update`` with these arguments would return ``(0.0, dil, state, 0.0, 0.0,
     0.0)`` whatever the shear force and displacements, and change nothing else: a separated
     sub-contact that stays separated. The force loop then skips the shear carry, the update
-    and the force sums for it (pdem.contact.forces); without one it never does.
+    and the force sums for it (pdem.contact.forces); without one it never does;
+    ``strength``: the parameters a factor-of-safety search reduces (:class:`Strength`). Every
+    registered law must declare it (``Strength()`` for a law without strength): it is not
+    guessed from parameter names, and :data:`pdem.contact.laws.JOINT_LAWS` refuses a law
+    without it.
     """
 
     name: str
@@ -56,6 +88,17 @@ class JointLaw:
     variants: tuple = ()
     dissipation: Any = None
     stays_open: Any = None
+    strength: Strength | None = None
+
+    def __post_init__(self):
+        if self.strength is None:
+            return
+        fields = self.params.model_fields
+        for key in (*self.strength.angles, *self.strength.strengths):
+            if key not in fields:
+                raise ValueError(f"joint law {self.name!r}: its strength names {key!r}, which is "
+                                 f"not a parameter of {self.params.__name__} (parameters: "
+                                 f"{', '.join(fields)})")
 
     def specialised(self, params: list) -> JointLaw:
         """The variant for these joints (unless ``PDEM_GENERIC_KERNELS`` is set), else self."""

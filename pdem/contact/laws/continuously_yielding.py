@@ -88,7 +88,7 @@ import numpy as np
 from pydantic import Field, PositiveFloat, model_validator
 
 from ...jit import inline_kernel
-from .base import OPEN, SLIPPING, JointLaw, JointParams
+from .base import OPEN, SLIPPING, JointLaw, JointParams, Strength
 
 R_CAP = 0.75  # cap on the reversal factor r of eq. 3 (pdem's choice)
 
@@ -242,5 +242,17 @@ def energy(p, j, s, hist, un, dil, fx, fy, fz, area, state):
     return fn, w + 0.5 * (fx * fx + fy * fy + fz * fz) * has_area / kss
 
 
+# Strength reduction (a factor-of-safety stage): the joint's strength is its bounding friction
+# φm (eq. 4, τm = σn tan φm; no cohesion or tension), which goes from initial_friction (φm0,
+# the peak) to friction (φ, the residual) with damage (eq. 6): both angles are reduced through
+# their tangents, tan(φ)/F and tan(φm0)/F, so the whole bound, peak to residual, is weakened.
+# initial_friction unset stays unset (the table then takes the reduced friction for it); set,
+# it stays >= the reduced friction (the tangent's reduction keeps the order, as the validator
+# wants). The dilation (eq. 7) follows from the two angles and has no parameter of its own.
+# Not strengths: the stiffnesses and their exponents and reference_stress (the normal and
+# shear springs), roughness (a length: how fast the peak degrades, not how high it is) and
+# continuous.
+STRENGTH = Strength(angles=("friction", "initial_friction"))
+
 LAW = JointLaw("continuously_yielding", Params, ("up", "r", "ex", "ey", "ez"), table, update,
-               energy, stays_open=stays_open)
+               energy, stays_open=stays_open, strength=STRENGTH)

@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import Field, NonNegativeFloat, PositiveFloat
 
 from ...jit import inline_kernel
-from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams
+from .base import FAILED, OPEN, SLIPPING, JointLaw, JointParams, Strength
 
 
 class Params(JointParams):
@@ -262,8 +262,15 @@ def friction_dissipation(p, j, s, hist, dun, dsx, dsy, dsz, area, un0, dil0, gx,
                                gz, fx, fy, fz)
 
 
+# Strength reduction (a factor-of-safety stage) as 3DEC's: tan(friction)/F, cohesion/F,
+# tension/F. Dilation is left as it is (3DEC leaves it too): at large F the reduced friction can
+# fall below it, which this law allows (no validator relates the two, and the update uses
+# tan(dilation) only while slipping); stiffnesses and dilation_limit are not strengths.
+STRENGTH = Strength(angles=("friction",), strengths=("cohesion", "tension"))
+
 FRICTION_LAW = JointLaw("coulomb", Params, (), friction_table, friction_update, friction_energy,
-                        dissipation=friction_dissipation, stays_open=friction_stays_open)
+                        dissipation=friction_dissipation, stays_open=friction_stays_open,
+                        strength=STRENGTH)
 LAW = JointLaw("coulomb", Params, (), table, update, energy,
                variants=((is_frictional, FRICTION_LAW),), dissipation=dissipation,
-               stays_open=stays_open)
+               stays_open=stays_open, strength=STRENGTH)
