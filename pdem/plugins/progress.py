@@ -40,21 +40,26 @@ class Progress(Plugin):
 
 
 class LoadReport(Plugin):
-    """Blocks, ghosts, contacts and halo bytes per rank, logged with each snapshot (MPI)."""
+    """Blocks, ghosts, contacts and halo bytes per rank (MPI), read with each snapshot and
+    logged when they changed since the last line (a settled model prints one line, not one a
+    snapshot)."""
 
     name = "load-report"
 
     def __init__(self, state, every: int):
         self.state = state
         self.every = every
+        self.last = None  # the last line's values
 
     def log(self):
         s = self.state
-        r = s.load_report()
-        if s.comm.size > 1:
+        r = s.load_report()  # collective: every rank reads it, rank 0 logs
+        values = (r["owned"], r["ghosts"], r["contacts"], r["halo_bytes"], r["imbalance"],
+                  r["rebuilds"])
+        if s.comm.size > 1 and values != self.last:
             log.info("load: owned %s ghosts %s contacts %s halo B/step %s; imbalance %.2f; "
-                     "rebuilds %d", r["owned"], r["ghosts"], r["contacts"], r["halo_bytes"],
-                     r["imbalance"], r["rebuilds"])
+                     "rebuilds %d", *values)
+        self.last = values
 
     def start(self, run):
         self.log()
