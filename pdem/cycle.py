@@ -47,9 +47,18 @@ DROPS = 2
 REDUCED = 3
 # (several ranks) an MPI call in the loop failed (its error code is returned as ``bad``)
 MPI_FAILED = 4
-# the step's reduction: max unbalanced force, bad state, migration due, block out of the
-# domain, stop signal, folded grid, grid ratio (pdem.stepper.Stepper._second_half)
+# The step's reduction (one Allreduce(MAX) of STEP_FLAGS floats), made by the Python path
+# (pdem.stepper.Stepper._second_half) and the compiled one (_reduce) alike, its columns by name:
+FLAG_FORCE = 0  # the largest unbalanced force of a free block
+FLAG_BAD = 1  # a bad (non-finite) state on some rank
+FLAG_MIGRATE = 2  # a block moved past half the ghost margin: migrate after the step
+FLAG_LEFT = 3  # a block left the model domain
+FLAG_SIGNAL = 4  # the stop signal some rank received (its number)
+FLAG_FOLDED = 5  # a folded zone on some rank (1 + its index)
+FLAG_GRID_RATIO = 6  # the grids' unbalanced-force ratio
 STEP_FLAGS = 7
+# the flags that end a compiled run of steps on every rank: FLAG_BAD .. FLAG_FOLDED
+STOP_FLAGS = (FLAG_BAD, FLAG_MIGRATE, FLAG_LEFT, FLAG_SIGNAL, FLAG_FOLDED)
 
 
 @kernel
@@ -181,8 +190,8 @@ def _reduce(net, max_force, rebuild):
     no block out of the model domain, no signal, no grid): 0 or MPI's error code."""
     f = net.flags
     f[:] = 0.0
-    f[0] = max_force
-    f[2] = 1.0 if rebuild else 0.0
+    f[FLAG_FORCE] = max_force
+    f[FLAG_MIGRATE] = 1.0 if rebuild else 0.0
     return allreduce_max(net)
 
 
@@ -190,10 +199,10 @@ def _reduce(net, max_force, rebuild):
 def _reduced_stop(red, ref_force, ratio_target):
     """Whether the reduced flags end the run of steps: a bad state, a migration, a block
     out of the domain, a signal or a folded grid on some rank, or the ratio target."""
-    for k in range(1, 6):
+    for k in STOP_FLAGS:
         if red[k] != 0.0:
             return True
-    return red[0] / ref_force <= ratio_target
+    return red[FLAG_FORCE] / ref_force <= ratio_target
 
 
 @kernel

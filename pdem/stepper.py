@@ -24,7 +24,22 @@ from .contact.forces import contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
 from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
-from .cycle import DONE, DROPS, MPI_FAILED, NEEDS_PYTHON, REDUCED, STEP_FLAGS, fused_steps
+from .cycle import (
+    DONE,
+    DROPS,
+    FLAG_BAD,
+    FLAG_FOLDED,
+    FLAG_FORCE,
+    FLAG_GRID_RATIO,
+    FLAG_LEFT,
+    FLAG_MIGRATE,
+    FLAG_SIGNAL,
+    MPI_FAILED,
+    NEEDS_PYTHON,
+    REDUCED,
+    STEP_FLAGS,
+    fused_steps,
+)
 from .deformable.contact import contact_forces_grid
 from .deformable.subcontacts import carry_grid_columns
 from .dynamics import motion
@@ -492,18 +507,23 @@ class Stepper:
             left = periodic and s.scene.domain is not None and domain.outside(s).any()
             signum = self.stop.signum if self.stop is not None else 0
             if flags is None:  # (pdem.cycle._reduce makes the same STEP_FLAGS)
-                flags = mpi.allreduce_max_array(s.comm, np.array(
-                    [self.stats[motion.STAT_MAX_FORCE], float(bad >= 0), float(rebuild),
-                     float(left), float(signum), float(self._grid_bad + 1),
-                     s.grids.ratio if s.grids is not None else 0.0]))
-        self.stop_signal = int(flags[4])
-        if flags[5]:
-            self._raise_folded(int(flags[5]) - 1)
-        if flags[1]:
+                mine = np.zeros(STEP_FLAGS)
+                mine[FLAG_FORCE] = self.stats[motion.STAT_MAX_FORCE]
+                mine[FLAG_BAD] = float(bad >= 0)
+                mine[FLAG_MIGRATE] = float(rebuild)
+                mine[FLAG_LEFT] = float(left)
+                mine[FLAG_SIGNAL] = float(signum)
+                mine[FLAG_FOLDED] = float(self._grid_bad + 1)
+                mine[FLAG_GRID_RATIO] = s.grids.ratio if s.grids is not None else 0.0
+                flags = mpi.allreduce_max_array(s.comm, mine)
+        self.stop_signal = int(flags[FLAG_SIGNAL])
+        if flags[FLAG_FOLDED]:
+            self._raise_folded(int(flags[FLAG_FOLDED]) - 1)
+        if flags[FLAG_BAD]:
             self._raise_non_finite(bad)
-        if flags[3]:
+        if flags[FLAG_LEFT]:
             domain.take_out(s, self.bodies())
-            flags[2] = 1.0
+            flags[FLAG_MIGRATE] = 1.0
         if s.damping.adaptive and s.step % 10 == 0:
             sums = mpi.allreduce_sum_array(s.comm, np.array(
                 [self.stats[motion.STAT_DAMP_POWER], self.stats[motion.STAT_DEK]]))
@@ -511,8 +531,8 @@ class Stepper:
                 s.alpha or 1e-3, sums[0], sums[1], s.scene.solve.damping.ratio, dt=s.dt)
         # the unbalanced-force ratio: of the rigid blocks (their largest unbalanced force over
         # the mean block weight) or of the grids (gridpoints over the mean gridpoint weight)
-        s.ratio = max(float(flags[0]) / r.ref_force, float(flags[6]))
-        return bool(flags[2]) and s.comm.size > 1
+        s.ratio = max(float(flags[FLAG_FORCE]) / r.ref_force, float(flags[FLAG_GRID_RATIO]))
+        return bool(flags[FLAG_MIGRATE]) and s.comm.size > 1
 
     def _raise_folded(self, gid: int):
         """Every rank raises alike: a zoned block's grid folded this step (found by its
