@@ -27,6 +27,7 @@ from .config.errors import ConfigError
 from .config.sizes import parse_bytes
 from .model.blocks import VERT_ROW
 from .model.fields import BLOCK, CONTACT, HELD_WIDTH, SUB, held_width
+from .model.shapes import shape_size
 from .mpi import LOCAL, allgather
 
 log = logging.getLogger("pdem")
@@ -85,24 +86,6 @@ def machine_memory() -> float:
         return math.inf
 
 
-def _shape_size(block) -> tuple[int, int, int, int]:
-    """(blocks, vertices, faces, edges) per entry; polytope counts from Euler's V - E + F = 2
-    with the worst case of triangular faces (E = 3V - 6, F = 2V - 4)."""
-    kind = block.shape_kind
-    p = getattr(block, kind)
-    if kind == "mesh":  # counted once the mesh is read (the cuts' blocks likewise)
-        return 1, 8, 6, 12
-    if kind in ("box", "array"):
-        n = math.prod(p.count) if kind == "array" else 1
-        return n, 8, 6, 12
-    if kind == "random":
-        v = p.vertices
-        return p.count, v, 2 * v - 4, 3 * v - 6
-    v = {"polyhedron": lambda: len(p.vertices), "prism": lambda: 2 * len(p.base),
-         "planes": lambda: 2 * len(p.normals)}[kind]()
-    return 1, v, max(2 * v - 4, 4), max(3 * v - 6, 6)
-
-
 def _row_bytes(fields) -> int:
     return sum(f.width * np.dtype(f.dtype).itemsize for f in fields)
 
@@ -149,7 +132,7 @@ def estimate(scene, comm_size: int, memory: float | None = None, whole: bool = F
     built_bytes = 0.0  # a block's row, geometry and shape objects while it is built
     held_bytes = 0.0  # a block's row and geometry in a rank's store
     for i, b in enumerate(scene.blocks):
-        n, v, f, e = _shape_size(b)
+        n, v, f, e = shape_size(b)  # the shape kind's estimate (pdem.model.shapes)
         per_entry.append((i, n))
         n_total += n
         # vertices local + world, face normals/offsets/starts, edge directions (float64 and

@@ -2,24 +2,13 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..config import ConfigError
-from ..config.schema import Block, BoxShape, Scene
+from ..config.schema import Scene
 from ..deformable.zoning import identity_frames, zone_specs
 from ..dynamics.rotation import quat_to_matrix
-from ..geometry import (
-    GeometryError,
-    box,
-    check_convex,
-    face_areas,
-    from_planes,
-    from_vertices,
-    prism,
-)
-from ..geometry.concave import convex_pieces
+from ..geometry import GeometryError, face_areas
 from ..mpi import LOCAL, allgather, run_together
 from ..registry import Registry
 from .blocks import VERT_ROW, BlockStore
@@ -28,6 +17,7 @@ from .mesh_blocks import mesh_blocks
 from .names import NameColumn
 from .rockmass import build_rock_mass
 from .runs import RunColumn
+from .shapes import SHAPES, family_size
 from .spec import BlockSpec
 from .speclist import RemoteRun, SpecList, UnbuiltRun, spec_parts, spec_summary
 
@@ -282,136 +272,6 @@ def quat_from_matrix(R: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def _random_hull(rng, diameter, nverts):
-    for _ in range(100):
-        pts = rng.normal(size=(nverts, 3))
-        pts /= np.linalg.norm(pts, axis=1)[:, None]
-        pts *= 0.5 * diameter
-        try:
-            poly = from_vertices(pts)
-        except GeometryError:
-            continue
-        if poly.volume > 0.05 * diameter**3:  # reject slivers
-            return poly
-    raise GeometryError("could not generate a non-degenerate random polyhedron")
-
-
-def _lattice(region: BoxShape, count: int, cell: float):
-    lo = np.array(region.min)
-    span = np.array(region.max) - lo
-    per_axis = np.floor(span / cell)
-    if not (per_axis < 2.0**62).all():
-        # found by the fuzz: the cast to int overflowed (a numpy warning and a wrong count)
-        raise ValueError(f"size {cell:g} m is too small for the region ({per_axis.max():.3g} "
-                         "sites along one axis)")
-    dims = np.maximum(per_axis.astype(int), 1)
-    n_sites = math.prod(int(d) for d in dims)  # Python ints: np.prod wraps around silently
-    if n_sites < count:
-        raise ValueError(
-            f"region holds only {n_sites} sites of size {cell:g}; count is {count}"
-        )
-    # the first ``count`` sites only: a large region of small sites has far more (1e18 would
-    # never finish), and the order (x fastest) is the same
-    sites = []
-    for k in range(dims[2]):
-        for j in range(dims[1]):
-            for i in range(dims[0]):
-                if len(sites) == count:
-                    return sites
-                sites.append(lo + (np.array([i, j, k]) + 0.5) * span / dims)
-    return sites
-
-
-def _box(p):
-    yield None, box(p.min, p.max)
-
-
-def _polyhedron(p):
-    pts = np.asarray(p.vertices, float)
-    if p.faces is not None:  # a closed surface, possibly concave: its convex pieces
-        pieces = convex_pieces(pts, p.faces)
-        yield None, pieces if len(pieces) > 1 else pieces[0]
-        return
-    inside = check_convex(pts, boundary=True)
-    if len(inside):
-        raise GeometryError(
-            f"vertices {list(map(int, inside))} are not on the convex hull: the "
-            "polyhedron is not convex (split a concave block into convex pieces)"
-        )
-    yield None, from_vertices(pts)
-
-
-def _prism(p):
-    yield None, prism(np.asarray(p.base, float), np.asarray(p.extrude, float))
-
-
-def _planes(p):
-    yield None, from_planes(np.asarray(p.normals, float), np.asarray(p.offsets, float))
-
-
-def _array(a, members: range | None = None):
-    """The members of ``base.transformed(np.eye(3), offset)`` (x fastest), computed for all
-    members at once: the rotated base once, then per member the same additions and
-    matrix-vector products (stacked), so bitwise the same shapes as one call per member.
-    ``members``: only these member indices (a rank's share of a large array)."""
-    base = box(a.box.min, a.box.max)
-    eye = np.eye(3)
-    base.transformed(eye, np.zeros(3))  # the same checks as a call per member
-    nx, ny, nz = a.count
-    ks = np.arange(nx * ny * nz) if members is None else np.arange(members.start, members.stop)
-    idx = np.stack([ks % nx, ks // nx % ny, ks // (nx * ny)], axis=1).astype(float)
-    offs = idx * np.array(a.spacing, float)
-    verts_r = base.vertices @ eye.T
-    normals = _frozen(base.normals @ eye.T)
-    centroid_r = eye @ base.centroid
-    inertia = _frozen(eye @ base.inertia @ eye.T)
-    for c0 in range(0, len(offs), _ARRAY_CHUNK):
-        t = offs[c0:c0 + _ARRAY_CHUNK]
-        verts = _frozen(verts_r + t[:, None, :])
-        stacked = np.ascontiguousarray(np.broadcast_to(normals, (len(t),) + normals.shape))
-        offsets = _frozen(base.offsets + (stacked @ t[:, :, None])[:, :, 0])
-        cents = _frozen(centroid_r + t)
-        for j in range(len(t)):
-            yield int(ks[c0 + j]), base.moved(vertices=verts[j], normals=normals,
-                                              offsets=offsets[j], centroid=cents[j],
-                                              inertia=inertia)
-
-
-def _family_size(b: Block) -> int | None:
-    """Members of a family entry (``array``, ``random``), None for a single block."""
-    if b.array is not None:
-        return math.prod(b.array.count)
-    if b.random is not None:
-        return b.random.count
-    return None
-
-
-_ARRAY_CHUNK = 1 << 16
-
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a.flags.writeable = False
-    return a
-
-
-def _random(r):
-    rng = np.random.default_rng(r.seed)
-    for k, site in enumerate(_lattice(r.region, r.count, r.size[1])):
-        d = rng.uniform(r.size[0], r.size[1])
-        shape = _random_hull(rng, d, r.vertices)
-        yield k, shape.transformed(np.eye(3), site - shape.centroid)
-
-
-# Block shapes by scene key: each builder yields (member index or None, world-frame shape, or a
-# list of convex pieces for a concave block) for its entry's parameters; a family (index given)
-# names its members ``NAME[k]``. A new shape is its schema model (config/schema.py,
-# SHAPE_KEYS) plus a builder and a line here.
-SHAPES: Registry = Registry("block shape")
-for _name, _builder in (("box", _box), ("polyhedron", _polyhedron), ("prism", _prism),
-                        ("planes", _planes), ("array", _array), ("random", _random)):
-    SHAPES.register(_name, _builder)
-
-
 def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
                   comm=None) -> list[BlockSpec]:
     """Every block of the scene in gid order, shapes in the world frame: the ``blocks:``
@@ -426,7 +286,7 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
     rank's share of the blocks built and the others' names and scalars only (a
     :class:`SpecList` of :class:`RemoteRun` parts), else every rank gets every block."""
     errors: list[str] = []
-    lo, hi = share(sum(_family_size(b) or 1 for b in scene.blocks)) \
+    lo, hi = share(sum(family_size(b) or 1 for b in scene.blocks)) \
         if share is not None and lazy_scene(scene) else (0, None)
     # with a share, the family members outside it are runs, not an object each
     out = SpecList() if hi is not None else []
@@ -438,19 +298,20 @@ def expand_blocks(scene: Scene, max_blocks: int | None = None, share=None,
             segments += [(True, out), (False, mesh_blocks(scene, i, b, comm))]
             out = []
             continue
-        size = _family_size(b)
+        entry = SHAPES[kind]
+        size = family_size(b)
         g0 = len(out)
         built = None
         if hi is not None and size is not None:  # a family: its members in the share only
             built = range(min(max(lo - g0, 0), size), min(max(hi - g0, 0), size))
-        # an array builds the members asked for; a random family draws every member (one
-        # random sequence) and those outside the share are dropped as they come
-        members = built if kind == "array" and built is not None else None
+        # an array (builds_share) builds the members asked for; a random family draws every
+        # member (one random sequence) and those outside the share are dropped as they come
+        members = built if entry.builds_share and built is not None else None
         if members is not None:
             out.append_unbuilt(b, i, 0, members.start)
         try:
-            args = (getattr(b, kind),) if members is None else (b.array, members)
-            for k, shape in SHAPES[kind](*args):
+            args = (getattr(b, kind),) if members is None else (getattr(b, kind), members)
+            for k, shape in entry.build(*args):
                 if built is not None and k not in built:  # drawn for the sequence only
                     out.append_unbuilt(b, i, k, 1)
                     continue

@@ -146,7 +146,8 @@ def _bits(a):
 
 def test_vectorised_setup_is_bitwise_the_per_block_definition():
     from pdem.geometry import box
-    from pdem.model.build import _array, unique_directions
+    from pdem.model.build import unique_directions
+    from pdem.model.shapes import _array
     from pdem.resolve import surface_areas
 
     scene = parse_scene(BITWISE_SCENE)
