@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
@@ -18,12 +18,31 @@ class Registry(Generic[T]):
     def __init__(self, kind: str):
         self.kind = kind
         self._entries: dict[str, T] = {}
+        self._watchers: list[Callable[[], None]] = []
 
     def register(self, name: str, entry: T) -> T:
         if name in self._entries:
             raise ValueError(f"{self.kind} {name!r} is registered twice")
         self._entries[name] = entry
+        self._changed()
         return entry
+
+    def unregister(self, name: str) -> T:
+        """Remove an entry (a test's, or a plugin's that is unloaded); returns it."""
+        entry = self[name]
+        del self._entries[name]
+        self._changed()
+        return entry
+
+    def watch(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` after every change of the entries: what is derived from them
+        elsewhere (the scene grammar's union of joint laws) follows a registration made from
+        outside pdem's tree."""
+        self._watchers.append(callback)
+
+    def _changed(self) -> None:
+        for callback in self._watchers:
+            callback()
 
     def __getitem__(self, name: str) -> T:
         try:

@@ -100,15 +100,16 @@ class Material(Strict):
         return {k: v for k, v in self if v is not None}
 
 
-def _joint_law_union():
-    """The union of the registered joint laws' parameter models, told apart by ``model``."""
+def joint_law_union():
+    """The union of the registered joint laws' parameter models, told apart by ``model``
+    (rebuilt into :class:`Scene` whenever a law is registered: :func:`_joint_laws_changed`)."""
     models = tuple(law.params for law in JOINT_LAWS.values())
     if len(models) == 1:
         return models[0]
     return Annotated[Union[models], Field(discriminator="model")]  # noqa: UP007
 
 
-Joint = _joint_law_union()
+Joint = joint_law_union()
 
 
 class JointPair(Strict):
@@ -934,3 +935,14 @@ def _is_family_member(name: str, names: dict[str, int]) -> bool:
     if not name.endswith("]") or "[" not in name:
         return False
     return name[: name.index("[")] in names
+
+
+def _joint_laws_changed() -> None:
+    """A joint law was registered (or removed): ``joints:`` takes the registered laws' union
+    from now on, so a law added from outside pdem's tree is selected by ``model:`` in a scene
+    like a shipped one (pydantic rebuilds the model's validator around the new annotation)."""
+    Scene.model_fields["joints"].annotation = dict[str, joint_law_union()]
+    Scene.model_rebuild(force=True)
+
+
+JOINT_LAWS.watch(_joint_laws_changed)

@@ -81,15 +81,9 @@ def glue_registered(monkeypatch):
         for kernel_ in vars(module).values():
             if isinstance(kernel_, Dispatcher):
                 monkeypatch.setattr(kernel_, "_cache", NullCache())
-    monkeypatch.setitem(JOINT_LAWS._entries, "glue", GLUE)
-    import pdem.config.schema as schema
-
-    union = schema._joint_law_union()
-    monkeypatch.setattr(schema.Scene.model_fields["joints"], "annotation", dict[str, union])
-    schema.Scene.model_rebuild(force=True)
+    JOINT_LAWS.register("glue", GLUE)  # the scene grammar follows (pdem.config.schema)
     yield
-    monkeypatch.undo()
-    schema.Scene.model_rebuild(force=True)
+    JOINT_LAWS.unregister("glue")
 
 
 def test_a_new_joint_law_is_selected_by_the_scene_and_keeps_history(glue_registered):
@@ -103,6 +97,27 @@ def test_a_new_joint_law_is_selected_by_the_scene_and_keeps_history(glue_registe
     assert abs(cube[1]) < 3 * m_g / 1.0e9  # held (static shear displacement ~2e-5 m)
     hist = sim.contacts.sub["sc_hist"]
     assert hist.shape[1] == 1 and hist[:, 0].max() > 100  # the law's own history advanced
+
+
+def test_registering_a_law_extends_the_scene_grammar():
+    """JOINT_LAWS.register is all a law from outside the tree needs for scenes to select it:
+    the schema's union of laws follows the registry (and its errors name the key path)."""
+    glued = SCENE.replace("MODEL", "glue")
+    with pytest.raises(ConfigError, match="joints.default"):
+        parse_scene(glued)
+    JOINT_LAWS.register("glue", GLUE)
+    try:
+        assert type(parse_scene(glued).joints["default"]) is GlueParams
+        with pytest.raises(ConfigError, match=r"joints\.default\.kn"):
+            parse_scene(glued.replace("kn: 1.0e9", "kn: -1.0"))
+        with pytest.raises(ConfigError, match="friction"):  # glue has no friction
+            parse_scene(glued.replace("ks: 1.0e9", "ks: 1.0e9, friction: 30.0"))
+        coulomb = parse_scene(SCENE.replace("MODEL", "coulomb"))  # the shipped laws still parse
+        assert coulomb.joints["default"].model == "coulomb"
+    finally:
+        JOINT_LAWS.unregister("glue")
+    with pytest.raises(ConfigError, match="joints.default"):
+        parse_scene(glued)
 
 
 def test_coulomb_is_the_default_model_and_unknown_models_are_refused():
