@@ -28,12 +28,15 @@ Stresses (docs/theory.md, "Boundary stress")
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from .config import ConfigError
 from .dynamics import motion
 from .dynamics.rotation import quat_to_matrix
+from .registry import Registry
 from .selection import selected, set_block_fields
 
 COVER_COS = 1.0 - 1e-6  # antiparallel faces: n_a . n_b < -COVER_COS
@@ -72,7 +75,20 @@ class Boundary:
 
     @property
     def active(self) -> bool:
-        return bool(self.histories) or len(self.f_gid) > 0
+        """Some condition acts on the blocks (the steps then run in Python, pdem.stepper)."""
+        return any(kind.active(self) for kind in BOUNDARY_KINDS.values())
+
+    def at_start(self, s) -> None:
+        """The conditions' loads before the run's first step (the staggered start)."""
+        for kind in BOUNDARY_KINDS.values():
+            if kind.at_start is not None and kind.active(self):
+                kind.at_start(self, s)
+
+    def before_step(self, s) -> None:
+        """What each condition in force does before a step from t (in registry order)."""
+        for kind in BOUNDARY_KINDS.values():
+            if kind.active(self):
+                kind.before_step(self, s)
 
     # ------------------------------------------------------------------ velocities
     def release(self, gids) -> None:
@@ -257,19 +273,70 @@ def exposed_faces(g, gids: np.ndarray, ctol: float):
             np.array(out[2], float).reshape(-1, 3), np.array(out[3], float).reshape(-1, 3))
 
 
+def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True) -> None:
+    """Put the conditions of every kind that ``source`` (the scene's ``boundary:`` or a
+    stage) lists on the blocks they select (every rank alike); ``where``: the key path of
+    ``source`` in the scene (for messages), ``t0``: when their histories start."""
+    for key, kind in BOUNDARY_KINDS.items():
+        for j, cond in enumerate(getattr(source, key)):
+            gids = selected(s, cond)
+            if not len(gids):
+                raise ConfigError([f"{s.scene.at(*where, key, j)}: selects no block"])
+            problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
+            if problem:
+                raise ConfigError([f"{s.scene.at(*where, key, j)}: {problem}"])
+
+
 def apply_scene(s) -> None:
     """The scene's ``boundary:`` on a new model state (every rank alike)."""
     s.boundary = Boundary()
-    bc = s.scene.boundary
-    for j, cond in enumerate(bc.velocity):
-        gids = selected(s, cond)
-        if not len(gids):
-            raise ConfigError([f"{s.scene.at('boundary', 'velocity', j)}: selects no block"])
-        s.boundary.add_velocity(s, cond, gids, 0.0)
-    for j, cond in enumerate(bc.stress):
-        gids = selected(s, cond)
-        if not len(gids):
-            raise ConfigError([f"{s.scene.at('boundary', 'stress', j)}: selects no block"])
-        if not s.boundary.add_stress(s, cond, gids):
-            raise ConfigError([f"{s.scene.at('boundary', 'stress', j)}: the selected blocks "
-                               "have no exposed face"])
+    apply_conditions(s, s.scene.boundary, ("boundary",), 0.0)
+
+
+def needs_every_block(scene, stages_only: bool = False) -> bool:
+    """Whether a condition of the scene's ``boundary:`` (unless ``stages_only``) or of a
+    stage finds what it acts on among every block (its kind's ``whole_scene``: exposed
+    faces), so every rank keeps every block's geometry (at set-up; after it too where a
+    stage's condition needs it)."""
+    return any(kind.whole_scene and ((not stages_only and getattr(scene.boundary, key))
+                                     or any(getattr(st, key) for st in scene.stages))
+               for key, kind in BOUNDARY_KINDS.items())
+
+
+@dataclass(frozen=True)
+class BoundaryKind:
+    """One kind of boundary condition, by its scene key (``boundary.<key>`` and a stage's
+    ``<key>``, lists of conditions with a selection; their models are in config/schema.py).
+
+    ``add(boundary, s, cond, gids, t0, motion_too)`` puts a condition on its selected
+    blocks and returns None, or the text of why it cannot (named with the condition's key
+    path); ``active(boundary)``: some condition of the kind is in force;
+    ``before_step(boundary, s)``: its work before each step from t; ``at_start``: before
+    the first step (None: nothing); ``whole_scene``: it looks for what it acts on among
+    every block, so set-up keeps every block's geometry on every rank. A stage with an
+    active condition steps in Python (the compiled loop runs none yet)."""
+
+    add: Callable[..., str | None]
+    active: Callable[[Boundary], bool]
+    before_step: Callable[[Boundary, object], None]
+    at_start: Callable[[Boundary, object], None] | None = None
+    whole_scene: bool = False
+
+
+def _add_velocity(boundary, s, cond, gids, t0, motion_too):
+    boundary.add_velocity(s, cond, gids, t0, motion_too)
+
+
+def _add_stress(boundary, s, cond, gids, t0, motion_too):
+    if not boundary.add_stress(s, cond, gids):
+        return "the selected blocks have no exposed face"
+    return None
+
+
+BOUNDARY_KINDS: Registry[BoundaryKind] = Registry("boundary condition")
+# velocities first: their histories are written into v before the tractions are computed
+BOUNDARY_KINDS.register("velocity", BoundaryKind(
+    _add_velocity, lambda b: bool(b.histories), Boundary.prescribe))
+BOUNDARY_KINDS.register("stress", BoundaryKind(
+    _add_stress, lambda b: len(b.f_gid) > 0, Boundary.tractions, at_start=Boundary.tractions,
+    whole_scene=True))

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from .boundary import apply_conditions
 from .config import ConfigError
 from .config.stages import stage_scene
 from .contact.laws import joint_table
@@ -47,18 +48,7 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
         s.boundary.release(gids)
         if fixed and motion:
             set_block_fields(s, gids, v=0.0, w=0.0, L=0.0)
-    for j, pv in enumerate(st.velocity):
-        gids = selected(s, pv)
-        if not len(gids):
-            raise ConfigError([f"{s.scene.at('stages', k, 'velocity', j)}: selects no block"])
-        s.boundary.add_velocity(s, pv, gids, s.stage_times.get(k, s.time), motion)
-    for j, ps in enumerate(st.stress):
-        gids = selected(s, ps)
-        if not len(gids):
-            raise ConfigError([f"{s.scene.at('stages', k, 'stress', j)}: selects no block"])
-        if not s.boundary.add_stress(s, ps, gids):
-            raise ConfigError([f"{s.scene.at('stages', k, 'stress', j)}: the selected blocks "
-                               "have no exposed face"])
+    apply_conditions(s, st, ("stages", k), s.stage_times.get(k, s.time), motion)
     for j, pf in enumerate(st.force):
         gids = selected(s, pf)
         if not len(gids):

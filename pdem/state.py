@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from .boundary import apply_scene
+from .boundary import apply_scene, needs_every_block
 from .config import ConfigError, Scene
 from .config.load import dump_scene
 from .contact.algorithms import ALGORITHMS
@@ -59,12 +59,12 @@ def max_step_motion(ctol: float, thinnest: float) -> float:
     common plane then lies past its middle and pushes it out on the far side)."""
     return max(REMAP_FRACTION * ctol, STEP_WIDTH_FRACTION * thinnest)
 
+
 def needs_whole_scene(scene: Scene, comm) -> bool:
     """Whether set-up needs every block's geometry on every rank: a boundary stress finds
     the exposed faces of its blocks among all blocks (pdem.boundary), and without parallel
     h5py rank 0 writes every block's surface."""
-    stress = bool(scene.boundary.stress) or any(st.stress for st in scene.stages)
-    return stress or (comm.size > 1 and not h5py_has_mpi())
+    return needs_every_block(scene) or (comm.size > 1 and not h5py_has_mpi())
 
 
 def build_share(comm, n: int) -> tuple[int, int]:
@@ -287,7 +287,7 @@ class ModelState:
     def needs_scene_geometry(self) -> bool:
         """Whether the run reads the geometry of blocks it does not hold after set-up: a
         stage's boundary stress finds the exposed faces on the scene's store (pdem.boundary)."""
-        return any(st.stress for st in self.scene.stages)
+        return needs_every_block(self.scene, stages_only=True)
 
     def _distributed_from_scene(self):
         """After the first distribution from the scene's store: take the output writer's

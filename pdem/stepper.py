@@ -112,8 +112,8 @@ class Stepper:
             initialise(s)
         self.compute_forces(0.0)
         b = s.blocks
-        if s.boundary is not None and s.boundary.active:
-            s.boundary.tractions(s)
+        if s.boundary is not None:
+            s.boundary.at_start(s)
         motion.stagger_start(motion_record(b, s.n_owned), s.gravity, s.dt, s.scalar_inertia)
         s.halo.forward(b)
 
@@ -447,9 +447,9 @@ class Stepper:
         self.stats[:] = 0.0
         hold_fixed(s)
         with tm.phase("motion"):
-            if s.boundary is not None and s.boundary.active:
-                s.boundary.prescribe(s)  # velocity histories at t + dt/2
-                s.boundary.tractions(s)  # boundary stresses at t, on the pose at t
+            if s.boundary is not None:
+                # velocity histories at t + dt/2, then boundary stresses at t on the pose at t
+                s.boundary.before_step(s)
             rec = motion_record(b, n, self.holds)
             if s.grids is not None:  # zoned blocks move with their grids
                 rec = rec._replace(fixed=s.grids.rigid_fixed(rec.fixed))
