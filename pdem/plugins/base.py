@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..registry import Registry
 
 
 class Plugin:
@@ -62,3 +66,19 @@ def interval_steps(state, every_steps, every) -> int:
 def next_multiple(step: int, every: int) -> int:
     """The first step after ``step`` that is a multiple of ``every`` (an interval's event)."""
     return (step // every + 1) * every
+
+
+@dataclass(frozen=True)
+class PluginEntry:
+    """How a run gets a plugin: ``make(state, output, made)`` returns the plugin a scene asks
+    for, or None (``output``: the run writes files; ``made``: the plugins made before it, by
+    name, e.g. the snapshots a plugin samples with). ``order``: where its hooks run after a
+    step, lowest first."""
+
+    order: int
+    make: Callable[..., Plugin | None]
+
+
+# The run plugins by name (their ``Plugin.name``): each plugin module registers its own, and
+# a plugin from outside pdem's tree registers the same way before the Simulation is made.
+PLUGINS: Registry[PluginEntry] = Registry("run plugin")

@@ -8,7 +8,7 @@ import os
 
 from ..errors import writing
 from ..io.checkpoint import prune, write_checkpoint
-from .base import Plugin, interval_steps, next_multiple
+from .base import PLUGINS, Plugin, PluginEntry, interval_steps, next_multiple
 
 log = logging.getLogger("pdem")
 
@@ -82,3 +82,8 @@ def stage_checkpoint(run, k: int) -> str:
     prefix = s.scene.checkpoint.file if s.scene.checkpoint is not None \
         else os.path.splitext(s.scene.output.file)[0]
     return _write(run, f"{prefix}-stage{k}-{safe}.h5")
+
+
+PLUGINS.register("checkpoints", PluginEntry(
+    30, lambda state, output, made: Checkpoints(state) if state.scene.checkpoint is not None
+    else None))

@@ -16,7 +16,7 @@ from ..dynamics.diagnosis import explain
 from ..dynamics.energy import kinetic_per_block
 from ..errors import SimulationError, writing
 from ..mpi import allgather, exact_sum
-from .base import Plugin, next_multiple
+from .base import PLUGINS, Plugin, PluginEntry, next_multiple
 
 log = logging.getLogger("pdem")
 
@@ -175,3 +175,7 @@ class EnergyBudget(Plugin):
             if start is not None:
                 self.state.energy_start = tuple(start)
                 self.e0 = start[0] + start[1]
+
+
+PLUGINS.register("energy", PluginEntry(
+    70, lambda state, output, made: EnergyBudget(state, made.get("snapshots"))))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..domain import DELETED, remove_blocks
-from .base import Plugin
+from .base import PLUGINS, Plugin, PluginEntry
 
 
 class Excavations(Plugin):
@@ -45,3 +45,9 @@ class Excavations(Plugin):
                 p.before_migration(run)
             s.rebalance()  # excavated blocks weigh nothing now (balance: rcb)
             s.redistribute()
+
+
+# first after the stage bookkeeping: a checkpoint after it sees it done
+PLUGINS.register("excavations", PluginEntry(
+    20, lambda state, output, made: None if np.isnan(state.specs.excavation_times()).all()
+    else Excavations(state)))

@@ -18,7 +18,7 @@ from ..model import csr
 from ..model.fields import OUTPUT
 from ..resolve import mass_scaling_summary
 from ..selection import timestep_rows
-from .base import Plugin, interval_steps, next_multiple
+from .base import PLUGINS, Plugin, PluginEntry, interval_steps, next_multiple
 
 
 def owned_zoned(grids) -> list | None:
@@ -245,3 +245,10 @@ class Histories(Plugin):
         if "history_next_time" in attrs:
             saved = json.loads(attrs["history_next_time"])
             self.next_time.update({k: v for k, v in saved.items() if k in self.next_time})
+
+
+PLUGINS.register("snapshots", PluginEntry(
+    40, lambda state, output, made: Snapshots(state) if output else None))
+PLUGINS.register("histories", PluginEntry(
+    60, lambda state, output, made: Histories(state, made["snapshots"]) if "snapshots" in made
+    else None))

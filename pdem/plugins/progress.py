@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import time as wallclock
 
-from .base import Plugin, next_multiple
+from .base import PLUGINS, Plugin, PluginEntry, next_multiple
 
 log = logging.getLogger("pdem")
 
@@ -70,3 +70,9 @@ class LoadReport(Plugin):
     def after_step(self, run):
         if self.state.step % self.every == 0:
             self.log()
+
+
+PLUGINS.register("load-report", PluginEntry(
+    50, lambda state, output, made: LoadReport(state, made["snapshots"].every)
+    if "snapshots" in made else None))
+PLUGINS.register("progress", PluginEntry(80, lambda state, output, made: Progress(state)))

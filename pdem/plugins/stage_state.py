@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from .base import Plugin
+from .base import PLUGINS, Plugin, PluginEntry
 
 _KEYS = {"stage": int, "stage_next": int, "stage_started": int, "stage_t0": float,
          "stage_step0": int}
@@ -30,3 +30,7 @@ class StageState(Plugin):
         for k, cast in _KEYS.items():
             if k in attrs:
                 setattr(self.state, k, cast(attrs[k]))
+
+
+PLUGINS.register("stages", PluginEntry(
+    10, lambda state, output, made: StageState(state) if state.scene.stages else None))
