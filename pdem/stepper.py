@@ -52,7 +52,7 @@ from .jit import drop_linking_ir
 from .memory import large_blocks_mapped, return_freed_memory
 from .model.contacts import ContactStore, Subs, sub_columns
 from .model.csr import pair_key
-from .model.fields import row_width
+from .model.fields import kernel_record, row_width
 from .parallel import native
 from .parallel.halo import halo_columns
 from .plugins.energy import energy_totals
@@ -67,11 +67,7 @@ PYTHON_RUN = 64
 def motion_record(b, n: int, still: bool = False) -> motion.Motion:
     """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`; with ``still`` the
     held inactive blocks are fixed for it too (pdem.dynamics.inactive)."""
-    return motion.Motion(b.x[:n], b.q[:n], b.v[:n], b.w[:n], b.L[:n], b.mass[:n],
-                         b.inertia[:n], (b.still if still else b.fixed)[:n], b.vfix[:n], b.force[:n],
-                         b.applied_force[:n], b.moment[:n], b.mscale[:n], b.prev_force[:n],
-                         b.prev_moment[:n], b.dx[:n], b.dtheta[:n], b.work[:n], b.bforce[:n],
-                         b.bmoment[:n])
+    return kernel_record(motion.Motion, b, n, fixed=b.still if still else b.fixed)
 
 
 class Stepper:
@@ -269,7 +265,7 @@ class Stepper:
 
     def bodies(self) -> Bodies:
         b = self.s.blocks
-        return Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
+        return kernel_record(Bodies, b)
 
     def compute_forces(self, dt: float):
         b = self.s.blocks

@@ -34,6 +34,9 @@ class Field:
     checkpoint: bool = False
     halo: bool = False
     output: str | None = None
+    # the field's name in the kernels' records (pdem.dynamics.motion.Motion, ...) where it is
+    # not its own (``applied_force`` is the motion kernel's ``applied``)
+    kernel: str | None = None
 
     @property
     def width(self) -> int:
@@ -65,7 +68,7 @@ BLOCK: tuple[Field, ...] = (
           **_S),
     Field("material", (), I32, "1", "row in the scene's materials", **_S),
     Field("group", (), I32, "1", "row in the sorted group names", **_S),
-    Field("applied_force", (3,), F, "N", "constant applied force", **_S),
+    Field("applied_force", (3,), F, "N", "constant applied force", **_S, kernel="applied"),
     Field("radius", (), F, "m", "largest centroid-to-vertex distance", **_S),
     Field("x0", (3,), F, "m", "centroid at start (displacements)", **_S),
     Field("force", (3,), F, "N", "contact force sum of the current step", **_D),
@@ -221,3 +224,20 @@ def halo_fields(inactive: bool, zoned: bool = True) -> tuple[Field, ...]:
     skip = (() if inactive else HALO_INACTIVE) + (() if zoned else HALO_ZONED)
     return tuple(f for f in HALO if f.name not in skip)
 OUTPUT = tuple(f for f in BLOCK if f.output)
+
+
+# a kernel record's field name -> the block field it is (the declared ``kernel`` names, else
+# the field's own)
+KERNEL_FIELDS = {f.name: f.name for f in BLOCK} | {f.kernel: f.name for f in BLOCK if f.kernel}
+
+
+def kernel_record(record, store, n: int | None = None, **given):
+    """A kernel record (a namedtuple type such as pdem.dynamics.motion.Motion) filled by field
+    name from a block store: each of the record's fields is the declared block field of that
+    name (or whose ``kernel`` name it is), its first ``n`` rows (all with None); ``given``
+    overrides fields by record name (e.g. the still flags in place of ``fixed``)."""
+    values = []
+    for name in record._fields:
+        a = given[name] if name in given else getattr(store, KERNEL_FIELDS[name])
+        values.append(a if n is None else a[:n])
+    return record(*values)

@@ -15,6 +15,7 @@ from ..dynamics import motion
 from ..dynamics.diagnosis import explain
 from ..dynamics.energy import kinetic_per_block
 from ..errors import SimulationError, writing
+from ..model.fields import kernel_record
 from ..mpi import allgather, exact_sum
 from .base import PLUGINS, Plugin, PluginEntry, next_multiple
 
@@ -40,7 +41,7 @@ def energy_totals(state) -> dict[str, float]:
         ke[r] -= 0.5 * b.mass[r] * b.mscale[r] * b.v[r, k] ** 2
     strain = np.zeros(b.n)
     c = state.contacts
-    bodies = Bodies(b.x, b.R, b.v, b.w, b.dtheta, b.force, b.moment, b.fixed, b.work)
+    bodies = kernel_record(Bodies, b)
     stored_energy(bodies, c.pairs(), c.subs(), state.joints.kernel_args, strain)
     w = b.work[:n]
     per_block = np.column_stack([ke, strain[:n], w[:, motion.WORK_GRAVITY],
