@@ -11,7 +11,6 @@ it, plugins (:mod:`pdem.plugins`) observe it.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -26,8 +25,7 @@ from .deformable.columns import GRID_WIDTH
 from .deformable.store import GridStore
 from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose, thinnest_width
-from .errors import UserError
-from .io.checkpoint import CheckpointReader, new_run_id, written_contacts
+from .io.checkpoint import new_run_id, written_contacts
 from .io.layout import even_share, h5py_has_mpi, writer_range
 from .io.surfaces import body_surfaces
 from .memory import map_large_blocks, return_freed_memory
@@ -39,9 +37,10 @@ from .model.fields import MIGRATE, halo_fields, held_width
 from .model.runs import RunColumn
 from .mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
 from .parallel.decomposition import make_decomposition
-from .parallel.migrate import place_contacts, rebuild, route_contacts
+from .parallel.migrate import rebuild
 from .preflight import check_derived, machine_memory, preflight, rescaled
 from .resolve import REMAP_FRACTION, Resolved, contact_tolerance, resolve
+from .restart import restore
 from .selection import CATALOGUE, GATHERED, RUN_CATALOGUE
 from .timers import Timers
 
@@ -261,7 +260,7 @@ class ModelState:
             self.n_rebuilds += 1
             return_freed_memory()  # the messages and the old store
 
-    def _scene_store(self):
+    def scene_store(self):
         """The scene's store with its geometry (set-up and restore only)."""
         if not self.glob.has_geometry:
             raise RuntimeError("the scene's block geometry was released after set-up")
@@ -289,7 +288,7 @@ class ModelState:
         stage's boundary stress finds the exposed faces on the scene's store (pdem.boundary)."""
         return needs_every_block(self.scene, stages_only=True)
 
-    def _distributed_from_scene(self):
+    def distributed_from_scene(self):
         """After the first distribution from the scene's store: take the output writer's
         share of the surfaces, then drop the rest of the scene's geometry (the start's
         contact search and first update then run without it: the set-up's peak)."""
@@ -329,14 +328,14 @@ class ModelState:
             g = self.glob
             owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
             self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE}, empty,
-                            source=self._scene_store())
+                            source=self.scene_store())
         else:
-            s = self._take_share()
+            s = self.take_share()
             self.distribute(s.gid.copy(), {k: getattr(s, k) for k in MIGRATE}, empty,
                             source=s, consume=True)
-        self._distributed_from_scene()
+        self.distributed_from_scene()
 
-    def _take_share(self):
+    def take_share(self):
         """The build share, to be sent to the owners (and dropped: ``self.share`` is None
         after), with what set-up changed on the scene's per-block fields since it was built
         (boundary conditions, mass scaling, a restart's removed blocks); the output writer
@@ -372,148 +371,8 @@ class ModelState:
         return i if i < len(owned) and owned[i] == gid else -1
 
     def restore(self, ck: dict):
-        """Continue from a checkpoint's state (any rank count; see pdem.io.checkpoint)."""
-        a = ck["attrs"]
-        if int(a["n_blocks"]) != self.glob.n:
-            # found by the fuzz: a checkpoint whose blocks do not match its scene
-            raise UserError(f"checkpoint: {int(a['n_blocks'])} blocks stored, its scene makes "
-                            f"{self.glob.n}: the file is damaged")
-        self.step = int(a["step"])
-        self.time = float(a["time"])
-        self.dt = float(a["dt"])
-        self.alpha = float(a["alpha"])
-        self.ratio = float(a["ratio"]) if a["ratio"] >= 0 else math.inf
-        self.run_id = str(a["run_id"])
-        self.resolved = dataclasses.replace(self.resolved, dt=self.dt)
-        if "blocks" in ck:  # read whole by one process (read_checkpoint)
-            self._restore_share(ck["blocks"]["out"], ck["blocks"]["x"],
-                                lambda owned: {k: ck["blocks"][k][owned] for k in MIGRATE},
-                                lambda free: ck["contacts"], ck["path"], read=False)
-            return
-        path = ck["path"]
-        if self.share is not None:
-            with self._reader(path, by_share=True) as reader:
-                self._restore_by_share(reader, path)
-            return
-        with self._reader(path) as reader:
-            # every rank has every block (it reads every block's centroid: who owns what) and
-            # reads the contacts' blocks, then the rows it will hold: its blocks and the
-            # contacts of its free blocks (the rebuild keeps no others)
-            out, x = self._checked(lambda: (reader.block_column("out"),
-                                            reader.block_column("x")), path)
-            self._restore_share(
-                out, x, lambda owned: self._checked(lambda: reader.block_rows(owned, MIGRATE),
-                                                    path),
-                lambda free: reader.contacts(self._checked(lambda: np.nonzero(
-                    np.isin(reader.contact_column("ga"), free)
-                    | np.isin(reader.contact_column("gb"), free))[0], path)), path)
-
-    def _restore_by_share(self, reader, path):
-        """Each rank reads the rows of its build share's blocks (a hyperslab: no rank reads a
-        whole column) and the rebuild takes them to their owners at the checkpoint's poses.
-        Then each reads an even, contiguous share of the contacts and sends each contact
-        straight to the ranks that own a free block of it: the contacts are not held while
-        the blocks travel (that was a restart's peak). What every rank learns of every block
-        is its ``out`` code and its owner (1 + 4 bytes a block, gathered from the shares,
-        dropped after)."""
-        comm = self.comm
-        gids = self.share.gid.copy()
-        rows = self._checked(lambda: reader.block_rows(gids, MIGRATE), path)
-        out = allgather_rows(comm, rows["out"])
-        owner = allgather_rows(comm, self.decomp.owner_of(rows["x"]).astype(np.int32))
-
-        def placed():
-            c0, c1, nsub = self._checked(lambda: reader.contact_share(comm.rank, comm.size),
-                                         path)
-            counts = allgather(comm, int(nsub.sum()))
-            if sum(counts) != reader.n_sub:  # every rank alike: the sum is everyone's
-                raise UserError(f"cannot restart from {path}: contacts/nsub counts "
-                                f"{sum(counts)} sub-contacts, the file holds {reader.n_sub}")
-            s0 = sum(counts[:comm.rank])
-            bounds = reader.contact_batches(nsub)
-            if len(nsub) and int(nsub.max()) < 2**31:  # held through the routing: half size
-                nsub = nsub.astype(np.int32)
-            known = self._checked(lambda: reader.contact_blocks(c0, c1), path)
-            fixed = self.glob.fixed  # to the owners of their free blocks
-            ga = known["ga"]
-            to_a = np.where(fixed[ga] == 0, owner[ga], -1)
-            gb = known["gb"]
-            to_b = np.where(fixed[gb] == 0, owner[gb], -1)
-            del ga, gb
-            held = [known]  # the blocks and pieces: dropped once the keys are sent
-            del known
-
-            def keys(lo, hi):
-                return held[0]["pga"][lo:hi].astype(np.int64) * KEY_SHIFT + held[0]["pgb"][lo:hi]
-
-            def read(lo, hi):  # (the blocks and pieces read again: 16 bytes a contact)
-                return self._checked(lambda: reader.contact_range(
-                    c0 + lo, c0 + hi, nsub[lo:hi], s0 + int(nsub[:lo].sum())), path)
-
-            return route_contacts(comm, to_a, to_b, nsub, keys, bounds, read,
-                                  keys_done=held.clear)
-
-        held = [rows]  # given to the rebuild, then dropped: not kept while the contacts come
-        del rows
-        self._restore_share(out, None, lambda owned: held.pop(), None, path, placed=placed)
-
-    def _restore_share(self, out, x, block_rows, contacts, path, read: bool = True,
-                       placed=None):
-        """The blocks this rank brings in (its build share, or those it owns at the
-        checkpoint's poses) from ``block_rows(gids)``, and the contacts of their free ones,
-        ``contacts(gids of those free blocks)``: the rebuild sends both to the owners.
-        ``read``: the contacts were read for this (the rebuild drops them as it merges),
-        else they are the caller's (a checkpoint read whole). ``placed()`` instead of
-        ``contacts``: read the contacts and send them to the owners of their free blocks
-        (collective), once the blocks are distributed."""
-        gone = out > 0  # blocks that left the model domain act as fixed ones
-        self.glob.fixed[gone] = 1
-        self.glob.out[gone] = out[gone]
-        if self.share is None:  # every rank has every block: it takes its own
-            owned = np.nonzero(self.decomp.owner_of(x) == self.comm.rank)[0]
-            source = self._scene_store()
-        else:  # each rank sends its share's blocks, at their checkpoint poses, to the owners
-            source = self._take_share()
-            owned = source.gid.copy()
-        free = owned[self.glob.fixed[owned] == 0]  # the contacts of these come along
-        if self.grids is not None:  # the grids held here (by the build) from the file
-            self._checked(lambda: self.grids.load(path), path)
-        # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
-        held = held_width(self.scene.solve.inactive is not None)
-        if placed is not None:
-            self.distribute(owned, block_rows(owned), self.empty_contacts(), source=source,
-                            consume=source is not self.glob)
-            with self.timers.phase("migrate"):
-                self.contacts = place_contacts(self.blocks, self.n_owned, self.glob.fixed,
-                                               placed().with_held(held))
-        else:
-            self.distribute(owned, block_rows(owned), contacts(free).with_held(held),
-                            source=source, consume=source is not self.glob,
-                            consume_contacts=read)
-        if self.grids is not None:  # zoned rows and pieces from the stored gridpoints
-            b, rows = self.blocks, self.grids.rows
-            x_saved = b.x[rows].copy()
-            self.grids.sync(b)
-            self.grids.sync(b, ghosts=True)
-            b.x[rows] = x_saved  # the stored centroids (the same numbers, recomputed)
-            b.dx[rows] = 0.0
-        self._distributed_from_scene()
-
-    def _reader(self, path, by_share: bool = False):
-        """The checkpoint opened on every rank (collective), or one line of why not."""
-        return self._checked(lambda: CheckpointReader(path, self.comm, by_share), path)
-
-    def _checked(self, read, path):
-        """``read()`` on every rank; a damaged file found by any rank is refused by all
-        (the same line), never one rank raising while the others wait."""
-        try:
-            value, why = read(), None
-        except (OSError, ValueError, KeyError) as exc:
-            value, why = None, str(exc)
-        whys = [w for w in allgather(self.comm, why) if w is not None]
-        if whys:
-            raise UserError(f"cannot restart from {path}: {whys[0]}")
-        return value
+        """Continue from a checkpoint's state (any rank count; :func:`pdem.restart.restore`)."""
+        restore(self, ck)
 
     # ------------------------------------------------------------------ start checks
     def check_initial_overlaps(self):
