@@ -23,11 +23,11 @@ from pdem.config import parse_scene
 from pdem.contact.detect import Planes, _plane, plane_scratch, refresh_contacts
 from pdem.contact.forces import contact_forces
 from pdem.contact.subcontacts import region_in, region_scratch
+from pdem.cycle import motion_record
 from pdem.dynamics import motion
 from pdem.dynamics.kinematics import rotation_matrices, update_world_vertices
 from pdem.resolve import TOUCH_FRACTION
 from pdem.simulation import Simulation
-from pdem.stepper import motion_record
 
 
 @numba.njit

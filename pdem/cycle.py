@@ -34,6 +34,7 @@ from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices, world_vertices
 from .jit import kernel
 from .model.contacts import Pairs, Subs
+from .model.fields import kernel_record
 from .parallel.native import allreduce_max, forward_halo
 
 # why a compiled run of steps returned (the stepper finishes the last step in Python)
@@ -48,7 +49,7 @@ REDUCED = 3
 # (several ranks) an MPI call in the loop failed (its error code is returned as ``bad``)
 MPI_FAILED = 4
 # The step's reduction (one Allreduce(MAX) of STEP_FLAGS floats), made by the Python path
-# (pdem.stepper.Stepper._second_half) and the compiled one (_reduce) alike, its columns by name:
+# (pdem.stepper.Stepper.second_half) and the compiled one (_reduce) alike, its columns by name:
 FLAG_FORCE = 0  # the largest unbalanced force of a free block
 FLAG_BAD = 1  # a bad (non-finite) state on some rank
 FLAG_MIGRATE = 2  # a block moved past half the ghost margin: migrate after the step
@@ -59,6 +60,12 @@ FLAG_GRID_RATIO = 6  # the grids' unbalanced-force ratio
 STEP_FLAGS = 7
 # the flags that end a compiled run of steps on every rank: FLAG_BAD .. FLAG_FOLDED
 STOP_FLAGS = (FLAG_BAD, FLAG_MIGRATE, FLAG_LEFT, FLAG_SIGNAL, FLAG_FOLDED)
+
+
+def motion_record(b, n: int, still: bool = False) -> motion.Motion:
+    """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`; with ``still`` the
+    held inactive blocks are fixed for it too (pdem.dynamics.inactive)."""
+    return kernel_record(motion.Motion, b, n, fixed=b.still if still else b.fixed)
 
 
 @kernel
@@ -153,7 +160,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
                     why = REDUCED
                     break
         # second half, when no search is due
-        # (pdem.stepper.Stepper._second_half with refresh(periodic=True): the stale contacts
+        # (pdem.stepper.Stepper.second_half with refresh(periodic=True): the stale contacts
         # are updated by the stepper's three calls, pdem.contact.update, inline here: a kernel
         # around them would compile the re-detection once more)
         if periodic:
@@ -186,7 +193,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
 
 @kernel
 def _reduce(net, max_force, rebuild):
-    """The step's reduction (pdem.stepper.Stepper._second_half's flags, with no bad state,
+    """The step's reduction (pdem.stepper.Stepper.second_half's flags, with no bad state,
     no block out of the model domain, no signal, no grid): 0 or MPI's error code."""
     f = net.flags
     f[:] = 0.0

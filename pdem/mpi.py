@@ -90,6 +90,12 @@ _sleeping: set[int] = set()  # handles of the communicators whose ranks sleep wh
 _nonblocking: set[int] = set()
 
 
+def reduces_nonblocking(comm) -> bool:
+    """Whether some rank of ``comm`` sleeps while it waits, so every rank reduces with the
+    non-blocking collective (decided by :func:`configure_waits`)."""
+    return comm.py2f() in _nonblocking
+
+
 def configure_waits(comm) -> bool:
     """Decide (collectively) how this rank waits on ``comm`` (see :data:`WAIT_MODES`); True
     if it sleeps. Oversubscribed: the ranks sharing this node are more than the distinct CPUs

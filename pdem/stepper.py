@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from . import domain, mpi
+from .compiled_runs import CompiledRuns
 from .contact import forces
 from .contact.detect import Planes, refresh_contacts
 from .contact.forces import contact_energies, contact_forces
@@ -25,8 +26,6 @@ from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
 from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
 from .cycle import (
-    DONE,
-    DROPS,
     FLAG_BAD,
     FLAG_FOLDED,
     FLAG_FORCE,
@@ -34,11 +33,8 @@ from .cycle import (
     FLAG_LEFT,
     FLAG_MIGRATE,
     FLAG_SIGNAL,
-    MPI_FAILED,
-    NEEDS_PYTHON,
-    REDUCED,
     STEP_FLAGS,
-    fused_steps,
+    motion_record,
 )
 from .deformable.contact import contact_forces_grid
 from .deformable.subcontacts import carry_grid_columns
@@ -48,26 +44,12 @@ from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
 from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
 from .errors import SimulationError
 from .insitu import initialise
-from .jit import drop_linking_ir
-from .memory import large_blocks_mapped, return_freed_memory
+from .memory import large_blocks_mapped
 from .model.contacts import ContactStore, Subs, sub_columns
 from .model.csr import pair_key
-from .model.fields import kernel_record, row_width
-from .parallel import native
-from .parallel.halo import halo_columns
+from .model.fields import kernel_record
 from .plugins.energy import energy_totals
 from .resolve import REMAP_FRACTION, TOUCH_FRACTION
-
-NO_STEP = 2**62  # no step bound for a compiled run of steps
-# most steps taken in Python before the compiled loop is tried again, after it returned
-# after its first step again and again (Stepper.advance_many)
-PYTHON_RUN = 64
-
-
-def motion_record(b, n: int, still: bool = False) -> motion.Motion:
-    """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`; with ``still`` the
-    held inactive blocks are fixed for it too (pdem.dynamics.inactive)."""
-    return kernel_record(motion.Motion, b, n, fixed=b.still if still else b.fixed)
 
 
 class Stepper:
@@ -80,12 +62,8 @@ class Stepper:
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
         self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
-        self.migrate_due = False  # a compiled run of steps on ranks ended with a migration due
-        self._net = None  # (halo, its pdem.parallel.native.Net) for compiled runs on ranks
-        self._dropped_ir = False  # the compiled loop's inlining IR freed (pdem.jit)
-        self._python_run = 0  # steps taken in Python after the loop's last 1-step return
-        self._python_left = 0  # of them, still to take (advance_many)
-        self.python_steps = 0  # steps advance_many took in Python so far
+        self.migrate_due = False  # the last step's reduction asked for a migration
+        self.runs = CompiledRuns(self)  # the compiled runs of steps (pdem.compiled_runs)
         # contacts whose geometry was updated since the start (its own update included): a
         # cost figure (bench/fidelity.py)
         self.redetected = 0
@@ -210,7 +188,7 @@ class Stepper:
         # only the store holds the new columns: each is freed once taken (below)
         del a, up, columns
         if rigid:
-            s.contacts = self._kept(ContactStore(c.arrays, sub, start), keep)
+            s.contacts = self.kept(ContactStore(c.arrays, sub, start), keep)
             return
         # zoned blocks: sub-contacts at their surface gridpoints, found after the update
         # the kept sub-contacts keep their gridpoints
@@ -240,7 +218,7 @@ class Stepper:
                                    motion.WORK_GEOMETRY)
 
     @staticmethod
-    def _kept(store: ContactStore, keep: np.ndarray) -> ContactStore:
+    def kept(store: ContactStore, keep: np.ndarray) -> ContactStore:
         """``store`` without the contacts an update found apart (``keep`` 0): column by column,
         each dropped once taken. The common case deletes none: no copy of every column (a
         select is a gather of all contact and sub-contact arrays, ~20 ms per 1e5 contacts)."""
@@ -295,146 +273,25 @@ class Stepper:
     def advance(self):
         """One calculation cycle (docs/architecture.md, docs/parallel.md); True if blocks must
         migrate now."""
-        self._first_half()
-        return self._second_half()
+        self.first_half()
+        return self.second_half()
 
     def fusable(self) -> bool:
-        """Whether steps may run in one compiled call (pdem.cycle), unless ``solve.fused`` is
-        off: runs without prescribed boundary motion or zoned blocks; on several ranks also
-        where the ranks spin while they wait (pdem.mpi.configure_waits), every halo
-        field is float64 (not with solve.inactive) and MPI can be called from compiled code
-        (pdem.parallel.native.link, collective on its first call)."""
-        s = self.s
-        if not (s.scene.solve.fused and s.grids is None
-                and not (s.boundary is not None and s.boundary.active)):
-            return False
-        if s.comm.size == 1:
-            return True
-        # (decided alike on every rank: link is collective)
-        return (s.comm.py2f() not in mpi._nonblocking and s.scene.solve.inactive is None
-                and native.link(s.comm))
+        """Whether steps may run in one compiled call (:meth:`CompiledRuns.fusable`)."""
+        return self.runs.fusable()
 
     def advance_many(self, max_steps: int, stop_step: int | None = None,
                      stop_time: float | None = None, ratio_target: float | None = None) -> int:
-        """Up to ``max_steps`` steps, ending early after the step that reaches ``stop_step`` or
-        ``stop_time`` or the ``ratio_target``, or after a step whose reduction asks for a
-        migration (``migrate_due``: the caller migrates) or stops the run; compiled runs of
-        steps when :meth:`fusable` (one step else). Returns the steps done; every rank returns
-        after the same step. ``max_steps`` must be the same on every rank.
+        """Up to ``max_steps`` steps, compiled where they can be (:meth:`CompiledRuns.advance`);
+        the steps done, every rank after the same step."""
+        return self.runs.advance(max_steps, stop_step, stop_time, ratio_target)
 
-        A step that needs Python on this rank (a search, an update that dropped contacts)
-        is finished here and the steps go on. Where the compiled loop keeps returning after
-        its first step, entering it costs more than a step in Python (~20 us of argument
-        checks for a few-block scene), so the next steps are taken in Python, twice as many
-        each time it happens again (:data:`PYTHON_RUN` at most), then the loop is tried
-        again: both paths give the same bits and make the same MPI calls."""
-        self.migrate_due = False
-        if max_steps <= 1 or not self.fusable():
-            self.migrate_due = self.advance()
-            return 1
-        s = self.s
-        several = s.comm.size > 1
-        done = 0
-        while True:
-            if self._python_left > 0:
-                self._python_left -= 1
-                self.python_steps += 1
-                self._first_half()
-                self.migrate_due = self._second_half()
-                done += 1
-            else:
-                steps, why = self._fused(max_steps - done, stop_step, stop_time, ratio_target)
-                done += steps
-                if why == MPI_FAILED:
-                    raise SimulationError(f"step {s.step}: an MPI call from compiled code "
-                                          f"failed (error code {self._bad}); "
-                                          "PDEM_MPI_NATIVE=0 keeps the steps in Python")
-                if why == NEEDS_PYTHON and steps == 1:
-                    self._python_run = min(2 * self._python_run or 1, PYTHON_RUN)
-                    self._python_left = self._python_run
-                elif steps > 1:
-                    self._python_run = 0
-                # after the reduction (in the loop) its flags finish the step; before it (a
-                # step this rank needed Python for, or the end of the run of steps) it is made
-                # here and meets the other ranks' compiled one
-                reduced = self._net[1].reduced.copy() \
-                    if several and why in (REDUCED, DROPS) else None
-                self.migrate_due = self._second_half(updated=why == DROPS, flags=reduced)
-                if why in (DONE, REDUCED):  # on every rank after this step
-                    return done
-            if self.migrate_due or self.stop_signal:
-                return done
-            # the reduction said go on: so does every other rank, until its own budget and
-            # limits end its steps after the same step as these
-            if done >= max_steps or (stop_step is not None and s.step >= stop_step) or \
-                    (stop_time is not None and s.time >= stop_time) or \
-                    (ratio_target is not None and s.ratio <= ratio_target):
-                return done
+    @property
+    def python_steps(self) -> int:
+        """Steps :meth:`advance_many` took in Python so far."""
+        return self.runs.python_steps
 
-    def _net_for(self, halo):
-        """The compiled MPI calls' record for this halo plan (made again after a migration);
-        a serial run's is idle."""
-        if self._net is None or self._net[0] is not halo:
-            if self.s.comm.size == 1:  # one compiled loop for any rank count
-                net = native.idle_net(row_width(halo.fields), STEP_FLAGS)
-            else:
-                net = native.make_net(self.s.comm, halo, STEP_FLAGS)
-            if net is None:  # (link found them on every rank)
-                raise SimulationError("internal: the MPI functions went missing")
-            self._net = (halo, net)
-        return self._net[1]
-
-    def _fused(self, max_steps: int, stop_step, stop_time, ratio_target):
-        """One compiled run of steps (pdem.cycle.fused_steps): (steps done, why it ended);
-        the contacts' columns are taken over when the loop updated them."""
-        s = self.s
-        hold_fixed(s)
-        b = s.blocks
-        c = s.contacts
-        n = s.n_owned
-        r = s.resolved
-        if s.damping.adaptive:  # its servo updates every 10 steps, in Python
-            nxt = (s.step // 10 + 1) * 10
-            stop_step = nxt if stop_step is None else min(stop_step, nxt)
-        columns = halo_columns(b, s.halo.fields) if s.halo is not None else None
-        net = self._net_for(s.halo) if columns is not None else None
-        if net is None and s.comm.size > 1:  # (fusable: only `still` is not float64)
-            raise SimulationError("internal: a halo field is not a float64 array")
-        self.stats[:] = 0.0
-        speed, sleep_steps, frac = inactive_args(s.scene)
-        todo = np.empty(c.n, np.uint8)
-        with s.timers.phase("fused"):
-            steps, s.step, s.time, why, self._bad, self._u_mig_max, redetected, keep, pairs, \
-                subs = fused_steps(
-                    motion_record(b, n, self.holds), s.gravity, s.dt, s.damping_args(),
-                    s.scalar_inertia, self.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n],
-                    b.q, b.R, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
-                    c.moved, self.geometry_update(), (b.piece_center, b.verts_local),
-                    c.arrays["rel_x"], c.arrays["rel_q"], b.radius,
-                    motion_record(b, n) if self.holds else None, b.calm[:n], b.still,
-                    speed, sleep_steps, frac,
-                    REMAP_FRACTION * s.ctol, s.scene.contact.detect_every,
-                    r.refresh_tolerance, s.scene.domain is not None, r.speed_limit,
-                    r.speed_growth, s.step, s.time, max_steps,
-                    NO_STEP if stop_step is None else stop_step,
-                    math.inf if stop_time is None else stop_time,
-                    -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step,
-                    todo, net, columns, 0.5 * r.margin)
-        if not self._dropped_ir:  # after its first call: loaded (or compiled and saved)
-            drop_linking_ir(fused_steps)
-            return_freed_memory()
-            self._dropped_ir = True
-        self.redetected += redetected
-        if redetected:  # the loop updated contacts (pdem.contact.update): their new columns
-            sub = sub_columns(subs)
-            start = pairs.sc_start
-            del pairs, subs
-            s.contacts = ContactStore(c.arrays, sub, start)
-            if why == DROPS:  # the last update found contacts apart
-                s.contacts = self._kept(s.contacts, keep)
-        return steps, why
-
-    def _first_half(self):
+    def first_half(self):
         """Motion, the forward halo and the contact forces of a step."""
         s = self.s
         b = s.blocks
@@ -459,7 +316,7 @@ class Stepper:
             # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
             # state check and the ghost-rebuild measure, in one kernel
             r = s.resolved
-            self._bad, self._u_mig_max = motion.motion_bookkeeping(
+            self.bad, self.u_mig_max = motion.motion_bookkeeping(
                 b.dx[:n], b.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n], b.u_geo[:n],
                 b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time,
                 s.max_step)  # a block moving more in a step could tunnel
@@ -472,9 +329,9 @@ class Stepper:
             self.compute_forces(s.dt)
             self.update_inactive()
 
-    def _second_half(self, updated: bool = False, flags: np.ndarray | None = None) -> bool:
+    def second_half(self, updated: bool = False, flags: np.ndarray | None = None) -> bool:
         """Contact search and updates, and the step's one reduction; True if blocks must
-        migrate. After :meth:`_first_half` or a compiled run of steps (pdem.cycle), which
+        migrate. After :meth:`first_half` or a compiled run of steps (pdem.cycle), which
         leaves ``u_mig`` and the state check to be redone here (both are cheap). ``flags``:
         the reduction, made already by a compiled run of steps on several ranks."""
         s = self.s
@@ -498,7 +355,7 @@ class Stepper:
             # one small reduction a step: max unbalanced force, trouble, rebuild needed, blocks
             # that left the model domain (looked for at the contact updates), and a stop
             # signal received by any rank (so every rank stops after the same step)
-            bad, u_mig_max = self._bad, self._u_mig_max
+            bad, u_mig_max = self.bad, self.u_mig_max
             rebuild = bool(n) and u_mig_max > 0.5 * r.margin
             left = periodic and s.scene.domain is not None and domain.outside(s).any()
             signum = self.stop.signum if self.stop is not None else 0

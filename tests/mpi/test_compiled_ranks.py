@@ -17,13 +17,13 @@ from support import collective, on_rank0
 from test_decomposition import pile_scene
 
 from pdem import mpi
+from pdem.compiled_runs import CompiledRuns
 from pdem.config import parse_scene
 from pdem.cycle import DROPS, NEEDS_PYTHON
 from pdem.errors import UserError
 from pdem.parallel import native
 from pdem.parallel.halo import Halo, halo_columns
 from pdem.simulation import Simulation
-from pdem.stepper import Stepper
 
 pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(300, method="thread")]
 
@@ -136,17 +136,17 @@ def test_compiled_ranks_match_python_ranks_and_one_rank(monkeypatch):
     comm = MPI.COMM_WORLD
     steps = 600
     ends = []  # (step, why) of each compiled run of steps on this rank
-    fused = Stepper._fused
+    fused = CompiledRuns.run
 
     def recording(self, *args):
         out = fused(self, *args)
-        ends.append((self.s.step, out[1]))
+        ends.append((self.stepper.s.step, out[1]))
         return out
 
-    monkeypatch.setattr(Stepper, "_fused", recording)
+    monkeypatch.setattr(CompiledRuns, "run", recording)
     compiled_state, compiled = _run(_pile(True, steps), comm)
     mine = list(ends)
-    spinning = comm.py2f() not in mpi._nonblocking
+    spinning = not mpi.reduces_nonblocking(comm)
     assert compiled == spinning, (compiled, spinning)
     if spinning:  # (else that run was the Python path already)
         python_state, python_used_fused = _run(_pile(False, steps), comm)

@@ -40,14 +40,14 @@ import sys
 from pdem.stepper import Stepper
 import pdem.cli
 
-second_half = Stepper._second_half  # every step ends here, compiled runs of steps too
+second_half = Stepper.second_half  # every step ends here, compiled runs of steps too
 
 def failing_second_half(self, *args, **kwargs):
     if self.s.comm.rank == 1 and self.s.step >= 5:
         raise RuntimeError("boom on rank 1")
     return second_half(self, *args, **kwargs)
 
-Stepper._second_half = failing_second_half
+Stepper.second_half = failing_second_half
 sys.exit(pdem.cli.main(["run", sys.argv[1], "-o", sys.argv[2], "-q"]))
 """
 

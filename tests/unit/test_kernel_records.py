@@ -10,9 +10,9 @@ import pytest
 
 from pdem.cases import make_simulation
 from pdem.contact.rigid import Bodies
+from pdem.cycle import motion_record
 from pdem.dynamics.motion import Motion
 from pdem.model.fields import BLOCK_BY_NAME, KERNEL_FIELDS, kernel_record
-from pdem.stepper import motion_record
 
 SCENE = """
 materials: {rock: {density: 2000.0}}

@@ -27,9 +27,9 @@ FLOORS: list[tuple[str, tuple[str, ...]]] = [
                "pdem.deformable.subcontacts", "pdem.deformable.zoning",
                "pdem.deformable.columns")),
     ("set-up", ("pdem.resolve", "pdem.preflight")),
-    ("run", ("pdem.selection", "pdem.boundary", "pdem.domain", "pdem.insitu", "pdem.state",
-             "pdem.cycle", "pdem.stepper", "pdem.strength", "pdem.stages", "pdem.plugins",
-             "pdem.run", "pdem.simulation")),
+    ("run", ("pdem.selection", "pdem.boundary", "pdem.domain", "pdem.insitu", "pdem.restart",
+             "pdem.state", "pdem.cycle", "pdem.compiled_runs", "pdem.stepper", "pdem.strength",
+             "pdem.stages", "pdem.plugins", "pdem.run", "pdem.simulation")),
     ("edge", ("pdem.cli", "pdem.warmup", "pdem.cases", "pdem.__main__")),
 ]
 # Modules that may import pdem modules inside functions: the command line loads only what
@@ -50,7 +50,9 @@ def floor_of(mod: str) -> int:
     best, level = -1, None
     for k, (_, prefixes) in enumerate(FLOORS):
         for p in prefixes:
-            if (mod == p or mod.startswith(p + ".")) and len(p) > best:
+            # "pdem" names the package's __init__ only: a module must be on a floor by name
+            under = mod.startswith(p + ".") and p != "pdem"
+            if (mod == p or under) and len(p) > best:
                 best, level = len(p), k
     assert level is not None, f"{mod}: on no floor (add it to FLOORS)"
     return level
