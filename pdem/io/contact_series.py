@@ -38,13 +38,13 @@ class ContactSeries:
                                    dtype=np.int64)
             core.write(off, (0,), np.zeros(1, np.int64) if core.comm.rank == 0 else None)
             off.attrs["doc"] = f"snapshot i is rows offset[i] .. offset[i+1]-1 of {group}/*"
-            for name, tail, dtype, units, doc in series:
+            for c in series:
                 d = f.create_dataset(
-                    f"{group}/{name}", (0, *tail), maxshape=(None, *tail),
-                    chunks=(CONTACT_CHUNK, *tail), dtype=dtype, compression="gzip",
+                    f"{group}/{c.name}", (0, *c.shape), maxshape=(None, *c.shape),
+                    chunks=(CONTACT_CHUNK, *c.shape), dtype=c.dtype, compression="gzip",
                     compression_opts=4, shuffle=True)
-                d.attrs["units"] = units
-                d.attrs["doc"] = doc
+                d.attrs["units"] = c.units
+                d.attrs["doc"] = c.doc
         f["contacts/state"].attrs["names"] = list(joints.STATE_NAMES)
         f.create_dataset("xdmf/index", (0,), maxshape=(None,), chunks=(CONTACT_CHUNK,),
                          dtype=np.int64)
@@ -110,11 +110,11 @@ class ContactSeries:
             base = self.bases[group]
             offset.resize(i + 2, axis=0)
             core.write(offset, (i + 1,), np.array([base + n], np.int64) if root else None)
-            for name, tail, dtype, _, _ in series:
-                d = f[f"{group}/{name}"]
+            for c in series:
+                d = f[f"{group}/{c.name}"]
                 d.resize(base + n, axis=0)
-                data = np.asarray(values[name]).reshape(-1, *tail).astype(dtype)
-                core.write(d, (base + off,) + (0,) * len(tail), data)
+                data = np.asarray(values[c.name]).reshape(-1, *c.shape).astype(c.dtype)
+                core.write(d, (base + off,) + (0,) * len(c.shape), data)
             self.bases[group] = base + n
         need = max(n_c, n_s)
         if need > self.pool:

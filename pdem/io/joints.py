@@ -13,13 +13,16 @@ whatever the partition.
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import numpy as np
 
 from ..contact.laws.base import FAILED, OPEN, SLIPPING
 from ..model import csr
 
 __all__ = ["CONTACT_COLS", "SUB_COLS", "STATE_NAMES", "CONTACT_SERIES", "SUB_SERIES",
-           "pack", "reduce_contacts"]
+           "OutputColumn", "pack", "reduce_contacts", "viewer_attributes"]
 
 # contact state codes (contacts/state), in order of precedence: open > slipping > failed > intact
 INTACT, SLIPPING_CODE, OPEN_CODE, FAILED_CODE = 0, 1, 2, 3
@@ -32,32 +35,62 @@ CONTACT_COLS = (("piece", 2), ("block", 2), ("joint", 1), ("point", 3), ("normal
 SUB_COLS = (("point", 3), ("area", 1), ("overlap", 1), ("normal_force", 1),
             ("shear_force", 3), ("shear_displacement", 3), ("state", 1))
 
-# The datasets: (name, trailing shape, dtype, units, doc), docs/output.md
+class OutputColumn(NamedTuple):
+    """One dataset of ``contacts/`` or ``subcontacts/`` (docs/output.md): trailing shape,
+    dtype, units, doc, and ``view``: its place among the point attributes of the ParaView
+    sidecar (``<run>-contacts.xdmf``, pdem.io.xdmf), None where it is not shown. A column
+    shown in ParaView is one line here (+ its value in :func:`reduce_contacts`)."""
+
+    name: str
+    shape: tuple[int, ...]
+    dtype: type
+    units: str
+    doc: str
+    view: int | None = None
+
+
 CONTACT_SERIES = (
-    ("block", (2,), np.int64, "1", "gids of blocks A and B"),
-    ("piece", (2,), np.int64, "1", "convex piece gids of A and B (the sort key)"),
-    ("joint", (), np.int32, "1", "row in the scene's joints (root attribute joint_names)"),
-    ("point", (3,), np.float64, "m", "common-plane reference point"),
-    ("normal", (3,), np.float64, "1", "common-plane unit normal, A -> B"),
-    ("normal_force", (), np.float64, "N", "sum of the sub-contacts' normal forces "
-     "(+ compression)"),
-    ("shear_force", (3,), np.float64, "N", "sum of the sub-contacts' shear forces, on B"),
-    ("normal_stress", (), np.float64, "Pa", "normal_force / contact area (0 without area)"),
-    ("shear_displacement", (), np.float64, "m", "area-weighted mean of |shear displacement|"),
-    ("opening", (), np.float64, "m", "max(0, -min overlap): the widest opening"),
-    ("area", (), np.float64, "m2", "sum of the sub-contacts' areas"),
-    ("state", (), np.uint8, "1", "0 intact, 1 slipping, 2 open, 3 failed"),
-    ("n_sub", (), np.int32, "1", "number of sub-contacts"),
+    OutputColumn("block", (2,), np.int64, "1", "gids of blocks A and B"),
+    OutputColumn("piece", (2,), np.int64, "1", "convex piece gids of A and B (the sort key)"),
+    OutputColumn("joint", (), np.int32, "1", "row in the scene's joints (root attribute "
+                 "joint_names)"),
+    OutputColumn("point", (3,), np.float64, "m", "common-plane reference point"),
+    OutputColumn("normal", (3,), np.float64, "1", "common-plane unit normal, A -> B", view=2),
+    OutputColumn("normal_force", (), np.float64, "N", "sum of the sub-contacts' normal forces "
+                 "(+ compression)", view=0),
+    OutputColumn("shear_force", (3,), np.float64, "N", "sum of the sub-contacts' shear forces, "
+                 "on B", view=1),
+    OutputColumn("normal_stress", (), np.float64, "Pa", "normal_force / contact area (0 without "
+                 "area)", view=4),
+    OutputColumn("shear_displacement", (), np.float64, "m", "area-weighted mean of |shear "
+                 "displacement|", view=5),
+    OutputColumn("opening", (), np.float64, "m", "max(0, -min overlap): the widest opening",
+                 view=6),
+    OutputColumn("area", (), np.float64, "m2", "sum of the sub-contacts' areas"),
+    OutputColumn("state", (), np.uint8, "1", "0 intact, 1 slipping, 2 open, 3 failed", view=3),
+    OutputColumn("n_sub", (), np.int32, "1", "number of sub-contacts"),
 )
 SUB_SERIES = (
-    ("point", (3,), np.float64, "m", "world position (from the body-frame point on A)"),
-    ("area", (), np.float64, "m2", "area carried"),
-    ("overlap", (), np.float64, "m", "overlap, + closing"),
-    ("normal_force", (), np.float64, "N", "normal force, + compression"),
-    ("shear_force", (3,), np.float64, "N", "shear force on B"),
-    ("shear_displacement", (3,), np.float64, "m", "total shear displacement"),
-    ("state", (), np.uint8, "1", "state bits: 1 slipping, 2 failed, 4 open"),
+    OutputColumn("point", (3,), np.float64, "m", "world position (from the body-frame point on "
+                 "A)"),
+    OutputColumn("area", (), np.float64, "m2", "area carried"),
+    OutputColumn("overlap", (), np.float64, "m", "overlap, + closing"),
+    OutputColumn("normal_force", (), np.float64, "N", "normal force, + compression", view=0),
+    OutputColumn("shear_force", (3,), np.float64, "N", "shear force on B", view=1),
+    OutputColumn("shear_displacement", (3,), np.float64, "m", "total shear displacement"),
+    OutputColumn("state", (), np.uint8, "1", "state bits: 1 slipping, 2 failed, 4 open", view=2),
 )
+# XDMF number type and precision of a dataset's dtype
+_XDMF_TYPES = {np.dtype(np.float64): ("Float", 8), np.dtype(np.float32): ("Float", 4),
+               np.dtype(np.uint8): ("UChar", 1), np.dtype(np.int32): ("Int", 4),
+               np.dtype(np.int64): ("Int", 8)}
+
+
+def viewer_attributes(series) -> tuple[tuple[str, int, str, int], ...]:
+    """The sidecar's point attributes of a series, in view order: (name, components, XDMF
+    number type, precision), from the columns' declarations."""
+    shown = sorted((c for c in series if c.view is not None), key=lambda c: c.view)
+    return tuple((c.name, math.prod(c.shape), *_XDMF_TYPES[np.dtype(c.dtype)]) for c in shown)
 
 
 def _widths(cols):

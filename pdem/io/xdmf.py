@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .joints import CONTACT_SERIES, SUB_SERIES, viewer_attributes
+
 __all__ = ["write_xdmf", "read_xdmf", "centroids_path", "contacts_path", "subcontacts_path",
            "zones_path", "CELL_FIELDS", "VIEWED_SERIES", "CONTACT_VIEWED", "SUB_VIEWED",
            "view_path"]
@@ -36,15 +38,11 @@ VIEWED_SERIES = (
 )
 
 # Point attributes of the contact and sub-contact grids (name, components, number type,
-# precision): each snapshot's rows of the flat contacts/<name>, subcontacts/<name>, read through
-# views like the series above. ``point`` is the grids' geometry.
-_CONTACT_ATTRS = (
-    ("normal_force", 1, "Float", 8), ("shear_force", 3, "Float", 8), ("normal", 3, "Float", 8),
-    ("state", 1, "UChar", 1), ("normal_stress", 1, "Float", 8),
-    ("shear_displacement", 1, "Float", 8), ("opening", 1, "Float", 8),
-)
-_SUB_ATTRS = (("normal_force", 1, "Float", 8), ("shear_force", 3, "Float", 8),
-              ("state", 1, "UChar", 1))
+# precision), from the series' declarations (pdem.io.joints: the columns with a ``view``):
+# each snapshot's rows of the flat contacts/<name>, subcontacts/<name>, read through views
+# like the series above. ``point`` is the grids' geometry.
+_CONTACT_ATTRS = viewer_attributes(CONTACT_SERIES)
+_SUB_ATTRS = viewer_attributes(SUB_SERIES)
 # Attributes of the zoned blocks' tetrahedral grid (pdem.io.zones): (name, center, attribute
 # type, components, number type, precision), each snapshot's zones/<name> read through a view.
 # The stress is a "Matrix" of 6 columns, not a "Tensor6": ParaView 5.11's readers disagree on
