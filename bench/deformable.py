@@ -170,8 +170,8 @@ def stack(k: int, zone_size: float | None, steps: int, profile: bool = False,
     s = sim.state
     probe = None
     if profile:
-        import pdem.deformable.contact as dcontact
         import pdem.deformable.store as dstore
+        import pdem.stepper as stepper_module
         from pdem.dynamics import motion
         from pdem.stepper import Stepper
 
@@ -181,7 +181,7 @@ def stack(k: int, zone_size: float | None, steps: int, profile: bool = False,
         probe.wrap(dstore.GridStore, "sync", "grids: piece refresh (sync)")
         probe.wrap(motion, "integrate", "rigid integration")
         probe.wrap(dstore.GridStore, "record", "contacts: locate (record)")
-        probe.wrap(dcontact, "contact_forces_grid", "contacts: force kernel")
+        probe.wrap(stepper_module, "contact_forces_grid", "contacts: force kernel")
         probe.wrap(Stepper, "search", "contacts: search")
         probe.wrap(Stepper, "refresh", "contacts: updates (with regrid)")
         probe.wrap(dstore.GridStore, "regrid", "contacts:   gridpoint regrid")

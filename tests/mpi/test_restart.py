@@ -11,7 +11,7 @@ import pytest
 from mpi4py import MPI
 
 import pdem.io.checkpoint as checkpoint_io
-import pdem.state as state_module
+import pdem.restart as restart_module
 from pdem.config import parse_scene
 from pdem.io.checkpoint import open_checkpoint, read_checkpoint
 from pdem.simulation import Simulation
@@ -113,7 +113,7 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
         return whole(dset, rows)
 
     # and the contacts each rank receives from the readers
-    route = state_module.route_contacts
+    route = restart_module.route_contacts
     routed = []
 
     def recorded(*args, **kwargs):
@@ -122,12 +122,12 @@ def test_restart_on_other_rank_counts_is_bitwise(tmp_path):
         return got
 
     checkpoint_io._read_rows = counted
-    state_module.route_contacts = recorded
+    restart_module.route_contacts = recorded
     try:
         (got, step), owned = restart(comm, f"{d}/r{comm.size}.h5", open_checkpoint(ck_path))
     finally:
         checkpoint_io._read_rows = whole
-        state_module.route_contacts = route
+        restart_module.route_contacts = route
     assert step == 2 * N
     for k in FIELDS:
         assert np.array_equal(got[k], ref[k]), k
