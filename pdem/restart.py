@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from .deformable import grid_checkpoint
 from .errors import UserError
 from .io.checkpoint import CheckpointReader
 from .model.csr import KEY_SHIFT
@@ -129,7 +130,7 @@ def _restore_share(state, out, x, block_rows, contacts, path, read: bool = True,
         owned = source.gid.copy()
     free = owned[state.glob.fixed[owned] == 0]  # the contacts of these come along
     if state.grids is not None:  # the grids held here (by the build) from the file
-        checked(state.comm, lambda: state.grids.load(path), path)
+        checked(state.comm, lambda: grid_checkpoint.load(state.grids, path), path)
     # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
     held = held_width(state.scene.solve.inactive is not None)
     if placed is not None:

@@ -18,14 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mpi import allgather, gather
+from ..mpi import allgather
 from ..parallel.halo import RowHalo
 from .body import DeformableBody
 from .columns import TRI, W
 from .contact import Grid, refresh_pieces
 from .motion import critical_timestep, cycle, scaled_masses
 from .subcontacts import regrid
-from .zones import gravity_forces, zone_geometry
+from .zones import gravity_forces
 
 # margin under the grids' Gershgorin step (a guaranteed bound of the elastic grid with its
 # joint springs; the margin covers the coupling to rigid blocks through their contacts)
@@ -287,86 +287,6 @@ class GridStore:
         return -1
 
     # ------------------------------------------------------------------ checkpoints
-    def checkpoint_rows(self, comm, parallel: bool):
-        """What :meth:`write` writes of this rank's owned grids (collective): the table of
-        every writing rank's grids (gid, gridpoint and zone counts) and this rank's arrays;
-        on one writer (``parallel`` False, several ranks) rank 0 gets every rank's arrays."""
-        own = range(self.n_owned)
-        mine = {"gid": np.array([self.gids[d] for d in own], np.int64),
-                "n_nodes": np.array([len(self.bodies[d].nodes) for d in own], np.int64),
-                "n_zones": np.array([len(self.bodies[d].tets) for d in own], np.int64)}
-        arrays = {k: [getattr(self, k)[self.node_start[d]:self.node_start[d + 1]] for d in own]
-                  for k in ("nodes", "vel", "force")}
-        arrays["stress"] = [self.bodies[d].stress for d in own]
-        arrays["plastic"] = [self.bodies[d].plastic for d in own]
-        if not parallel and comm.size > 1:  # one writer: every grid to it
-            parts = gather(comm, (mine, arrays))
-            if comm.rank != 0:
-                return None
-            mine = {k: np.concatenate([p[0][k] for p in parts]) for k in mine}
-            arrays = {k: [a for p in parts for a in p[1][k]] for k in arrays}
-            return [mine], mine, arrays
-        return (allgather(comm, mine) if parallel else [mine]), mine, arrays
-
-    @staticmethod
-    def write(f, rows, rank: int) -> None:
-        """The grids' state (:meth:`checkpoint_rows`) into group ``grids`` of an open
-        checkpoint file, in gid order over all ranks: gid, gridpoint and zone counts,
-        gridpoint positions, velocities and contact forces, zone stresses and plastic bits
-        (the sub-contacts' grid columns are in ``subcontacts/sc_grid``)."""
-        table, mine, arrays = rows
-        allt = {k: np.concatenate([t[k] for t in table]) for k in mine}
-        order = np.argsort(allt["gid"], kind="stable")
-        node_off = np.zeros(len(order) + 1, np.int64)
-        zone_off = np.zeros(len(order) + 1, np.int64)
-        np.cumsum(allt["n_nodes"][order], out=node_off[1:])
-        np.cumsum(allt["n_zones"][order], out=zone_off[1:])
-        where = {int(g): i for i, g in enumerate(allt["gid"][order])}
-        g = f.create_group("grids")
-        for k in ("gid", "n_nodes", "n_zones"):
-            d = g.create_dataset(k, (len(order),), dtype=np.int64)
-            if rank == 0:
-                d[:] = allt[k][order]
-        shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "stress": (6,), "plastic": ()}
-        for k, shape in shapes.items():
-            zones = k in ("stress", "plastic")
-            off = zone_off if zones else node_off
-            d = g.create_dataset(k, (int(off[-1]), *shape),
-                                 dtype=np.int32 if k == "plastic" else np.float64)
-            for gid, a in zip(mine["gid"], arrays[k], strict=True):
-                i = where[int(gid)]
-                d[off[i]:off[i + 1]] = a
-
-    def load(self, path) -> None:
-        """Continue the grids held here from a checkpoint written by :meth:`write` (before
-        the blocks are distributed): gridpoints, velocities, contact forces, stresses,
-        plastic bits, and the zones' geometry from the gridpoints. ValueError (agreed over
-        the ranks by the restore) if the file has no such grids."""
-        import h5py
-
-        with h5py.File(path, "r") as f:
-            if "grids" not in f or "n_nodes" not in f["grids"]:
-                raise ValueError("no grids of this scene's zoned blocks (a checkpoint of "
-                                 "another scene, or of a pdem before zoned blocks ran on "
-                                 "several ranks: run its scene again)")
-            g = f["grids"]
-            gid = g["gid"][()]
-            node_off = np.concatenate([[0], np.cumsum(g["n_nodes"][()])])
-            zone_off = np.concatenate([[0], np.cumsum(g["n_zones"][()])])
-            where = {int(x): i for i, x in enumerate(gid)}
-            for d, gg in enumerate(self.gids):
-                i = where.get(gg)
-                b = self.bodies[d]
-                if i is None or node_off[i + 1] - node_off[i] != len(b.nodes) \
-                        or zone_off[i + 1] - zone_off[i] != len(b.tets):
-                    raise ValueError(f"no grid for zoned block {self.names[d]!r} as this "
-                                     "scene zones it")
-                a, e = self.node_start[d], self.node_start[d + 1]
-                for k in ("nodes", "vel", "force"):
-                    getattr(self, k)[a:e] = g[k][node_off[i]:node_off[i + 1]]
-                b.stress[:] = g["stress"][zone_off[i]:zone_off[i + 1]]
-                b.plastic[:] = g["plastic"][zone_off[i]:zone_off[i + 1]]
-                zone_geometry(b.nodes, b.tets, b.grad, b.vol)
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:

@@ -20,6 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..deformable import grid_checkpoint
 from ..model import csr
 from ..model.contacts import ContactStore
 from ..model.fields import (
@@ -119,12 +120,12 @@ def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = 
         off_c = off_s = 0
         f = h5py.File(tmp, "w") if comm.rank == 0 else None
     # zoned blocks: their grids' rows (collective: gathered to the one writer if needed)
-    grid_rows = None if state.grids is None else state.grids.checkpoint_rows(comm, parallel)
+    grid_rows = None if state.grids is None else grid_checkpoint.checkpoint_rows(state.grids, comm, parallel)
     if f is not None:
         try:
             _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s)
             if grid_rows is not None:
-                state.grids.write(f, grid_rows, comm.rank)
+                grid_checkpoint.write(f, grid_rows, comm.rank)
         except BaseException:
             # the previous checkpoint is untouched (it has another name); drop the partial temp
             # file. A parallel file is not closed here: closing is collective and the other

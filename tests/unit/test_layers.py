@@ -25,6 +25,7 @@ FLOORS: list[tuple[str, tuple[str, ...]]] = [
     ("grammar", ("pdem.config",)),
     ("model", ("pdem.model", "pdem.parallel", "pdem.io", "pdem.deformable.store",
                "pdem.deformable.subcontacts", "pdem.deformable.zoning",
+               "pdem.deformable.grid_checkpoint",
                "pdem.deformable.columns")),
     ("set-up", ("pdem.resolve", "pdem.preflight")),
     ("run", ("pdem.selection", "pdem.boundary", "pdem.domain", "pdem.insitu", "pdem.restart",
