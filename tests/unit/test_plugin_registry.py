@@ -7,17 +7,10 @@ from __future__ import annotations
 import pytest
 
 from pdem.cases import make_simulation
+from pdem.cases.stacks import cube_stack_scene
 from pdem.plugins import PLUGINS, Plugin, PluginEntry
 
-SCENE = """
-gravity: [0, 0, -9.81]
-materials: {rock: {density: 2500.0}}
-joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 30.0}}
-blocks:
-  - {name: floor, box: {min: [-2, -2, -1], max: [2, 2, 0]}, material: rock, fixed: true}
-  - {name: cube, box: {min: [-0.5, -0.5, 0], max: [0.5, 0.5, 1]}, material: rock}
-solve: {steps: 7}
-"""
+SCENE = cube_stack_scene(1, "fast")  # one cube on a floor
 
 
 class StepCounter(Plugin):
@@ -53,7 +46,7 @@ def test_the_shipped_plugins_in_their_order():
 def test_a_plugin_from_outside_the_tree(counter_registered):
     sim = make_simulation(SCENE)
     assert [p.name for p in sim.runner.plugins] == ["energy", "step-counter", "progress"]
-    sim.run()
+    sim.run(steps=7)
     assert sim.runner.plugin("step-counter").steps == list(range(1, 8))
 
 
