@@ -1,25 +1,21 @@
 """Cube stack benchmark: N = n x n x n unit cubes on a fixed floor under gravity, every cube
-in face contact from step 0. Prints block-steps/s and sub-contact-steps/s on one core.
+in face contact from step 0, stepped on one core (``MPI.COMM_SELF``, no output files).
 
     .venv/bin/python bench/cube_stack.py [n=10] [steps=500] [--algorithm fast|cundall]
                                          [--repeat R]
 
-Issue floor 2e5 block-steps/s, target 1e6. Not a test: timings on shared machines are noisy.
-Measured (2026-11-23, 2 shared cores under load, alternating with the tree before):
-``PYTHONPATH=. .venv/bin/python bench/cube_stack.py 20 300`` 4.0e5 -> 4.3e5 block-steps/s
-(1.07-1.09x on CPU time); the step is contact forces ~57%, contact updates ~40%, motion ~5%
-(docs/validation.md, Benchmarks). 2026-11-25, the contact update 1.4x cheaper per contact
-(same bits): 3.7-3.8e5 -> 4.2-4.3e5 block-steps/s on CPU time (machine under load 3-4);
-with contacts re-detected by the motion of B relative to A (pdem.contact.staleness) too:
-7.0-7.1e5 against 3.9-4.1e5 for the tree before both (quiet machine, alternating, 2026-11-25).
-Later: the force loop's roots near 1 by series (docs/validation.md): defaults (n=10)
-9.4-9.9e5 against 8.6-9.3e5, 20 300: 8.9-9.3e5 against 8.5-8.9e5 (alternating, 2026-11-25).
-2026-11-27, the staleness marks reused, short runs copied by row, separated sub-contacts
-skipping their law: CPU time of 500 steps 0.517 s (median 0.548) against 0.560 (0.599), 12 runs
-each alternating; best 9.1e5 block-steps/CPU-s on that host (docs/validation.md).
-Later that day, the periodic contact updates inside the compiled loop (pdem.contact.update):
-0.476 s (median 0.523) against 0.487 (0.541), 24 runs each alternating; best 1.05e6
-block-steps/CPU-s, the target, in the best runs of this host, not in every run.
+Each run sets the stack up, takes 20 untimed warm-up steps and times ``steps`` steps. Prints,
+per run: the cubes, contacts and sub-contacts and the algorithm; the set-up seconds; the wall
+and CPU seconds of the timed steps; block-steps/s (wall), block-steps/CPU-s and
+sub-contact-steps/s; and the per-phase timers of the stepper. With ``--repeat R`` (R > 1) the
+same run is made R times and the best, median and worst block-steps/CPU-s are printed last:
+on a shared host the wall clock counts the other tenants' turns, so compare CPU rates and
+medians. To compare two trees, alternate runs with ``PYTHONPATH=that/tree``.
+
+The issue's floor is 2e5 block-steps/s, its target 1e6. The current figures, with their host,
+are in docs/validation.md (Benchmarks); every measurement so far, with its date, host, command
+and the tree it was compared against, is in bench/results/cube_stack.csv. Not a test: timings
+on shared machines are noisy.
 """
 
 from __future__ import annotations
