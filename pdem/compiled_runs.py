@@ -163,7 +163,8 @@ class CompiledRuns:
             steps, s.step, s.time, why, st.bad, st.u_mig_max, redetected, keep, pairs, \
                 subs = fused_steps(
                     motion_record(b, n, st.holds), s.gravity, s.dt, s.damping_args(),
-                    s.scalar_inertia, st.stats, b.radius[:n], b.u_acc, b.u_geo, b.u_mig[:n],
+                    s.scalar_inertia, st.stats, b.radius[:n], b.fixed[:n], b.u_acc, b.u_geo,
+                    b.u_mig[:n],
                     b.q, b.R, st.bodies(), c.pairs(), c.subs(), s.joints.kernel_args,
                     c.moved, st.geometry_update(), (b.piece_center, b.verts_local),
                     c.arrays["rel_x"], c.arrays["rel_q"], b.radius,

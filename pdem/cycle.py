@@ -1,16 +1,24 @@
-"""The calculation cycle compiled: many steps of a serial run in one numba call.
+"""The calculation cycle compiled: the step's phases, and many steps in one numba call.
+
+A step's first half is defined once, here, as two compiled phases: :func:`motion_phase`
+(integrate the owned blocks; the clock, the motion bound and the state check) and
+:func:`force_phase` (rotation matrices, the contact forces, the inactive blocks), with the
+forward halo between them; its reduction is one record filled by :func:`step_flags`. The
+stepper (:meth:`pdem.stepper.Stepper.first_half`) calls the phases for one step, with its
+Python hooks between them (boundary loads, a zoned block's grid step, the halo by mpi4py);
+:func:`fused_steps` calls them for many.
 
 A small scene spends most of a step in the interpreter (about 70 us of Python per step, for a
 few microseconds of arithmetic). Between Python-level events (output, checkpoints, energy
 samples, a contact search, a contact geometry update with work to do, the end of the run)
-:func:`fused_steps` runs the steps of :meth:`pdem.stepper.Stepper.advance` inside one compiled
-loop, calling the same kernels in the same order on the same arrays, so the result is bitwise
-that of the step-by-step path (and so of any rank count, whose steps exchange halos in Python).
+:func:`fused_steps` runs the steps inside one compiled loop, on the same arrays, so the result
+is bitwise that of the step-by-step path (and so of any rank count).
 
-The loop does a step's first half (motion, bookkeeping, rotation matrices, contact forces)
-and then, if nothing needs Python, its second half. At a periodic contact update it marks the
-stale contacts (pdem.contact.staleness) and, if any, updates them by the stepper's own kernel
-(:mod:`pdem.contact.update`), carrying on with the new sub-contact columns.
+The loop does a step's first half and then, if nothing needs Python, its second half. At a
+periodic contact update it marks the stale contacts (pdem.contact.staleness) and, if any,
+updates them by the stepper's own three calls (:mod:`pdem.contact.update`; not one wrapper
+kernel, which would compile the re-detection once more), carrying on with the new sub-contact
+columns.
 Otherwise it returns after the first half and the stepper finishes that step in Python: a
 search, an update that found contacts apart (the stepper drops them from every column), a bad
 state, an event.
@@ -29,6 +37,7 @@ from .contact.detect import refresh_contacts
 from .contact.forces import contact_forces
 from .contact.staleness import stale_contacts
 from .contact.update import begin_update, end_update, keeps_all
+from .deformable.contact import contact_forces_grid
 from .dynamics import motion
 from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices, world_vertices
@@ -62,6 +71,71 @@ STEP_FLAGS = 7
 STOP_FLAGS = (FLAG_BAD, FLAG_MIGRATE, FLAG_LEFT, FLAG_SIGNAL, FLAG_FOLDED)
 
 
+# The first half of a step is two compiled phases, called by the stepper for one step (with
+# its Python hooks between them: boundary loads, a zoned block's grid step, the halo in
+# Python) and by fused_steps for many (with the compiled halo between them): one definition.
+MOTION = 1  # motion_phase's parts: integrate the owned blocks (eqs. 44-52) ...
+CLOCK = 2  # ... and t + dt, eq. 1's motion bound, the state check (after a grid step)
+MOTION_AND_CLOCK = MOTION | CLOCK
+
+
+@kernel
+def motion_phase(parts, m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u_acc,
+                 u_geo, u_mig, step, time, speed_limit, speed_growth, max_step):
+    """The motion of a step: ``parts`` :data:`MOTION` integrates ``m`` (the owned rows'
+    :data:`pdem.dynamics.motion.Motion`, its ``fixed`` the flags the integrator holds;
+    ``stats`` zeroed first) and :data:`CLOCK` advances ``step`` and ``time`` and does
+    :func:`pdem.dynamics.motion.motion_bookkeeping` with the blocks' true ``fixed`` flags.
+    Returns ``(step, time, bad, u_mig_max)`` (``-1``, ``0.0`` without :data:`CLOCK`)."""
+    bad = -1
+    u_mig_max = 0.0
+    if parts & MOTION:
+        stats[:] = 0.0
+        motion.integrate(m, gravity, dt, damping, scalar_inertia, stats)
+    if parts & CLOCK:
+        step += 1
+        time += dt
+        # a block moving more in a step than max_step could tunnel
+        bad, u_mig_max = motion.motion_bookkeeping(m.dx, m.dtheta, radius, fixed, u_acc, u_geo,
+                                                   u_mig, m.v, m.x,
+                                                   speed_limit + speed_growth * time, max_step)
+    return step, time, bad, u_mig_max
+
+
+@kernel
+def force_phase(dt, q, R, bodies, pairs, subs, joints, still, grid, m_true, gravity, radius,
+                calm, speed, sleep_steps, force_frac, ref_force):
+    """The forces of a step, after the forward halo: rotation matrices, the sub-contact
+    forces at t + dt (``grid``: the zoned blocks' :class:`pdem.deformable.contact.Grid`, or
+    None), and the inactive blocks' bookkeeping (``m_true``: the owned rows' record with the
+    true ``fixed`` flags where ``solve.inactive`` holds blocks, else None)."""
+    rotation_matrices(q, R)
+    bodies.force[:] = 0.0
+    bodies.moment[:] = 0.0
+    if grid is None:
+        contact_forces(dt, bodies, pairs, subs, joints, still)
+    else:
+        grid.force[:] = 0.0
+        contact_forces_grid(dt, bodies, pairs, subs, joints, grid)
+    if m_true is not None:
+        update_inactive(m_true, gravity, radius, calm, still, speed, sleep_steps, force_frac,
+                        ref_force)
+
+
+@kernel
+def step_flags(flags, max_force, bad, rebuild, left, signum, folded, grid_ratio):
+    """This rank's side of the step's reduction (:data:`STEP_FLAGS`, by name), for the
+    stepper's ``Allreduce`` and the compiled one alike."""
+    flags[:] = 0.0
+    flags[FLAG_FORCE] = max_force
+    flags[FLAG_BAD] = 1.0 if bad >= 0 else 0.0
+    flags[FLAG_MIGRATE] = 1.0 if rebuild else 0.0
+    flags[FLAG_LEFT] = 1.0 if left else 0.0
+    flags[FLAG_SIGNAL] = signum
+    flags[FLAG_FOLDED] = folded
+    flags[FLAG_GRID_RATIO] = grid_ratio
+
+
 def motion_record(b, n: int, still: bool = False) -> motion.Motion:
     """The owned rows' arrays for :func:`pdem.dynamics.motion.integrate`; with ``still`` the
     held inactive blocks are fixed for it too (pdem.dynamics.inactive)."""
@@ -69,7 +143,8 @@ def motion_record(b, n: int, still: bool = False) -> motion.Motion:
 
 
 @kernel
-def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u_geo, u_mig,
+def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u_acc, u_geo,
+                u_mig,
                 q, R, bodies, pairs, subs, joints, c_moved, up, pieces, rel_x, rel_q, radius_all,
                 m_true, calm, still,
                 speed, sleep_steps, force_frac, remap_at,
@@ -83,9 +158,10 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
     contacts' ``pairs``/``subs`` after the updates (a new CSR start and sub-contact columns
     when any contact was re-detected).
 
-    ``m``: the owned rows' :data:`pdem.dynamics.motion.Motion` record (serial: every row);
-    ``q``, ``R``, ``u_acc``, ``u_geo``, ``bodies``, ``radius_all``: all rows; ``rel_x``,
-    ``rel_q``: the contacts' columns the periodic check reads (pdem.contact.staleness);
+    ``m``: the owned rows' :data:`pdem.dynamics.motion.Motion` record (serial: every row),
+    ``fixed`` their true flags (:func:`motion_phase`); ``q``, ``R``, ``u_acc``, ``u_geo``,
+    ``bodies``, ``radius_all``: all rows; ``rel_x``, ``rel_q``: the contacts' columns the
+    periodic check reads (pdem.contact.staleness);
     ``up``: :data:`pdem.contact.update.GeometryUpdate`; ``pieces``: the pieces' centres and
     body-frame vertices (their world vertices are made before an update). Stops after the
     step that reaches ``stop_step`` or ``stop_time`` (a plugin's event, the end of the run) or
@@ -110,15 +186,11 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
     redetected = 0
     keep = todo
     while True:
-        # first half: pdem.stepper.Stepper.advance up to the contact forces
-        stats[:] = 0.0
-        motion.integrate(m, gravity, dt, damping, scalar_inertia, stats)
-        step += 1
-        time += dt
+        # first half: the stepper's phases (pdem.stepper.Stepper.first_half)
+        step, time, bad, u_mig_max = motion_phase(
+            MOTION_AND_CLOCK, m, gravity, dt, damping, scalar_inertia, stats, radius, fixed,
+            u_acc, u_geo, u_mig, step, time, speed_limit, speed_growth, max_step)
         n_steps += 1
-        bad, u_mig_max = motion.motion_bookkeeping(m.dx, m.dtheta, radius, m.fixed, u_acc, u_geo,
-                                           u_mig, m.v, m.x, speed_limit + speed_growth * time,
-                                           max_step)
         single = True  # one rank (with or without an idle ``net``: see the docstring)
         if net is not None:
             single = net.single
@@ -127,13 +199,8 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
                 if rc != 0:
                     why, bad = MPI_FAILED, rc
                     break
-        rotation_matrices(q, R)
-        bodies.force[:] = 0.0
-        bodies.moment[:] = 0.0
-        contact_forces(dt, bodies, pairs, subs, joints, still)
-        if m_true is not None:
-            update_inactive(m_true, gravity, radius, calm, still, speed, sleep_steps, force_frac,
-                            ref_force)
+        force_phase(dt, q, R, bodies, pairs, subs, joints, still, None, m_true, gravity, radius,
+                    calm, speed, sleep_steps, force_frac, ref_force)
         periodic = step % detect_every == 0
         own = bad >= 0 or _remap_due(u_acc, remap_at) or (periodic and stop_at_update)
         done = n_steps >= max_steps or step >= stop_step or time >= stop_time
@@ -195,10 +262,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, u_acc, u
 def _reduce(net, max_force, rebuild):
     """The step's reduction (pdem.stepper.Stepper.second_half's flags, with no bad state,
     no block out of the model domain, no signal, no grid): 0 or MPI's error code."""
-    f = net.flags
-    f[:] = 0.0
-    f[FLAG_FORCE] = max_force
-    f[FLAG_MIGRATE] = 1.0 if rebuild else 0.0
+    step_flags(net.flags, max_force, -1, rebuild, False, 0.0, 0.0, 0.0)
     return allreduce_max(net)
 
 

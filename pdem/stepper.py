@@ -1,6 +1,7 @@
 """The calculation cycle: one step of the model held in a :class:`pdem.state.ModelState`.
 
-One step (``Stepper.advance``):
+One step (``Stepper.advance``; steps 1-3 are the compiled phases of :mod:`pdem.cycle`, which
+a compiled run of steps calls too):
 1. motion of every free block by central differences (eqs. 44-52) from the forces at t;
 2. forward halo: ghosts receive their owners' new pose and velocities;
 3. sub-contact forces at t + dt from the relative motion of the step (eqs. 15-43);
@@ -26,6 +27,7 @@ from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
 from .contact.update import GeometryUpdate, JointSets, begin_update, end_update, keeps_all
 from .cycle import (
+    CLOCK,
     FLAG_BAD,
     FLAG_FOLDED,
     FLAG_FORCE,
@@ -33,15 +35,20 @@ from .cycle import (
     FLAG_LEFT,
     FLAG_MIGRATE,
     FLAG_SIGNAL,
+    MOTION,
+    MOTION_AND_CLOCK,
     STEP_FLAGS,
+    force_phase,
+    motion_phase,
     motion_record,
+    step_flags,
 )
 from .deformable.contact import contact_forces_grid
 from .deformable.subcontacts import carry_grid_columns
 from .dynamics import motion
 from .dynamics.diagnosis import explain
-from .dynamics.inactive import hold_fixed, inactive_args, update_inactive
-from .dynamics.kinematics import rotation_matrices, update_envelopes, update_world_vertices
+from .dynamics.inactive import hold_fixed, inactive_args
+from .dynamics.kinematics import update_envelopes, update_world_vertices
 from .errors import SimulationError
 from .insitu import initialise
 from .memory import large_blocks_mapped
@@ -259,16 +266,6 @@ class Stepper:
         contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                             g.record(b, c))
 
-    def update_inactive(self):
-        """Count, hold and wake inactive blocks after the contact forces (solve.inactive)."""
-        s = self.s
-        if s.scene.solve.inactive is None:
-            return
-        b, n = s.blocks, s.n_owned
-        speed, steps, frac = inactive_args(s.scene)
-        update_inactive(motion_record(b, n), s.gravity, b.radius[:n], b.calm[:n], b.still[:n],
-                        speed, steps, frac, s.resolved.ref_force)
-
     # ------------------------------------------------------------------ the step
     def advance(self):
         """One calculation cycle (docs/architecture.md, docs/parallel.md); True if blocks must
@@ -292,42 +289,46 @@ class Stepper:
         return self.runs.python_steps
 
     def first_half(self):
-        """Motion, the forward halo and the contact forces of a step."""
+        """Motion, the forward halo and the contact forces of a step: the compiled phases
+        (pdem.cycle.motion_phase, force_phase) that a compiled run of steps calls too, with
+        this step's Python hooks between them (boundary loads, the zoned blocks' grid step,
+        the halo by mpi4py), each phase timed."""
         s = self.s
         b = s.blocks
         n = s.n_owned
         tm = s.timers
-        self.stats[:] = 0.0
+        r = s.resolved
+        g = s.grids
         hold_fixed(s)
         with tm.phase("motion"):
             if s.boundary is not None:
                 # velocity histories at t + dt/2, then boundary stresses at t on the pose at t
                 s.boundary.before_step(s)
             rec = motion_record(b, n, self.holds)
-            if s.grids is not None:  # zoned blocks move with their grids
-                rec = rec._replace(fixed=s.grids.rigid_fixed(rec.fixed))
-            motion.integrate(rec, s.gravity, s.dt, s.damping_args(), s.scalar_inertia,
-                             self.stats)
-            if s.grids is not None:
-                self._grid_bad = s.grids.step(s.dt)
-                s.grids.sync(b)
-            s.step += 1
-            s.time += s.dt
-            # eq. 1 (bounded by the centroid motion plus rotation times the block radius), the
-            # state check and the ghost-rebuild measure, in one kernel
-            r = s.resolved
-            self.bad, self.u_mig_max = motion.motion_bookkeeping(
-                b.dx[:n], b.dtheta[:n], b.radius[:n], b.fixed[:n], b.u_acc[:n], b.u_geo[:n],
-                b.u_mig[:n], b.v[:n], b.x[:n], r.speed_limit + r.speed_growth * s.time,
-                s.max_step)  # a block moving more in a step could tunnel
+            if g is not None:  # zoned blocks move with their grids
+                rec = rec._replace(fixed=g.rigid_fixed(rec.fixed))
+            # (a grid step between the motion and the clock: the grids move their blocks)
+            parts = MOTION if g is not None else MOTION_AND_CLOCK
+            while parts:
+                s.step, s.time, self.bad, self.u_mig_max = motion_phase(
+                    parts, rec, s.gravity, s.dt, s.damping_args(), s.scalar_inertia,
+                    self.stats, b.radius[:n], b.fixed[:n], b.u_acc, b.u_geo, b.u_mig[:n],
+                    s.step, s.time, r.speed_limit, r.speed_growth, s.max_step)
+                if parts == MOTION:
+                    self._grid_bad = g.step(s.dt)
+                    g.sync(b)
+                parts = CLOCK if parts == MOTION else 0
         with tm.phase("halo"):
             s.halo.forward(b)
-            if s.grids is not None:  # the ghost grids' gridpoints, their rows and pieces
-                s.grids.forward(b)
-        rotation_matrices(b.q, b.R)
+            if g is not None:  # the ghost grids' gridpoints, their rows and pieces
+                g.forward(b)
         with tm.phase("forces"):
-            self.compute_forces(s.dt)
-            self.update_inactive()
+            speed, sleep_steps, frac = inactive_args(s.scene)
+            force_phase(s.dt, b.q, b.R, self.bodies(), s.contacts.pairs(), s.contacts.subs(),
+                        s.joints.kernel_args, b.still,
+                        g.record(b, s.contacts) if g is not None else None,
+                        motion_record(b, n) if self.holds else None, s.gravity, b.radius[:n],
+                        b.calm[:n], speed, sleep_steps, frac, r.ref_force)
 
     def second_half(self, updated: bool = False, flags: np.ndarray | None = None) -> bool:
         """Contact search and updates, and the step's one reduction; True if blocks must
@@ -359,15 +360,11 @@ class Stepper:
             rebuild = bool(n) and u_mig_max > 0.5 * r.margin
             left = periodic and s.scene.domain is not None and domain.outside(s).any()
             signum = self.stop.signum if self.stop is not None else 0
-            if flags is None:  # (pdem.cycle._reduce makes the same STEP_FLAGS)
+            if flags is None:  # (a compiled run of steps makes the same STEP_FLAGS)
                 mine = np.zeros(STEP_FLAGS)
-                mine[FLAG_FORCE] = self.stats[motion.STAT_MAX_FORCE]
-                mine[FLAG_BAD] = float(bad >= 0)
-                mine[FLAG_MIGRATE] = float(rebuild)
-                mine[FLAG_LEFT] = float(left)
-                mine[FLAG_SIGNAL] = float(signum)
-                mine[FLAG_FOLDED] = float(self._grid_bad + 1)
-                mine[FLAG_GRID_RATIO] = s.grids.ratio if s.grids is not None else 0.0
+                step_flags(mine, self.stats[motion.STAT_MAX_FORCE], bad, rebuild, left,
+                           float(signum), float(self._grid_bad + 1),
+                           s.grids.ratio if s.grids is not None else 0.0)
                 flags = mpi.allreduce_max_array(s.comm, mine)
         self.stop_signal = int(flags[FLAG_SIGNAL])
         if flags[FLAG_FOLDED]:
