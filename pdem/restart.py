@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from .deformable import grid_checkpoint
+from .distribute import distribute, distributed_from_scene, take_share
 from .errors import UserError
 from .io.checkpoint import CheckpointReader
 from .model.csr import KEY_SHIFT
@@ -126,7 +127,7 @@ def _restore_share(state, out, x, block_rows, contacts, path, read: bool = True,
         owned = np.nonzero(state.decomp.owner_of(x) == state.comm.rank)[0]
         source = state.scene_store()
     else:  # each rank sends its share's blocks, at their checkpoint poses, to the owners
-        source = state.take_share()
+        source = take_share(state)
         owned = source.gid.copy()
     free = owned[state.glob.fixed[owned] == 0]  # the contacts of these come along
     if state.grids is not None:  # the grids held here (by the build) from the file
@@ -134,15 +135,14 @@ def _restore_share(state, out, x, block_rows, contacts, path, read: bool = True,
     # a checkpoint's ``held`` has 6 columns (older files always) or none: the scene's
     held = held_width(state.scene.solve.inactive is not None)
     if placed is not None:
-        state.distribute(owned, block_rows(owned), state.empty_contacts(), source=source,
-                         consume=source is not state.glob)
+        distribute(state, owned, block_rows(owned), state.empty_contacts(), source=source,
+                   consume=source is not state.glob)
         with state.timers.phase("migrate"):
             state.contacts = place_contacts(state.blocks, state.n_owned, state.glob.fixed,
                                            placed().with_held(held))
     else:
-        state.distribute(owned, block_rows(owned), contacts(free).with_held(held),
-                         source=source, consume=source is not state.glob,
-                         consume_contacts=read)
+        distribute(state, owned, block_rows(owned), contacts(free).with_held(held),
+                   source=source, consume=source is not state.glob, consume_contacts=read)
     if state.grids is not None:  # zoned rows and pieces from the stored gridpoints
         b, rows = state.blocks, state.grids.rows
         x_saved = b.x[rows].copy()
@@ -150,7 +150,7 @@ def _restore_share(state, out, x, block_rows, contacts, path, read: bool = True,
         state.grids.sync(b, ghosts=True)
         b.x[rows] = x_saved  # the stored centroids (the same numbers, recomputed)
         b.dx[rows] = 0.0
-    state.distributed_from_scene()
+    distributed_from_scene(state)
 
 
 def _reader(state, path, by_share: bool = False):

@@ -29,7 +29,7 @@ from .mpi import allgather_rows
 CATALOGUE = ("fixed", "vfix", "out")
 # what the ranks gather of it
 GATHERED = CATALOGUE
-# what of it a rank keeps once the blocks are distributed (ModelState.distributed_from_scene)
+# what of it a rank keeps once the blocks are distributed (distribute.distributed_from_scene)
 # and the output is open (pdem.simulation): two bytes a scene block, read by the rebuild
 # (which contacts travel: fixed), the checkpoint (which copy of a contact is written: fixed)
 # and the excavations (out). A stage's start reads the blocks each rank holds (its

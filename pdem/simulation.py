@@ -9,6 +9,7 @@ This is the public entry point for scripts and tests::
 
 from __future__ import annotations
 
+from .distribute import release_scene_geometry, release_setup_fields
 from .io.paths import check_writable
 from .memory import reuse_large_blocks
 from .plugins import default_plugins
@@ -54,8 +55,8 @@ class Simulation:
         if release:
             # the output writer has taken its share of the surfaces (it keeps its own copy)
             self.state.writer_mesh = self.state.writer_static = None
-            self.state.release_scene_geometry()
-            self.state.release_setup_fields()
+            release_scene_geometry(self.state)
+            release_setup_fields(self.state)
         reuse_large_blocks()  # set up: the step's arrays come from the heap (pdem.memory)
 
     # the model, as scripts and tests read it

@@ -19,29 +19,27 @@ from .boundary import apply_scene, needs_every_block
 from .config import ConfigError, Scene
 from .config.load import dump_scene
 from .contact.algorithms import ALGORITHMS
-from .contact.cellspace import CellSpace
 from .contact.laws import joint_table
 from .deformable.columns import GRID_WIDTH
 from .deformable.store import GridStore
+from .distribute import distribute_initial, redistribute
 from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose, thinnest_width
 from .io.checkpoint import new_run_id, written_contacts
-from .io.layout import even_share, h5py_has_mpi, writer_range
-from .io.surfaces import body_surfaces
+from .io.layout import even_share, h5py_has_mpi
 from .memory import map_large_blocks, return_freed_memory
 from .model.blocks import BlockStore
 from .model.build import SpecTable, block_store, expand_blocks, geometry_columns
 from .model.contacts import ContactStore
 from .model.csr import KEY_SHIFT
-from .model.fields import MIGRATE, halo_fields, held_width
+from .model.fields import held_width
 from .model.runs import RunColumn
 from .mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
 from .parallel.decomposition import make_decomposition
-from .parallel.migrate import rebuild
 from .preflight import check_derived, machine_memory, preflight, rescaled
 from .resolve import REMAP_FRACTION, Resolved, contact_tolerance, resolve
 from .restart import restore
-from .selection import CATALOGUE, GATHERED, RUN_CATALOGUE
+from .selection import GATHERED
 from .timers import Timers
 
 # a block may move up to this fraction of the thinnest piece's width in one step (see
@@ -86,7 +84,8 @@ def zoned_grids(scene: Scene, comm, specs, first_gid: int):
 
 
 class ModelState:
-    """The model on one rank; construct with :meth:`create` (collective)."""
+    """The model on one rank; construct with :meth:`create` (collective). Its blocks go to
+    their owners, and set-up's scene data is dropped, by :mod:`pdem.distribute`."""
 
     def __init__(self, scene: Scene, comm, specs, glob, group_names, joints, resolved: Resolved,
                  thinnest: float, share=None):
@@ -232,34 +231,6 @@ class ModelState:
         return self.damping.kernel_args(self.alpha)
 
     # ------------------------------------------------------------------ ownership
-    def distribute(self, owned_gids, state: dict, contacts: ContactStore, source=None,
-                   consume: bool = False, consume_contacts: bool = False):
-        """(Re)build this rank's blocks, contacts and halo (collective), see parallel.migrate.
-        ``source``: a store holding the blocks ``owned_gids`` (default: this rank's);
-        ``consume``: it is dropped once sent (the build share); ``consume_contacts``:
-        ``contacts`` are dropped once merged (a restart's, read for this call)."""
-        with self.timers.phase("migrate"):
-            r = self.resolved
-            grids = self.grids
-            self.blocks, self.n_owned, self.contacts, self.halo, held = rebuild(
-                self.comm, self.decomp, self.glob, self.blocks if source is None else source,
-                owned_gids, state, contacts, 0.5 * r.ctol, r.margin,
-                halo_fields(self.scene.solve.inactive is not None,
-                            any(x.zones is not None for x in self.scene.blocks)), consume,
-                None if grids is None else grids.payload(), consume_contacts)
-            b = self.blocks
-            if grids is not None:  # zoned blocks' grids came with them (owned and ghosts)
-                self.grids = type(grids).arrived(grids, b, self.n_owned, held)
-                self.grids.plan_halo(self.halo)
-            refresh_pose(b, 0.5 * r.ctol)
-            # a rank whose brick holds no block has no cell space until blocks arrive; blocks
-            # deleted from the model take no space
-            present = b.out != 2
-            self.cells = CellSpace(b.lo[present], b.hi[present], r.cell_size) \
-                if present.any() else None
-            self.n_rebuilds += 1
-            return_freed_memory()  # the messages and the old store
-
     def scene_store(self):
         """The scene's store with its geometry (set-up and restore only)."""
         if not self.glob.has_geometry:
@@ -283,78 +254,14 @@ class ModelState:
         return BlockStore.catalogue({"gid": gid[order], **{
             k: allgather_rows(self.comm, getattr(b, k)[:n])[order] for k in names}})
 
-    def needs_scene_geometry(self) -> bool:
-        """Whether the run reads the geometry of blocks it does not hold after set-up: a
-        stage's boundary stress finds the exposed faces on the scene's store (pdem.boundary)."""
-        return needs_every_block(self.scene, stages_only=True)
-
-    def distributed_from_scene(self):
-        """After the first distribution from the scene's store: take the output writer's
-        share of the surfaces, then drop the rest of the scene's geometry (the start's
-        contact search and first update then run without it: the set-up's peak)."""
-        if self.glob.has_geometry and self.output_surfaces:  # else from the build share
-            lo, hi = writer_range(self.comm, self.glob.n)
-            self.writer_mesh = body_surfaces(self.glob, lo, hi)
-            self.writer_static = (self.glob.x0[lo:hi].copy(), self.glob.group[lo:hi].copy())
-        if not self.keep_scene_geometry:
-            self.release_scene_geometry()
-            self.release_setup_fields()
-
-    def release_scene_geometry(self):
-        """After set-up (blocks distributed, output opened): drop the geometry of the blocks
-        this rank does not hold. The scene's store keeps its per-block fields (a few scalars a
-        block: fixed, radius, ...); each rank's store holds its blocks' and ghosts' geometry,
-        which migrates with them."""
-        if not self.needs_scene_geometry():
-            if self.glob.has_geometry:
-                self.glob.drop_geometry()
-            # the catalogue's envelopes (lo, hi: the resolve's) too, 48 bytes a scene block
-            self.glob.keep_fields(CATALOGUE)
-        return_freed_memory()
-
-    def release_setup_fields(self, keep: tuple[str, ...] = ()):
-        """Of every scene block keep only :data:`RUN_CATALOGUE` and ``keep``: once the
-        blocks are distributed, and once the output is open. A run that keeps the whole scene
-        (``pdem check``, a stage's boundary stress) keeps it all."""
-        if not self.keep_scene_geometry and not self.needs_scene_geometry():
-            self.glob.keep_fields(RUN_CATALOGUE + keep)
-            return_freed_memory()
-
     def distribute_initial(self):
-        """Every rank takes the blocks whose centroid lies in its brick (collective): from
-        its build share, sent to their owners, or from the whole scene's store."""
-        empty = self.empty_contacts()
-        if self.share is None:
-            g = self.glob
-            owned = np.nonzero(self.decomp.owner_of(g.x) == self.comm.rank)[0]
-            self.distribute(owned, {k: getattr(g, k)[owned] for k in MIGRATE}, empty,
-                            source=self.scene_store())
-        else:
-            s = self.take_share()
-            self.distribute(s.gid.copy(), {k: getattr(s, k) for k in MIGRATE}, empty,
-                            source=s, consume=True)
-        self.distributed_from_scene()
-
-    def take_share(self):
-        """The build share, to be sent to the owners (and dropped: ``self.share`` is None
-        after), with what set-up changed on the scene's per-block fields since it was built
-        (boundary conditions, mass scaling, a restart's removed blocks); the output writer
-        takes its surfaces first (the build share is the writer's, :func:`build_share`)."""
-        s, self.share = self.share, None
-        for k in CATALOGUE:  # the rest was set on the share itself
-            if k in vars(self.glob):
-                getattr(s, k)[:] = getattr(self.glob, k)[s.gid]
-        if self.output_surfaces:  # the writer's range is the build share (writer_range)
-            self.writer_mesh = body_surfaces(s)
-            self.writer_static = (s.x.copy(), s.group.copy())
-        return s
+        """The first distribution of the blocks (collective; pdem.distribute)."""
+        distribute_initial(self)
 
     def redistribute(self):
-        """Migrate blocks whose centroid left the brick and rebuild ghosts (collective)."""
-        n = self.n_owned
-        b = self.blocks
-        self.distribute(b.gid[:n].copy(), {k: getattr(b, k)[:n].copy() for k in MIGRATE},
-                        self.contacts)
+        """Migrate blocks whose centroid left the brick and rebuild ghosts (collective;
+        pdem.distribute)."""
+        redistribute(self)
 
     def rebalance(self) -> bool:
         """At a rebuild point, before :meth:`redistribute`: new cuts if the owned work is

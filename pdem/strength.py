@@ -31,6 +31,7 @@ import numpy as np
 from . import mpi
 from .config.stages import stage_scene
 from .contact.laws import JOINT_LAWS, joint_table
+from .distribute import distribute
 from .errors import UserError
 from .model.blocks import take_rows
 from .model.fields import MIGRATE
@@ -77,8 +78,8 @@ class _Snapshot:
         for k, v in self.glob.items():
             getattr(s.glob, k)[:] = v
         s.step, s.time, s.ratio, s.alpha = self.clock
-        s.distribute(self.gids, {k: v.copy() for k, v in self.rows.items()},
-                     self.contacts.take(np.arange(self.contacts.n)), source=self.store)
+        distribute(s, self.gids, {k: v.copy() for k, v in self.rows.items()},
+                   self.contacts.take(np.arange(self.contacts.n)), source=self.store)
 
 
 def _displacements(s, snap: _Snapshot) -> np.ndarray:

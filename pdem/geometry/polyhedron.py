@@ -174,52 +174,7 @@ class ConvexPolyhedron:
         (:meth:`with_face_tag` without the copy). ``fresh``: the arrays given were made for
         this polyhedron (float64 and int64) and nobody else holds them: copied into one
         buffer instead of nine arrays."""
-        faces = range(len(face_start) - 1)  # the face count, for the offsets below
-        if fresh:  # a cut piece: the checks and the edges compiled, in the same order
-            edges = cut_piece_edges(len(v), face_start, face_verts)
-        else:
-            if face_verts.size and (face_verts.min() < 0 or face_verts.max() >= len(v)):
-                raise GeometryError("face vertex id out of range")
-            edges = build_half_edges(len(v), face_start, face_verts).edges
-        if normals is None:
-            n = face_area_vectors(v, face_start, face_verts)
-            norm = np.linalg.norm(n, axis=1)
-            if np.any(norm == 0.0):
-                raise GeometryError("a face has zero area")
-            n = n / norm[:, None]
-        else:
-            n = np.asarray(normals, dtype=np.float64)
-        if offsets is None:
-            # Mean of n . x over each face's vertices (an average absorbs round-off).
-            face_of = np.repeat(np.arange(len(faces)), np.diff(face_start))
-            d = np.bincount(
-                face_of, np.einsum("ij,ij->i", v[face_verts], n[face_of]), len(faces)
-            ) / np.diff(face_start)
-        else:
-            d = np.asarray(offsets, dtype=np.float64)
-        volume, centroid, inertia = mass_properties(v, face_start, face_verts)
-        if not volume > 0.0:
-            raise GeometryError(
-                f"polyhedron volume is {volume:g}; faces must be counter-clockwise from outside"
-            )
-        if fresh:
-            # one buffer for all its arrays, laid out as a pickled piece arrives: the arrays
-            # the kernels made each carry numba's allocation record (kept, they were ~1.6 KB
-            # a piece more than copies)
-            return _packed(v, face_start, face_verts, n, d, edges, volume, centroid, inertia,
-                           face_tag)
-        return cls(
-            vertices=_readonly(v, np.float64),
-            face_start=_readonly(face_start, np.int64),
-            face_verts=_readonly(face_verts, np.int64),
-            normals=_readonly(n, np.float64),
-            offsets=_readonly(d, np.float64),
-            edges=_readonly(edges, np.int64),
-            volume=volume,
-            centroid=_readonly(centroid, np.float64),
-            inertia=_readonly(inertia, np.float64),
-            face_tag=None if face_tag is None else _readonly(face_tag, np.int64),
-        )
+        return _from_csr(v, face_start, face_verts, normals, offsets, face_tag, fresh)
 
     def with_face_tag(self, face_tag) -> ConvexPolyhedron:
         """Copy of the polyhedron carrying the per-face labels ``face_tag``.
@@ -373,20 +328,7 @@ class ConvexPolyhedron:
         ConvexPolyhedron
             New polyhedron; topology shared, normals rotated, inertia ``R I R^T``.
         """
-        R = np.asarray(R, dtype=np.float64)
-        t = np.asarray(t, dtype=np.float64).reshape(3)
-        if R.shape != (3, 3) or not _is_rotation(R):
-            raise GeometryError("R must be a proper rotation matrix (orthonormal, det = +1)")
-        n = self.normals @ R.T
-        c = R @ self.centroid + t
-        return dataclasses.replace(
-            self,
-            vertices=_readonly(self.vertices @ R.T + t, np.float64),
-            normals=_readonly(n, np.float64),
-            offsets=_readonly(self.offsets + n @ t, np.float64),
-            centroid=_readonly(c, np.float64),
-            inertia=_readonly(R @ self.inertia @ R.T, np.float64),
-        )
+        return _transformed(self, R, t)
 
     def principal_frame(self) -> tuple[ConvexPolyhedron, np.ndarray, np.ndarray, np.ndarray]:
         """Express the polyhedron in its principal body frame.
@@ -404,20 +346,96 @@ class ConvexPolyhedron:
         moments : (3,) float64
             Principal moments per unit density, ascending.
         """
-        moments, R = np.linalg.eigh(self.inertia)
-        if np.linalg.det(R) < 0.0:
-            R[:, 2] = -R[:, 2]  # eigenvectors are defined up to sign: pick a right-handed frame
-        c = np.array(self.centroid)
-        n = self.normals @ R
-        body = dataclasses.replace(
-            self,
-            vertices=_readonly((self.vertices - c) @ R, np.float64),
-            normals=_readonly(n, np.float64),
-            offsets=_readonly(self.offsets - self.normals @ c, np.float64),
-            centroid=_readonly(np.zeros(3), np.float64),
-            inertia=_readonly(np.diag(moments), np.float64),
+        return _principal_frame(self)
+
+
+def _from_csr(v, face_start, face_verts, normals, offsets, face_tag, fresh
+              ) -> ConvexPolyhedron:
+    """:meth:`ConvexPolyhedron.from_csr`: the checks, the derived fields (edges, planes,
+    mass properties) and the read-only record."""
+    faces = range(len(face_start) - 1)  # the face count, for the offsets below
+    if fresh:  # a cut piece: the checks and the edges compiled, in the same order
+        edges = cut_piece_edges(len(v), face_start, face_verts)
+    else:
+        if face_verts.size and (face_verts.min() < 0 or face_verts.max() >= len(v)):
+            raise GeometryError("face vertex id out of range")
+        edges = build_half_edges(len(v), face_start, face_verts).edges
+    if normals is None:
+        n = face_area_vectors(v, face_start, face_verts)
+        norm = np.linalg.norm(n, axis=1)
+        if np.any(norm == 0.0):
+            raise GeometryError("a face has zero area")
+        n = n / norm[:, None]
+    else:
+        n = np.asarray(normals, dtype=np.float64)
+    if offsets is None:
+        # Mean of n . x over each face's vertices (an average absorbs round-off).
+        face_of = np.repeat(np.arange(len(faces)), np.diff(face_start))
+        d = np.bincount(
+            face_of, np.einsum("ij,ij->i", v[face_verts], n[face_of]), len(faces)
+        ) / np.diff(face_start)
+    else:
+        d = np.asarray(offsets, dtype=np.float64)
+    volume, centroid, inertia = mass_properties(v, face_start, face_verts)
+    if not volume > 0.0:
+        raise GeometryError(
+            f"polyhedron volume is {volume:g}; faces must be counter-clockwise from outside"
         )
-        return body, c, R, moments
+    if fresh:
+        # one buffer for all its arrays, laid out as a pickled piece arrives: the arrays
+        # the kernels made each carry numba's allocation record (kept, they were ~1.6 KB
+        # a piece more than copies)
+        return _packed(v, face_start, face_verts, n, d, edges, volume, centroid, inertia,
+                       face_tag)
+    return ConvexPolyhedron(
+        vertices=_readonly(v, np.float64),
+        face_start=_readonly(face_start, np.int64),
+        face_verts=_readonly(face_verts, np.int64),
+        normals=_readonly(n, np.float64),
+        offsets=_readonly(d, np.float64),
+        edges=_readonly(edges, np.int64),
+        volume=volume,
+        centroid=_readonly(centroid, np.float64),
+        inertia=_readonly(inertia, np.float64),
+        face_tag=None if face_tag is None else _readonly(face_tag, np.int64),
+    )
+
+
+def _transformed(p: ConvexPolyhedron, R, t) -> ConvexPolyhedron:
+    """:meth:`ConvexPolyhedron.transformed`."""
+    R = np.asarray(R, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64).reshape(3)
+    if R.shape != (3, 3) or not _is_rotation(R):
+        raise GeometryError("R must be a proper rotation matrix (orthonormal, det = +1)")
+    n = p.normals @ R.T
+    c = R @ p.centroid + t
+    return dataclasses.replace(
+        p,
+        vertices=_readonly(p.vertices @ R.T + t, np.float64),
+        normals=_readonly(n, np.float64),
+        offsets=_readonly(p.offsets + n @ t, np.float64),
+        centroid=_readonly(c, np.float64),
+        inertia=_readonly(R @ p.inertia @ R.T, np.float64),
+    )
+
+
+def _principal_frame(p: ConvexPolyhedron
+                     ) -> tuple[ConvexPolyhedron, np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`ConvexPolyhedron.principal_frame`."""
+    moments, R = np.linalg.eigh(p.inertia)
+    if np.linalg.det(R) < 0.0:
+        R[:, 2] = -R[:, 2]  # eigenvectors are defined up to sign: pick a right-handed frame
+    c = np.array(p.centroid)
+    n = p.normals @ R
+    body = dataclasses.replace(
+        p,
+        vertices=_readonly((p.vertices - c) @ R, np.float64),
+        normals=_readonly(n, np.float64),
+        offsets=_readonly(p.offsets - p.normals @ c, np.float64),
+        centroid=_readonly(np.zeros(3), np.float64),
+        inertia=_readonly(np.diag(moments), np.float64),
+    )
+    return body, c, R, moments
 
 
 # faces per numpy batch in :func:`face_areas` (bounds the (F, k, 3) polygon stack's memory)

@@ -394,11 +394,9 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
     replaces: the store is bitwise the same (tests compare it) for any share, in a fraction
     of the time for a large model."""
     hi = len(specs) if hi is None else hi
-    mats = {m: i for i, m in enumerate(scene.materials)}
     runs = isinstance(specs, SpecList)
     groups = sorted({b.group for b in scene.blocks if b.mesh is None}
                     | (specs.groups() if runs else {s.group for s in specs}))
-    group_index = {g: i for i, g in enumerate(groups)}
     # the global ordinal of the share's first piece (contact keys name pieces by it)
     first_piece = specs.n_pieces_before(lo) if runs else sum(s.n_pieces for s in specs[:lo])
     specs = specs[lo:hi]
@@ -407,14 +405,32 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
     frames = _body_frames(specs)
     # per piece, gid order: the world piece (topology) and its body-frame geometry
     pieces = [p for s in specs for p in s.pieces]
-    n_pieces = len(pieces)
     piece_start = np.zeros(n + 1, np.int64)
     np.cumsum([len(s.pieces) for s in specs], out=piece_start[1:])
     counts = np.array([(len(p.vertices), len(p.face_start) - 1, len(p.face_verts), len(p.edges))
                        for p in pieces], np.int64).reshape(-1, 4)
-    starts = np.zeros((n_pieces + 1, 4), np.int64)
+    starts = np.zeros((len(pieces) + 1, 4), np.int64)
     np.cumsum(counts, axis=0, out=starts[1:])
-    vert_start, face_start, edge_start = starts[:, 0], starts[:, 1], starts[:, 3]
+    body, radius = _place_frames(frames, arr, piece_start, starts)
+    arr["gid"][:] = np.arange(lo, lo + n)
+    arr["owned"][:] = 1
+    arr["x0"][:] = arr["x"]
+    arr["x_stage"][:] = arr["x"]
+    _frame_quaternions(frames, arr)
+    _block_fields(scene, specs, arr, groups, radius)
+    geometry = _store_geometry(pieces, counts, starts, piece_start, first_piece, **body)
+    if any(s.zoning is not None for s in specs):
+        identity_frames(geometry, arr, specs)
+    return BlockStore(arr, geometry), groups
+
+
+def _place_frames(frames, arr, piece_start: np.ndarray, starts: np.ndarray):
+    """The blocks' principal frames (:func:`_body_frames`) into their rows: centroid ``x``
+    and per-unit-density ``inertia`` into ``arr``; returns the pieces' body-frame geometry
+    (``verts_local``, ``normals_local``, ``offsets_local``, ``centers``: of a joined block's
+    pieces, else zero) by the CSR ``starts`` (vertices, faces) and every block's radius."""
+    n, n_pieces = len(piece_start) - 1, len(starts) - 1
+    vert_start, face_start = starts[:, 0], starts[:, 1]
     verts_local = np.empty((starts[-1, 0], 3))
     normals_local = np.empty((starts[-1, 1], 3))
     offsets_local = np.empty(starts[-1, 1])
@@ -439,11 +455,13 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
                 offsets_local[face_start[k]:face_start[k + 1]] = body.offsets
                 centers[k] = body.centroid
             radius[rows] = max(np.linalg.norm(b.vertices, axis=1).max() for b in bv)
-    arr["gid"][:] = np.arange(lo, lo + n)
-    arr["owned"][:] = 1
-    arr["x0"][:] = arr["x"]
-    arr["x_stage"][:] = arr["x"]
-    # one quaternion per distinct R (bitwise): blocks of one shape share a few frames
+    return dict(verts_local=verts_local, normals_local=normals_local,
+                offsets_local=offsets_local, centers=centers), radius
+
+
+def _frame_quaternions(frames, arr) -> None:
+    """Every block's orientation ``q`` from its frame's R: one quaternion per distinct R
+    (bitwise): blocks of one shape share a few frames."""
     for rows, _, R, _, _, _, _ in frames:
         if R.ndim == 2:  # a joined block: its one frame (np.unique of one row: ~75 us)
             arr["q"][rows] = quat_from_matrix(R)
@@ -453,6 +471,14 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
                                       return_index=True, return_inverse=True)
         q = np.array([quat_from_matrix(R[i]) for i in first])
         arr["q"][rows] = q[inverse.ravel()].reshape(-1, 4) if np.ndim(rows) else q[0]
+
+
+def _block_fields(scene: Scene, specs, arr, groups: list[str], radius: np.ndarray) -> None:
+    """The per-block fields from the scene: mass and inertia (the frames' per unit density,
+    times the material's), material and group ids, the conditions of each block's entry
+    (:data:`BLOCK_CONDITIONS`), the radius and the initial angular momentum."""
+    mats = {m: i for i, m in enumerate(scene.materials)}
+    group_index = {g: i for i, g in enumerate(groups)}
     rho = np.array([scene.materials[s.material].density for s in specs], float)
     arr["mass"][:] = rho * np.array([s.volume for s in specs], float)
     arr["inertia"][:] *= rho[:, None]
@@ -471,7 +497,17 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
     for r in np.nonzero((arr["w"] != 0.0).any(axis=1))[0]:
         Rm = quat_to_matrix(arr["q"][r])
         arr["L"][r] = Rm @ (arr["inertia"][r] * (Rm.T @ arr["w"][r]))
-    # topology: the world pieces' (a rigid motion keeps it), vertex ids made store rows
+
+
+def _store_geometry(pieces, counts: np.ndarray, starts: np.ndarray, piece_start: np.ndarray,
+                    first_piece: int, verts_local, normals_local, offsets_local, centers
+                    ) -> dict[str, np.ndarray]:
+    """The store's geometry columns (pdem.model.blocks) of ``pieces`` (gid order; ``counts``:
+    each one's vertices, faces, face vertices and edges, ``starts`` their running sums):
+    the world pieces' topology (a rigid motion keeps it) with vertex ids made store rows,
+    and the body-frame geometry (:func:`_place_frames`)."""
+    n, n_pieces = len(piece_start) - 1, len(pieces)
+    vert_start, face_start, edge_start = starts[:, 0], starts[:, 1], starts[:, 3]
     v0 = vert_start[:-1]
     face_verts = np.concatenate([p.face_verts for p in pieces]) + np.repeat(v0, counts[:, 2]) \
         if pieces else np.zeros(0, np.int64)
@@ -488,7 +524,7 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
         if p.face_tag is not None:
             face_tag[face_start[k]:face_start[k + 1]] = p.face_tag
     edirs, edir_start = _edge_directions(verts_local, edges.astype(np.int64), edge_start)
-    geometry = dict(
+    return dict(
         piece_start=piece_start,
         piece_block=np.repeat(np.arange(n), np.diff(piece_start)),
         piece_gid=np.arange(first_piece, first_piece + n_pieces, dtype=np.int64),
@@ -510,9 +546,6 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
         edir_start=edir_start,
         edirs_local=edirs,
     )
-    if any(s.zoning is not None for s in specs):
-        identity_frames(geometry, arr, specs)
-    return BlockStore(arr, geometry), groups
 
 
 def _body_frames(specs: list[BlockSpec]):

@@ -44,7 +44,7 @@ class BlockSpec:
 
     def release(self) -> None:
         """Drop the pieces (after set-up their geometry lives with the blocks' owners, see
-        pdem.state.ModelState.release_scene_geometry), keeping the scalars later stages
+        pdem.distribute.release_scene_geometry), keeping the scalars later stages
         read: volume, surface area, largest face, piece count."""
         if self.pieces is None:
             return

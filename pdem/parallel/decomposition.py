@@ -166,6 +166,36 @@ def _allreduce(comm, a: np.ndarray, op) -> np.ndarray:
     return out
 
 
+class _Nodes:
+    """The cut tree as :func:`rcb_tree` grows it, in the lists :class:`CutTree` takes: each
+    node's cut (``axis`` -1 and ``cut`` 0 until it is split), children and leaf rank (-1: a
+    split), the ranks ``r0 .. r1-1`` under it and its region ``rlo .. rhi``; ``work``: the
+    weight each leaf's rank got."""
+
+    def __init__(self, parts: int, lo, hi):
+        self.axis, self.cut, self.left, self.right, self.rank = [-1], [0.0], [-1], [-1], [-1]
+        self.r0, self.r1 = [0], [parts]
+        self.rlo, self.rhi = [np.asarray(lo, float)], [np.asarray(hi, float)]
+        self.work = np.zeros(parts, np.int64)
+
+    def add(self, r0: int, r1: int, lo: np.ndarray, hi: np.ndarray) -> int:
+        """A new node for ranks ``r0 .. r1-1`` (a leaf if one) over ``lo .. hi``: its index."""
+        self.axis.append(-1)
+        self.cut.append(0.0)
+        self.left.append(-1)
+        self.right.append(-1)
+        self.r0.append(r0)
+        self.r1.append(r1)
+        self.rlo.append(lo)
+        self.rhi.append(hi)
+        self.rank.append(r0 if r1 - r0 == 1 else -1)
+        return len(self.axis) - 1
+
+    def tree(self) -> CutTree:
+        return CutTree(self.axis, self.cut, self.left, self.right, self.rank,
+                       np.array(self.rlo), np.array(self.rhi), self.work)
+
+
 def rcb_tree(comm, x: np.ndarray, w: np.ndarray, parts: int, lo, hi) -> CutTree:
     """The RCB of the points ``x`` (this rank's share; each point on one rank) with integer
     weights ``w`` into ``parts`` regions (collective over ``comm``; ``parts`` need not be
@@ -184,110 +214,131 @@ def rcb_tree(comm, x: np.ndarray, w: np.ndarray, parts: int, lo, hi) -> CutTree:
 
     x = np.asarray(x, float).reshape(-1, 3)
     w = np.asarray(w, np.int64).reshape(-1)
-    axis, cut, left, right, rank = [-1], [0.0], [-1], [-1], [-1]
-    r0, r1 = [0], [parts]
-    rlo, rhi = [np.asarray(lo, float)], [np.asarray(hi, float)]
-    work = np.zeros(parts, np.int64)
+    t = _Nodes(parts, lo, hi)
     node = np.zeros(len(x), np.int64)
     active = [0] if parts > 1 else []
     if parts == 1:
-        rank[0] = 0
-        work[0] = _allreduce(comm, np.array([w.sum()], np.int64), MPI.SUM)[0]
-    while active:
-        k = len(active)
-        slot = np.full(len(axis), -1, np.int64)
-        slot[active] = np.arange(k)
-        j_of = slot[node]
-        mine = np.nonzero(j_of >= 0)[0]
-        mine = mine[np.argsort(j_of[mine], kind="stable")]
-        bounds = np.searchsorted(j_of[mine], np.arange(k + 1))
-        groups = [mine[bounds[j]:bounds[j + 1]] for j in range(k)]
-        # the box around each node's points
-        box = np.full((k, 6), np.inf)
-        for j, g in enumerate(groups):
-            if len(g):
-                box[j, :3] = x[g].min(0)
-                box[j, 3:] = -x[g].max(0)
-        box = _allreduce(comm, box, MPI.MIN)
-        bmin, bmax = box[:, :3], -box[:, 3:]
-        has = np.isfinite(bmin[:, 0])
-        ax = np.empty(k, np.int64)
-        a = np.empty(k)
-        b = np.empty(k)
-        for j, i in enumerate(active):
-            ext = bmax[j] - bmin[j] if has[j] else rhi[i] - rlo[i]
-            ax[j] = int(np.argmax(ext))  # the first of equal extents: x, y, z
-            if has[j]:
-                a[j] = bmin[j, ax[j]]
-                b[j] = np.nextafter(bmax[j, ax[j]], np.inf)  # every point below b
-            else:
-                a[j] = b[j] = 0.5 * (rlo[i][ax[j]] + rhi[i][ax[j]])
+        t.rank[0] = 0
+        t.work[0] = _allreduce(comm, np.array([w.sum()], np.int64), MPI.SUM)[0]
+    while active:  # one level of the tree a pass
+        groups = _level_groups(node, active, len(t.axis))
+        has, ax, a, b = _windows(comm, x, groups, active, t.rlo, t.rhi)
         coord = [x[g, ax[j]] for j, g in enumerate(groups)]
-        pl = np.array([(r1[i] - r0[i]) // 2 for i in active], np.int64)
-        p = np.array([r1[i] - r0[i] for i in active], np.int64)
-        below = np.zeros(k, np.int64)  # weight left of the window [a, b)
-        total = None
-        inside = np.zeros(k, np.int64)
-        for _ in range(HIST_PASSES):
-            edges = np.linspace(a, b, HIST_BINS + 1, axis=1)
-            hist = np.zeros((k, HIST_BINS), np.int64)
-            for j, g in enumerate(groups):
-                c = coord[j]
-                sel = (c >= a[j]) & (c < b[j])
-                if sel.any():
-                    bins = np.searchsorted(edges[j], c[sel], side="right") - 1
-                    hist[j] = np.bincount(bins, w[g][sel], HIST_BINS).astype(np.int64)
-            hist = _allreduce(comm, hist, MPI.SUM)
-            if total is None:
-                total = hist.sum(1)
-            cum = below[:, None] + np.cumsum(hist, axis=1)
-            # the first bin whose upper edge has at least the share p_left / p to its left
-            reach = cum * p[:, None] >= total[:, None] * pl[:, None]
-            jb = np.where(reach.any(1), np.argmax(reach, axis=1), HIST_BINS - 1)
-            rows = np.arange(k)
-            inside = hist[rows, jb]
-            below = cum[rows, jb] - inside
-            a, b = edges[rows, jb], edges[rows, jb + 1]
-        # the window's edge nearer the quantile (the lower one on a tie)
-        err_a = np.abs(below * p - total * pl)
-        err_b = np.abs((below + inside) * p - total * pl)
-        take_b = err_b < err_a
-        cuts = np.where(take_b, b, a)
-        left_w = np.where(take_b, below + inside, below)
-        nxt = []
-        for j, i in enumerate(active):
-            if not has[j]:
-                cuts[j] = a[j]
-            axis[i], cut[i] = int(ax[j]), float(cuts[j])
-            mid = r0[i] + int(pl[j])
-            for lo_r, hi_r, wt, side in ((r0[i], mid, left_w[j], "left"),
-                                         (mid, r1[i], total[j] - left_w[j], "right")):
-                c_lo, c_hi = rlo[i].copy(), rhi[i].copy()
-                if side == "left":
-                    c_hi[ax[j]] = cuts[j]
-                    left[i] = len(axis)
-                else:
-                    c_lo[ax[j]] = cuts[j]
-                    right[i] = len(axis)
-                axis.append(-1)
-                cut.append(0.0)
-                left.append(-1)
-                right.append(-1)
-                r0.append(lo_r)
-                r1.append(hi_r)
-                rlo.append(c_lo)
-                rhi.append(c_hi)
-                if hi_r - lo_r == 1:
-                    rank.append(lo_r)
-                    work[lo_r] = wt
-                else:
-                    rank.append(-1)
-                    nxt.append(len(axis) - 1)
-            g = groups[j]
-            go = coord[j] >= cuts[j]
-            node[g] = np.where(go, right[i], left[i])
-        active = nxt
-    return CutTree(axis, cut, left, right, rank, np.array(rlo), np.array(rhi), work)
+        pl = np.array([(t.r1[i] - t.r0[i]) // 2 for i in active], np.int64)
+        p = np.array([t.r1[i] - t.r0[i] for i in active], np.int64)
+        cuts, left_w, total = _quantile_cuts(comm, groups, coord, w, a, b, p, pl, has)
+        active = _split_level(t, active, groups, coord, node, ax, cuts, pl, left_w, total)
+    return t.tree()
+
+
+def _level_groups(node: np.ndarray, active: list[int], n_nodes: int) -> list[np.ndarray]:
+    """This rank's points (``node``: the node each is in) of each node of ``active``."""
+    k = len(active)
+    slot = np.full(n_nodes, -1, np.int64)
+    slot[active] = np.arange(k)
+    j_of = slot[node]
+    mine = np.nonzero(j_of >= 0)[0]
+    mine = mine[np.argsort(j_of[mine], kind="stable")]
+    bounds = np.searchsorted(j_of[mine], np.arange(k + 1))
+    return [mine[bounds[j]:bounds[j + 1]] for j in range(k)]
+
+
+def _windows(comm, x: np.ndarray, groups, active: list[int], rlo, rhi):
+    """Each node's cut axis and first window ``[a, b)`` (collective): the longest extent of
+    the box around its points (over the ranks) and that box along it; for a node holding no
+    point (``has`` False), its region's longest extent and the region's middle."""
+    from mpi4py import MPI
+
+    k = len(active)
+    # the box around each node's points
+    box = np.full((k, 6), np.inf)
+    for j, g in enumerate(groups):
+        if len(g):
+            box[j, :3] = x[g].min(0)
+            box[j, 3:] = -x[g].max(0)
+    box = _allreduce(comm, box, MPI.MIN)
+    bmin, bmax = box[:, :3], -box[:, 3:]
+    has = np.isfinite(bmin[:, 0])
+    ax = np.empty(k, np.int64)
+    a = np.empty(k)
+    b = np.empty(k)
+    for j, i in enumerate(active):
+        ext = bmax[j] - bmin[j] if has[j] else rhi[i] - rlo[i]
+        ax[j] = int(np.argmax(ext))  # the first of equal extents: x, y, z
+        if has[j]:
+            a[j] = bmin[j, ax[j]]
+            b[j] = np.nextafter(bmax[j, ax[j]], np.inf)  # every point below b
+        else:
+            a[j] = b[j] = 0.5 * (rlo[i][ax[j]] + rhi[i][ax[j]])
+    return has, ax, a, b
+
+
+def _quantile_cuts(comm, groups, coord, w: np.ndarray, a: np.ndarray, b: np.ndarray,
+                   p: np.ndarray, pl: np.ndarray, has: np.ndarray):
+    """Each node's cut at the weighted quantile ``pl / p`` of its points' ``coord`` in the
+    window ``[a, b)``, by ``HIST_PASSES`` passes of histogram refinement (collective), the
+    weight left of it and the node's total weight. A node holding no point is cut at ``a``."""
+    from mpi4py import MPI
+
+    k = len(groups)
+    below = np.zeros(k, np.int64)  # weight left of the window [a, b)
+    total = None
+    inside = np.zeros(k, np.int64)
+    for _ in range(HIST_PASSES):
+        edges = np.linspace(a, b, HIST_BINS + 1, axis=1)
+        hist = np.zeros((k, HIST_BINS), np.int64)
+        for j, g in enumerate(groups):
+            c = coord[j]
+            sel = (c >= a[j]) & (c < b[j])
+            if sel.any():
+                bins = np.searchsorted(edges[j], c[sel], side="right") - 1
+                hist[j] = np.bincount(bins, w[g][sel], HIST_BINS).astype(np.int64)
+        hist = _allreduce(comm, hist, MPI.SUM)
+        if total is None:
+            total = hist.sum(1)
+        cum = below[:, None] + np.cumsum(hist, axis=1)
+        # the first bin whose upper edge has at least the share p_left / p to its left
+        reach = cum * p[:, None] >= total[:, None] * pl[:, None]
+        jb = np.where(reach.any(1), np.argmax(reach, axis=1), HIST_BINS - 1)
+        rows = np.arange(k)
+        inside = hist[rows, jb]
+        below = cum[rows, jb] - inside
+        a, b = edges[rows, jb], edges[rows, jb + 1]
+    # the window's edge nearer the quantile (the lower one on a tie)
+    err_a = np.abs(below * p - total * pl)
+    err_b = np.abs((below + inside) * p - total * pl)
+    take_b = err_b < err_a
+    cuts = np.where(take_b, b, a)
+    left_w = np.where(take_b, below + inside, below)
+    for j in range(k):
+        if not has[j]:
+            cuts[j] = a[j]
+    return cuts, left_w, total
+
+
+def _split_level(t: _Nodes, active: list[int], groups, coord, node: np.ndarray, ax, cuts,
+                 pl, left_w, total) -> list[int]:
+    """Split each node of ``active`` at ``cuts`` along ``ax`` into two children (its first
+    ``pl`` ranks left, with the weight ``left_w``; the rest right) and move its points
+    (``node``) into them; returns the children still to split (more than one rank)."""
+    nxt = []
+    for j, i in enumerate(active):
+        t.axis[i], t.cut[i] = int(ax[j]), float(cuts[j])
+        mid = t.r0[i] + int(pl[j])
+        for lo_r, hi_r, wt, side in ((t.r0[i], mid, left_w[j], "left"),
+                                     (mid, t.r1[i], total[j] - left_w[j], "right")):
+            c_lo, c_hi = t.rlo[i].copy(), t.rhi[i].copy()
+            (c_hi if side == "left" else c_lo)[ax[j]] = cuts[j]  # the cut bounds the child
+            child = t.add(lo_r, hi_r, c_lo, c_hi)
+            (t.left if side == "left" else t.right)[i] = child
+            if hi_r - lo_r == 1:
+                t.work[lo_r] = wt
+            else:
+                nxt.append(child)
+        g = groups[j]
+        go = coord[j] >= cuts[j]
+        node[g] = np.where(go, t.right[i], t.left[i])
+    return nxt
 
 
 class RCBDecomposition:

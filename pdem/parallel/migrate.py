@@ -245,30 +245,15 @@ def rows_of(gids_held: np.ndarray, gids: np.ndarray) -> np.ndarray:
     return rows
 
 
-def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.ndarray,
-            state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO,
-            consume: bool = False, extras: dict | None = None, consume_contacts: bool = False):
-    """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo, extras).
-
-    ``glob``: the per-block static fields of every block, by gid (fixed, radius);
-    ``source``: a store holding the blocks ``owned_gids`` (the scene's store at start, this
-    rank's store later): their static data and geometry go with them;
-    ``owned_gids``/``state``: the blocks this rank owns now and their MIGRATE arrays;
-    ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here);
-    ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields);
-    ``consume``: ``source`` is not used after this call (the set-up's build share): its
-    arrays are dropped as soon as its blocks are packed, not kept through the rebuild's
-    peak; ``consume_contacts``: the same for ``contacts`` (a restart's, read for this
-    rebuild), whose columns are dropped as they are merged;
-    ``extras``: objects by gid that travel with their blocks, to the new owner and to the
-    ranks that ghost them (the zoned blocks' grids: pdem.deformable.store), for blocks of
-    ``owned_gids``; returned for the blocks held after (owned and ghosts), None without.
-    """
+def _migrate_owned(comm, decomp, source: BlockStore, owned_gids: np.ndarray, state: dict,
+                   contacts: ContactStore, fixed: np.ndarray, extras: dict | None,
+                   consume: bool):
+    """Step 1 of :func:`rebuild`: every owned block goes to the rank whose brick holds its
+    centroid, and to a rank that did not own it with its store rows and the contacts of
+    its free blocks that leave. Returns the gids owned now (ascending), their MIGRATE rows
+    and store in that order, the contacts received and the extras held (None without)."""
     size, rank = comm.size, comm.rank
-    owned_gids = np.asarray(owned_gids, np.int64)
     src_rows = rows_of(source.gid, owned_gids)
-    fixed = glob.fixed.astype(bool)
-    # 1. migration of owned blocks and the contacts of the free ones that leave
     dest = decomp.owner_of(state["x"]) if len(owned_gids) else np.zeros(0, np.int64)
     out = []
     for r in range(size):
@@ -304,24 +289,30 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         m.pop("store", None)
     mine_store = take_rows(arrived, order, np.ones(len(gids), np.uint8))
     del arrived
-    parts = [contacts] + [m["contacts"] for m in got if "contacts" in m]
-    drop = [consume_contacts] + [True] * (len(parts) - 1)
-    del got
+    received = [m["contacts"] for m in got if "contacts" in m]
+    return gids, new_state, mine_store, received, held
 
-    # 2. interest boxes and ghosts
-    free_now = gids[~fixed[gids]]
-    # the contacts this rank computes: those of its free blocks (rows renumbered at 4.)
-    # (a restart's contacts, read for this rebuild, and the ones received: their columns
-    # dropped as they are merged)
-    mine = _merge_contacts(parts, free_now, drop)
-    del parts
-    if len(free_now):
-        sel = ~fixed[gids]
-        lo, hi = _boxes(new_state["x"][sel], mine_store.radius[sel], pad)
+
+def _interest_boxes(comm, gids: np.ndarray, x: np.ndarray, radius: np.ndarray,
+                    fixed: np.ndarray, pad: float, margin: float) -> np.ndarray:
+    """Every rank's interest box (rows ``lo``, ``hi``): the box around its owned free blocks
+    (``gids``, centroids ``x``), padded by ``pad`` and enlarged by ``margin``; empty
+    (inverted) on a rank that owns no free block."""
+    sel = ~fixed[gids]
+    if sel.any():
+        lo, hi = _boxes(x[sel], radius[sel], pad)
         box = np.concatenate([lo.min(0) - margin, hi.max(0) + margin])
     else:
         box = np.array([np.inf] * 3 + [-np.inf] * 3)
-    boxes = np.array(allgather(comm, box))
+    return np.array(allgather(comm, box))
+
+
+def _send_ghosts(comm, boxes: np.ndarray, gids: np.ndarray, new_state: dict,
+                 mine_store: BlockStore, pad: float, held: dict | None):
+    """Each owned block whose padded bounding box reaches into another rank's interest box
+    goes there as a ghost (with its geometry, and its extras). Returns the messages sent
+    (None to itself) and those received."""
+    size, rank = comm.size, comm.rank
     blo, bhi = _boxes(new_state["x"], mine_store.radius, pad)
     out = []
     for r in range(size):
@@ -338,6 +329,13 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
         for m in got:
             if m is not None:
                 held.update(m["extras"])
+    return out, got
+
+
+def _ghost_rows(got: list, state: dict):
+    """The ghosts received (:func:`_send_ghosts`): the messages that hold some, as (rank,
+    message), their gids in gid order, the rank each came from, that order, and their
+    MIGRATE rows in it (shaped as ``state``'s when none came)."""
     ghost_parts = [(r, m) for r, m in enumerate(got) if m is not None and len(m["gid"])]
     g_gids = np.concatenate([m["gid"] for _, m in ghost_parts]) if ghost_parts else np.zeros(0, np.int64)
     g_from = np.concatenate([np.full(len(m["gid"]), r) for r, m in ghost_parts]) if ghost_parts \
@@ -346,6 +344,64 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     g_gids, g_from = g_gids[g_order], g_from[g_order]
     g_state = {k: (np.concatenate([m[k] for _, m in ghost_parts])[g_order] if ghost_parts
                    else np.zeros((0, *state[k].shape[1:]))) for k in MIGRATE}
+    return ghost_parts, g_gids, g_from, g_order, g_state
+
+
+def _halo_plan(out: list, gids: np.ndarray, g_gids: np.ndarray, g_from: np.ndarray,
+               fixed: np.ndarray, n_owned: int) -> tuple[dict, dict]:
+    """The per-step halo's rows (free blocks only; fixed ghosts were sent once): by rank,
+    the owned rows sent there and the ghost rows received from there."""
+    send = {}
+    for r, m in enumerate(out):
+        if m is None:
+            continue
+        gi = m["gid"][~fixed[m["gid"]]]
+        send[r] = np.searchsorted(gids, gi)  # owned rows are [0, n_owned) in gid order
+    recv = {}
+    for r in np.unique(g_from):
+        rows = np.nonzero((g_from == r) & ~fixed[g_gids])[0] + n_owned
+        recv[int(r)] = rows
+    return send, recv
+
+
+def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.ndarray,
+            state: dict, contacts: ContactStore, pad: float, margin: float, halo_fields=HALO,
+            consume: bool = False, extras: dict | None = None, consume_contacts: bool = False):
+    """Redistribute blocks and contacts; returns (blocks, n_owned, contacts, halo, extras).
+
+    ``glob``: the per-block static fields of every block, by gid (fixed, radius);
+    ``source``: a store holding the blocks ``owned_gids`` (the scene's store at start, this
+    rank's store later): their static data and geometry go with them;
+    ``owned_gids``/``state``: the blocks this rank owns now and their MIGRATE arrays;
+    ``contacts``: this rank's contacts (``ga``, ``gb`` valid; rows are reassigned here);
+    ``halo_fields``: what the halo sends each step (pdem.model.fields.halo_fields);
+    ``consume``: ``source`` is not used after this call (the set-up's build share): its
+    arrays are dropped as soon as its blocks are packed, not kept through the rebuild's
+    peak; ``consume_contacts``: the same for ``contacts`` (a restart's, read for this
+    rebuild), whose columns are dropped as they are merged;
+    ``extras``: objects by gid that travel with their blocks, to the new owner and to the
+    ranks that ghost them (the zoned blocks' grids: pdem.deformable.store), for blocks of
+    ``owned_gids``; returned for the blocks held after (owned and ghosts), None without.
+    """
+    owned_gids = np.asarray(owned_gids, np.int64)
+    fixed = glob.fixed.astype(bool)
+    # 1. migration of owned blocks and the contacts of the free ones that leave
+    gids, new_state, mine_store, received, held = _migrate_owned(
+        comm, decomp, source, owned_gids, state, contacts, fixed, extras, consume)
+    parts = [contacts] + received
+    drop = [consume_contacts] + [True] * (len(parts) - 1)
+    del received
+
+    # 2. interest boxes and ghosts
+    free_now = gids[~fixed[gids]]
+    # the contacts this rank computes: those of its free blocks (rows renumbered at 4.)
+    # (a restart's contacts, read for this rebuild, and the ones received: their columns
+    # dropped as they are merged)
+    mine = _merge_contacts(parts, free_now, drop)
+    del parts
+    boxes = _interest_boxes(comm, gids, new_state["x"], mine_store.radius, fixed, pad, margin)
+    out, got = _send_ghosts(comm, boxes, gids, new_state, mine_store, pad, held)
+    ghost_parts, g_gids, g_from, g_order, g_state = _ghost_rows(got, state)
 
     # 3. the local store: owned rows first, then ghosts, each in gid order
     owned = np.concatenate([np.ones(len(gids), np.uint8), np.zeros(len(g_gids), np.uint8)])
@@ -369,15 +425,6 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     _number_rows(mine, blocks)
 
     # 5. the per-step halo plan (free blocks only; fixed ghosts were sent once, above)
-    send = {}
-    for r, m in enumerate(out):
-        if m is None:
-            continue
-        gi = m["gid"][~fixed[m["gid"]]]
-        send[r] = np.searchsorted(gids, gi)  # owned rows are [0, n_owned) in gid order
-    recv = {}
-    for r in np.unique(g_from):
-        rows = np.nonzero((g_from == r) & ~fixed[g_gids])[0] + n_owned
-        recv[int(r)] = rows
+    send, recv = _halo_plan(out, gids, g_gids, g_from, fixed, n_owned)
     blocks.u_mig[:] = 0.0
     return blocks, n_owned, mine, Halo(comm, send, recv, halo_fields), held
