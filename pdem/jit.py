@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import numba
 
@@ -79,3 +80,33 @@ def drop_linking_ir(dispatcher) -> None:
         library = getattr(cres, "library", None)
         if getattr(library, "_shared_module", None) is not None:
             library._shared_module = None
+
+
+class Access(NamedTuple):
+    """What a kernel reads and writes of the model's stores, by declared field name
+    (pdem.model.fields: the block, contact and sub-contact fields by their store names,
+    ``applied_force`` and ``sc_un`` rather than the records' ``applied`` and ``un``): every
+    field it reads (written ones included, where also read) and every field it may change.
+    Arrays that are no declared field (the pieces' geometry, the CSR start, the joints'
+    tables, statistics) are not named."""
+
+    reads: tuple[str, ...]
+    writes: tuple[str, ...]
+
+
+# the declared kernels' access, by "module.kernel" (tests/unit/test_kernel_access.py runs each
+# on a scene and checks that it changes no field it does not declare)
+ACCESS: dict[str, Access] = {}
+
+
+def access(reads: str, writes: str = ""):
+    """Declare what the kernel below reads and writes (:class:`Access`; field names separated
+    by blanks); put above its ``@kernel``, it returns the kernel unchanged."""
+
+    def declare(dispatcher):
+        fn = getattr(dispatcher, "py_func", dispatcher)  # (a plain function with the JIT off)
+        ACCESS[f"{fn.__module__}.{fn.__name__}"] = Access(tuple(reads.split()),
+                                                          tuple(writes.split()))
+        return dispatcher
+
+    return declare

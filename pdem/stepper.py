@@ -21,7 +21,7 @@ import numpy as np
 from . import domain, mpi
 from .compiled_runs import CompiledRuns
 from .contact import forces
-from .contact.detect import Planes, refresh_contacts
+from .contact.detect import refresh_contacts
 from .contact.forces import contact_energies, contact_forces
 from .contact.rigid import Bodies
 from .contact.staleness import stale_contacts
@@ -238,9 +238,7 @@ class Stepper:
         (:data:`pdem.contact.update.GeometryUpdate`)."""
         s = self.s
         b = s.blocks
-        a = s.contacts.arrays
-        planes = Planes(a["ia"], a["ib"], a["ka"], a["kb"], a["normal"], a["point"], a["gap"],
-                        a["ctype"], a["warm"])
+        planes = s.contacts.planes()
         sets = JointSets(b.face_start, b.normals_local, b.offsets_local, b.face_tag,
                          s.joints.cut_joint) if s.joints.by_set else None
         # set-up (large arrays mapped): the first update's slack stays untouched, untrimmed;

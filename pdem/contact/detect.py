@@ -18,7 +18,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..jit import inline_kernel, kernel
+from ..jit import access, inline_kernel, kernel
 from .algorithms import find_plane, uses_face_normals
 from .common_plane import type_code
 from .laws import FAILED
@@ -194,6 +194,12 @@ def _copy_subs(dst, d0, src, s0, s1):
             hist[d, m] = shist[s, m]
 
 
+# (the new sub-contact columns are returned: the caller puts them in the store, ``in_place``
+# writes them over the old ones)
+@access(reads="x R point_area ia ib ka kb normal point warm sc_pa sc_area sc_un sc_fs sc_us "
+              "sc_dil sc_state sc_hist",
+        writes="normal point gap ctype warm sc_pa sc_area sc_un sc_fs sc_us sc_dil sc_state "
+               "sc_hist")
 @kernel
 def refresh_contacts(x, R, shapes, planes, old_start, old, todo, ctol, touch_frac, alg,
                      trim=True, in_place=False):

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..jit import force_kernel, inline_kernel, kernel
+from ..jit import access, force_kernel, inline_kernel, kernel
 from .laws import OPEN, SLIPPING, apply_law, joint_dissipation, law_energy, law_stays_open
 from .rigid import (
     add_point_force,
@@ -78,6 +78,9 @@ def carry_shear(fx, fy, fz, nx, ny, nz):
     return fx, fy, fz
 
 
+@access(reads="x R v w dtheta force moment fixed work still ia ib joint normal held frozen sc_pa "
+              "sc_area sc_un sc_fs sc_us sc_dil sc_state sc_hist",
+        writes="force moment work normal held frozen sc_un sc_fs sc_us sc_dil sc_state sc_hist")
 @force_kernel
 def contact_forces(dt, bodies, pairs, subs, joints, still):
     """Advance every sub-contact by one step and add the contact forces to the blocks.
@@ -243,6 +246,7 @@ def book_on_blocks(bodies, a, b, e, column):
     bodies.work[b, column] += wb * e
 
 
+@access(reads="fixed work ia ib joint sc_area sc_un sc_fs sc_dil sc_state sc_hist", writes="work")
 @kernel
 def book_stored_energy(bodies, pairs, subs, joints, which, column):
     """``book_contact_energy(bodies, ia, ib, contact_energies(pairs, subs, joints, which),

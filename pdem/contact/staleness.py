@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 
-from ..jit import inline_kernel, kernel
+from ..jit import access, inline_kernel, kernel
 
 # the share of the refresh tolerance a sub-contact of a contact found apart may overlap by
 # before the contact is re-detected (see the module doc)
@@ -78,6 +78,7 @@ def mark_fresh(x, q, R, ia, ib, rel_x, rel_q, which):
         rel_q[c, 0], rel_q[c, 1], rel_q[c, 2], rel_q[c, 3] = rw, rx, ry, rz
 
 
+@access(reads="x q R radius ia ib rel_x rel_q gap warm sc_un", writes="moved")
 @kernel
 def stale_contacts(x, q, R, radius, ia, ib, rel_x, rel_q, gap, warm, sc_start, sc_un,
                    tolerance, moved, todo):

@@ -27,7 +27,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..jit import kernel
+from ..jit import access, kernel
 from .forces import book_on_blocks, book_stored_energy, spring_energy
 from .joint_sets import set_joints
 from .rigid import WORK_GEOMETRY
@@ -45,6 +45,8 @@ GeometryUpdate = namedtuple("GeometryUpdate",
 JointSets = namedtuple("JointSets", "face_start normals_local offsets_local face_tag cut_joint")
 
 
+@access(reads="x q R ia ib warm joint sc_area sc_un sc_fs sc_dil sc_state sc_hist",
+        writes="moved rel_x rel_q")
 @kernel
 def begin_update(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo):
     """What an update of the contacts with ``todo[c] != 0`` does before their re-detection:
@@ -64,6 +66,8 @@ def begin_update(x, q, R, up, pairs, subs, joints, moved, rel_x, rel_q, todo):
     return before, _unseen(up.sets, planes.warm)
 
 
+@access(reads="x R fixed work ia ib ka kb normal joint sc_area sc_un sc_fs sc_dil sc_state sc_hist",
+        writes="joint frozen work")
 @kernel
 def end_update(x, R, up, pairs, subs, joints, bodies, todo, keep, new, before, book):
     """What an update does after the re-detection (:func:`.detect.refresh_contacts`, whose

@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import math
 
-from ..jit import kernel
+from ..jit import access, kernel
 from .motion import WORK_DAMPING
 
 NEVER = 2**31 - 1  # ``steps`` when inactive blocks are off: ``calm`` never gets there
 
 
+@access(reads="x fixed vfix mass mscale force applied_force bforce moment bmoment v w L work radius "
+              "calm",
+        writes="calm still v w L work")
 @kernel
 def update_inactive(m, gravity, radius, calm, still, speed, steps, force_frac, ref_force):
     """After a step's contact forces: count each owned free block's steps at rest (``calm``),

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import kernel
+from ..jit import access, kernel
 from .rotation import quat_to_matrix_s
 
 
+@access(reads="q", writes="R")
 @kernel
 def rotation_matrices(q, out):
     """Rotation matrix of each unit quaternion (w, x, y, z): ``out[b] = R(q[b])``."""

@@ -78,7 +78,7 @@ from pdem.dynamics.rotation import (
     rotate_inv_s,
     rotate_s,
 )
-from pdem.jit import kernel
+from pdem.jit import access, kernel
 
 # The block arrays integrate reads and writes (owned rows): ``force`` and ``moment`` are the
 # contact sums, ``applied`` the applied loads (gravity is added with the true mass); ``work``
@@ -176,6 +176,9 @@ def midpoint_omega_s(qw, qx, qy, qz, lx, ly, lz, i1, i2, i3, dt):
     return wx, wy, wz, it
 
 
+@access(reads="x q v w L mass inertia fixed vfix force applied_force moment mscale prev_force "
+              "prev_moment work bforce bmoment",
+        writes="x q v w L prev_force prev_moment dx dtheta work")
 @kernel
 def integrate(m, gravity, dt, damping, scalar_inertia, out_stats):
     """Advance all blocks one step; see the module docstring for time levels and damping.
@@ -420,6 +423,8 @@ def momentum_from_omega(q, w, inertia, mass_scale, scalar_inertia, out_L):
         out_L[i, 0], out_L[i, 1], out_L[i, 2] = r
 
 
+@access(reads="q v L mass inertia mscale fixed vfix force applied_force moment bforce bmoment",
+        writes="v w L")
 @kernel
 def stagger_start(m, gravity, dt, scalar_inertia):
     """Turn velocities given at t = 0 into the t = -dt/2 values the integrator expects.
@@ -449,6 +454,7 @@ def stagger_start(m, gravity, dt, scalar_inertia):
         w[i, 0], w[i, 1], w[i, 2] = r
 
 
+@access(reads="dx dtheta radius fixed u_acc u_geo u_mig v x", writes="u_acc u_geo u_mig")
 @kernel
 def motion_bookkeeping(dx, dtheta, radius, fixed, u_acc, u_geo, u_mig, v, x, speed_limit,
                        max_step=math.inf):

@@ -31,8 +31,8 @@ _COLLECTION = {"vtu": ".pvd", "vtk": ".vtk.series"}
 _STATIC = ("block_id", "group", "fixed")  # per-triangle arrays that do not change in time
 _SERIES = tuple(name for name, _, _ in CELL_FIELDS)
 # the zoned blocks' series (pdem.io.zones), as point and cell arrays of their tetrahedra
-_ZONE_POINT = tuple(s[0] for s in POINT_SERIES if s[0] != "points")
-_ZONE_CELL = tuple(s[0] for s in ZONE_SERIES)
+_ZONE_POINT = tuple(c.name for c in POINT_SERIES if c.name != "points")
+_ZONE_CELL = tuple(c.name for c in ZONE_SERIES)
 
 
 def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None,

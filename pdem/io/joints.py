@@ -22,24 +22,21 @@ from ..contact.laws.base import FAILED, OPEN, SLIPPING
 from ..model import csr
 
 __all__ = ["CONTACT_COLS", "SUB_COLS", "STATE_NAMES", "CONTACT_SERIES", "SUB_SERIES",
-           "OutputColumn", "pack", "reduce_contacts", "viewer_attributes"]
+           "CONTACT_FIELDS", "SUB_FIELDS",
+           "OutputColumn", "pack", "reduce_contacts", "viewer_attributes", "xdmf_number"]
 
 # contact state codes (contacts/state), in order of precedence: open > slipping > failed > intact
 INTACT, SLIPPING_CODE, OPEN_CODE, FAILED_CODE = 0, 1, 2, 3
 STATE_NAMES = ("intact", "slipping", "open", "failed")
 
-# What a rank passes per contact and per sub-contact (pdem.plugins.output builds it), packed as
-# float64 rows for the exchange (ids and counts are exact below 2**53).
-CONTACT_COLS = (("piece", 2), ("block", 2), ("joint", 1), ("point", 3), ("normal", 3),
-                ("n_sub", 1))
-SUB_COLS = (("point", 3), ("area", 1), ("overlap", 1), ("normal_force", 1),
-            ("shear_force", 3), ("shear_displacement", 3), ("state", 1))
-
 class OutputColumn(NamedTuple):
     """One dataset of ``contacts/`` or ``subcontacts/`` (docs/output.md): trailing shape,
-    dtype, units, doc, and ``view``: its place among the point attributes of the ParaView
-    sidecar (``<run>-contacts.xdmf``, pdem.io.xdmf), None where it is not shown. A column
-    shown in ParaView is one line here (+ its value in :func:`reduce_contacts`)."""
+    dtype, units, doc, ``view``: its place among the point attributes of the ParaView
+    sidecar (``<run>-contacts.xdmf``, pdem.io.xdmf), None where it is not shown, and
+    ``field``: the contact or sub-contact field (pdem.model.fields) it is, written as it is
+    stored (pdem.plugins.output.contact_rows passes it), None for a column made here from the
+    sub-contacts (:func:`reduce_contacts`) or by the caller. A stored field shown in ParaView
+    is one line here, with its ``field`` and ``view``."""
 
     name: str
     shape: tuple[int, ...]
@@ -47,15 +44,18 @@ class OutputColumn(NamedTuple):
     units: str
     doc: str
     view: int | None = None
+    field: str | None = None
 
 
 CONTACT_SERIES = (
     OutputColumn("block", (2,), np.int64, "1", "gids of blocks A and B"),
     OutputColumn("piece", (2,), np.int64, "1", "convex piece gids of A and B (the sort key)"),
     OutputColumn("joint", (), np.int32, "1", "row in the scene's joints (root attribute "
-                 "joint_names)"),
-    OutputColumn("point", (3,), np.float64, "m", "common-plane reference point"),
-    OutputColumn("normal", (3,), np.float64, "1", "common-plane unit normal, A -> B", view=2),
+                 "joint_names)", field="joint"),
+    OutputColumn("point", (3,), np.float64, "m", "common-plane reference point",
+                 field="point"),
+    OutputColumn("normal", (3,), np.float64, "1", "common-plane unit normal, A -> B", view=2,
+                 field="normal"),
     OutputColumn("normal_force", (), np.float64, "N", "sum of the sub-contacts' normal forces "
                  "(+ compression)", view=0),
     OutputColumn("shear_force", (3,), np.float64, "N", "sum of the sub-contacts' shear forces, "
@@ -73,24 +73,42 @@ CONTACT_SERIES = (
 SUB_SERIES = (
     OutputColumn("point", (3,), np.float64, "m", "world position (from the body-frame point on "
                  "A)"),
-    OutputColumn("area", (), np.float64, "m2", "area carried"),
-    OutputColumn("overlap", (), np.float64, "m", "overlap, + closing"),
+    OutputColumn("area", (), np.float64, "m2", "area carried", field="sc_area"),
+    OutputColumn("overlap", (), np.float64, "m", "overlap, + closing", field="sc_un"),
     OutputColumn("normal_force", (), np.float64, "N", "normal force, + compression", view=0),
-    OutputColumn("shear_force", (3,), np.float64, "N", "shear force on B", view=1),
-    OutputColumn("shear_displacement", (3,), np.float64, "m", "total shear displacement"),
+    OutputColumn("shear_force", (3,), np.float64, "N", "shear force on B", view=1,
+                 field="sc_fs"),
+    OutputColumn("shear_displacement", (3,), np.float64, "m", "total shear displacement",
+                 field="sc_us"),
     OutputColumn("state", (), np.uint8, "1", "state bits: 1 slipping, 2 failed, 4 open", view=2),
 )
+# the columns written as stored: (output name, store field), per contact and per sub-contact
+CONTACT_FIELDS = tuple((c.name, c.field) for c in CONTACT_SERIES if c.field)
+SUB_FIELDS = tuple((c.name, c.field) for c in SUB_SERIES if c.field)
+# What a rank passes per contact and per sub-contact (pdem.plugins.output builds it: the stored
+# columns above and the rest), packed as float64 rows for the exchange (ids and counts are
+# exact below 2**53). Every sub-contact column is passed; the contacts' others are reduced
+# from them (:func:`reduce_contacts`).
+CONTACT_COLS = (("piece", 2), ("block", 2),
+                *((c.name, math.prod(c.shape)) for c in CONTACT_SERIES if c.field),
+                ("n_sub", 1))
+SUB_COLS = tuple((c.name, math.prod(c.shape)) for c in SUB_SERIES)
 # XDMF number type and precision of a dataset's dtype
 _XDMF_TYPES = {np.dtype(np.float64): ("Float", 8), np.dtype(np.float32): ("Float", 4),
                np.dtype(np.uint8): ("UChar", 1), np.dtype(np.int32): ("Int", 4),
                np.dtype(np.int64): ("Int", 8)}
 
 
+def xdmf_number(dtype) -> tuple[str, int]:
+    """The XDMF number type and precision of a dataset's dtype."""
+    return _XDMF_TYPES[np.dtype(dtype)]
+
+
 def viewer_attributes(series) -> tuple[tuple[str, int, str, int], ...]:
     """The sidecar's point attributes of a series, in view order: (name, components, XDMF
     number type, precision), from the columns' declarations."""
     shown = sorted((c for c in series if c.view is not None), key=lambda c: c.view)
-    return tuple((c.name, math.prod(c.shape), *_XDMF_TYPES[np.dtype(c.dtype)]) for c in shown)
+    return tuple((c.name, math.prod(c.shape), *xdmf_number(c.dtype)) for c in shown)
 
 
 def _widths(cols):
@@ -173,8 +191,8 @@ def reduce_contacts(crows: np.ndarray, srows: np.ndarray) -> tuple[dict, dict]:
                               np.where(any_failed, FAILED_CODE, INTACT)))
     contacts = {
         "block": col(crows, C_AT, "block"), "piece": col(crows, C_AT, "piece"),
-        "joint": col(crows, C_AT, "joint"), "point": col(crows, C_AT, "point"),
-        "normal": col(crows, C_AT, "normal"), "normal_force": f_n, "shear_force": f_s,
+        **{name: col(crows, C_AT, name) for name, _ in CONTACT_FIELDS},
+        "normal_force": f_n, "shear_force": f_s,
         "normal_stress": np.where(pos, f_n / safe, 0.0),
         "shear_displacement": np.where(pos, a_us / safe, 0.0),
         "opening": np.where(nsub > 0, np.maximum(0.0, -min_un), 0.0), "area": a_sum,

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .joints import CONTACT_SERIES, SUB_SERIES, viewer_attributes
+from .joints import CONTACT_SERIES, SUB_SERIES, viewer_attributes, xdmf_number
+from .zones import ZONE_COLUMNS
 
 __all__ = ["write_xdmf", "read_xdmf", "centroids_path", "contacts_path", "subcontacts_path",
            "zones_path", "CELL_FIELDS", "VIEWED_SERIES", "CONTACT_VIEWED", "SUB_VIEWED",
@@ -43,19 +44,11 @@ VIEWED_SERIES = (
 # like the series above. ``point`` is the grids' geometry.
 _CONTACT_ATTRS = viewer_attributes(CONTACT_SERIES)
 _SUB_ATTRS = viewer_attributes(SUB_SERIES)
-# Attributes of the zoned blocks' tetrahedral grid (pdem.io.zones): (name, center, attribute
-# type, components, number type, precision), each snapshot's zones/<name> read through a view.
-# The stress is a "Matrix" of 6 columns, not a "Tensor6": ParaView 5.11's readers disagree on
-# Tensor6 (the Xdmf3 readers pass the 6 columns on, the legacy reader expands them to 9 taking
-# them as xx xy xz yy yz zz); a 6-column Matrix reaches ParaView as the same 6-component array
-# in all three, which ParaView takes as a symmetric tensor XX YY ZZ XY YZ XZ: pdem's order.
-_ZONE_ATTRS = (
-    ("displacement", "Node", "Vector", 3, "Float", 8), ("velocity", "Node", "Vector", 3, "Float", 8),
-    ("stress", "Cell", "Matrix", 6, "Float", 8), ("plastic", "Cell", "Scalar", 1, "UChar", 1),
-    ("mean_stress", "Cell", "Scalar", 1, "Float", 4), ("von_mises", "Cell", "Scalar", 1, "Float", 4),
-    ("sigma1", "Cell", "Scalar", 1, "Float", 4), ("sigma2", "Cell", "Scalar", 1, "Float", 4),
-    ("sigma3", "Cell", "Scalar", 1, "Float", 4),
-)
+# Attributes of the zoned blocks' tetrahedral grid: (name, center, attribute type, components,
+# number type, precision), from the zone series' declarations (pdem.io.zones.ZONE_COLUMNS: the
+# columns with a ``view``, in their order), each snapshot's zones/<name> read through a view.
+_ZONE_ATTRS = tuple((c.name, c.center, c.view, c.width, *xdmf_number(c.dtype))
+                    for c in ZONE_COLUMNS if c.view is not None)
 CONTACT_VIEWED = ("point", *(a[0] for a in _CONTACT_ATTRS))
 SUB_VIEWED = ("point", *(a[0] for a in _SUB_ATTRS))
 

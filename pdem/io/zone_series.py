@@ -13,8 +13,6 @@ from .zones import POINT_SERIES, ZONE_SERIES, ZONE_VIEWED, ZoneLayout, zone_layo
 
 __all__ = ["ZoneSeries"]
 
-_POINT_NAMES = {s[0] for s in POINT_SERIES}  # zone output series per gridpoint (else per zone)
-
 
 def _static_items(zones, n_blocks: int) -> list:
     """``(gid, {initial_points, tets})`` of this rank's zoned blocks (``ValueError`` if bad)."""
@@ -75,12 +73,12 @@ class ZoneSeries:
                 if k == len(lay.gid) or lay.gid[k] != int(gid):
                     raise ValueError(f"write_snapshot: block {gid} is not a zoned block")
                 v = zone_values(body)
-                for name, w, *_ in POINT_SERIES + ZONE_SERIES:
-                    start = lay.point_start if name in _POINT_NAMES else lay.zone_start
+                for c in POINT_SERIES + ZONE_SERIES:
+                    start = lay.point_start if c.center == "Node" else lay.zone_start
                     n = start[k + 1] - start[k]
-                    if v[name].size != n * w:
-                        raise ValueError(f"write_snapshot: zoned block {gid}: {name} has shape "
-                                         f"{np.shape(v[name])}, need ({n}, {w})")
+                    if v[c.name].size != n * c.width:
+                        raise ValueError(f"write_snapshot: zoned block {gid}: {c.name} has "
+                                         f"shape {np.shape(v[c.name])}, need ({n}, {c.width})")
                 items.append((int(gid), v))
         except (TypeError, ValueError, AttributeError) as e:
             return str(e), []
@@ -134,13 +132,13 @@ class ZoneSeries:
             if units:
                 d.attrs["units"] = units
         for series, n in ((POINT_SERIES, npt), (ZONE_SERIES, nz)):
-            for name, w, dtype, units, doc in series:
-                tail = (n, w) if w > 1 else (n,)
-                d = f.create_dataset(f"zones/{name}", (0, *tail), maxshape=(None, *tail),
+            for c in series:
+                tail = (n, c.width) if c.width > 1 else (n,)
+                d = f.create_dataset(f"zones/{c.name}", (0, *tail), maxshape=(None, *tail),
                                      chunks=(1, min(max(n, 1), CHUNK_ROWS), *tail[1:]),
-                                     dtype=dtype)
-                d.attrs["units"] = units
-                d.attrs["doc"] = doc
+                                     dtype=c.dtype)
+                d.attrs["units"] = c.units
+                d.attrs["doc"] = c.doc
 
     def write(self, i: int, items: list) -> None:
         """Snapshot ``i`` of the zone series and its ``/xdmf`` views (IO ranks, collective)."""
@@ -148,10 +146,10 @@ class ZoneSeries:
         gids = np.array([gid for gid, _ in items], np.int64)
         p0, pn, z0, zn = self.layout.runs(gids)
         for series, starts, counts in ((POINT_SERIES, p0, pn), (ZONE_SERIES, z0, zn)):
-            for name, *_ in series:
-                d = f[f"zones/{name}"]
+            for c in series:
+                d = f[f"zones/{c.name}"]
                 d.resize(i + 1, axis=0)
-                data = np.concatenate([v[name] for _, v in items]) if items else None
+                data = np.concatenate([v[c.name] for _, v in items]) if items else None
                 core.write_runs(d, (i,), starts, counts, data)
         for path in ZONE_VIEWED:
             add_view(f, path, i)

@@ -20,30 +20,56 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["ZoneLayout", "zone_layout", "zone_values", "POINT_SERIES", "ZONE_SERIES",
-           "ZONE_VIEWED", "PLASTIC_BITS"]
+__all__ = ["ZoneLayout", "zone_layout", "zone_values", "ZoneColumn", "ZONE_COLUMNS",
+           "POINT_SERIES", "ZONE_SERIES", "ZONE_VIEWED", "PLASTIC_BITS"]
 
-# Time series of the gridpoints and the zones: (name, components, dtype, units, doc). The exact
-# state is float64; the invariants are display values for the viewer (float32, like the
-# surfaces' viewer fields).
-POINT_SERIES = (
-    ("points", 3, np.float64, "m", "gridpoint positions, world frame"),
-    ("displacement", 3, np.float64, "m", "points - initial_points"),
-    ("velocity", 3, np.float64, "m/s", "gridpoint velocity"),
+
+class ZoneColumn(NamedTuple):
+    """One time series of ``zones/`` (docs/output.md): per gridpoint (``center`` "Node") or
+    per zone ("Cell"), ``width`` values a row, dtype, units, doc, and ``view``: its XDMF
+    attribute type in the sidecar ``<run>-zones.xdmf`` (pdem.io.xdmf; the attributes come in
+    this table's order), None where it is not an attribute (the gridpoint positions are the
+    grid's geometry). A series shown in ParaView is one line here (+ its value in
+    :func:`zone_values`)."""
+
+    name: str
+    center: str
+    width: int
+    dtype: type
+    units: str
+    doc: str
+    view: str | None = None
+
+
+# Time series of the gridpoints and the zones. The exact state is float64; the invariants are
+# display values for the viewer (float32, like the surfaces' viewer fields). The stress is a
+# "Matrix" of 6 columns, not a "Tensor6": ParaView 5.11's readers disagree on Tensor6 (the
+# Xdmf3 readers pass the 6 columns on, the legacy reader expands them to 9 taking them as xx
+# xy xz yy yz zz); a 6-column Matrix reaches ParaView as the same 6-component array in all
+# three, which ParaView takes as a symmetric tensor XX YY ZZ XY YZ XZ: pdem's order.
+ZONE_COLUMNS = (
+    ZoneColumn("points", "Node", 3, np.float64, "m", "gridpoint positions, world frame"),
+    ZoneColumn("displacement", "Node", 3, np.float64, "m", "points - initial_points",
+               view="Vector"),
+    ZoneColumn("velocity", "Node", 3, np.float64, "m/s", "gridpoint velocity", view="Vector"),
+    ZoneColumn("stress", "Cell", 6, np.float64, "Pa",
+               "zone stress xx, yy, zz, xy, yz, zx; tension positive", view="Matrix"),
+    ZoneColumn("plastic", "Cell", 1, np.uint8, "1",
+               "plastic state bits: 1 shear now, 2 tension now, 4 shear past, 8 tension past",
+               view="Scalar"),
+    ZoneColumn("mean_stress", "Cell", 1, np.float32, "Pa", "(xx + yy + zz) / 3; tension positive",
+               view="Scalar"),
+    ZoneColumn("von_mises", "Cell", 1, np.float32, "Pa", "sqrt(3 J2), >= 0", view="Scalar"),
+    ZoneColumn("sigma1", "Cell", 1, np.float32, "Pa", "minor principal stress: the most "
+               "compressive (smallest, tension positive)", view="Scalar"),
+    ZoneColumn("sigma2", "Cell", 1, np.float32, "Pa", "intermediate principal stress",
+               view="Scalar"),
+    ZoneColumn("sigma3", "Cell", 1, np.float32, "Pa", "major principal stress: the most tensile "
+               "(largest)", view="Scalar"),
 )
-ZONE_SERIES = (
-    ("stress", 6, np.float64, "Pa",
-     "zone stress xx, yy, zz, xy, yz, zx; tension positive"),
-    ("plastic", 1, np.uint8, "1",
-     "plastic state bits: 1 shear now, 2 tension now, 4 shear past, 8 tension past"),
-    ("mean_stress", 1, np.float32, "Pa", "(xx + yy + zz) / 3; tension positive"),
-    ("von_mises", 1, np.float32, "Pa", "sqrt(3 J2), >= 0"),
-    ("sigma1", 1, np.float32, "Pa", "minor principal stress: the most compressive (smallest, "
-     "tension positive)"),
-    ("sigma2", 1, np.float32, "Pa", "intermediate principal stress"),
-    ("sigma3", 1, np.float32, "Pa", "major principal stress: the most tensile (largest)"),
-)
-ZONE_VIEWED = tuple(f"/zones/{s[0]}" for s in POINT_SERIES + ZONE_SERIES)
+POINT_SERIES = tuple(c for c in ZONE_COLUMNS if c.center == "Node")  # per gridpoint
+ZONE_SERIES = tuple(c for c in ZONE_COLUMNS if c.center == "Cell")  # per zone
+ZONE_VIEWED = tuple(f"/zones/{c.name}" for c in POINT_SERIES + ZONE_SERIES)
 # pdem.deformable.constitutive's bits (FLAC3D's convention)
 PLASTIC_BITS = ("shear-n", "tension-n", "shear-p", "tension-p")
 

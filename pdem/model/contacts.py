@@ -14,17 +14,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact.detect import Planes
 from ..contact.forces import normal_forces as law_normal_forces
 from . import csr
-from .fields import CONTACT, HELD_WIDTH, SUB, allocate
+from .fields import CONTACT, CONTACT_KERNEL_FIELDS, HELD_WIDTH, SUB, allocate, kernel_columns
 
-# What the force kernel reads and writes of the contacts and sub-contacts.
+# What the force kernel reads and writes of the contacts and sub-contacts. The kernel records
+# (these and pdem.contact.detect.Planes) are filled by field name from the declarations
+# (pdem.model.fields: a sub-contact field's ``kernel`` name, ``pa`` for ``sc_pa``); the
+# kernels take them by position, so a record's field order is fixed.
 Pairs = namedtuple("Pairs", "ia ib joint normal sc_start held frozen")
 # No normal force: the law gives it from the stored state (:meth:`ContactStore.normal_forces`),
 # so a sub-contact does not keep a column only the force step would write.
 Subs = namedtuple("Subs", "pa area un fs us dil state hist")
-# the store's name of each column of :data:`Subs`, in its order
-SUB_COLUMNS = ("sc_pa", "sc_area", "sc_un", "sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist")
+# the store's name of each field of the records, in their order
+PAIR_COLUMNS = kernel_columns(Pairs, CONTACT_KERNEL_FIELDS, own=("sc_start",))
+SUB_COLUMNS = kernel_columns(Subs, CONTACT_KERNEL_FIELDS)
+PLANE_COLUMNS = kernel_columns(Planes, CONTACT_KERNEL_FIELDS)
 
 
 def sub_columns(subs: Subs) -> dict[str, np.ndarray]:
@@ -91,13 +97,23 @@ class ContactStore:
     def keys(self) -> np.ndarray:
         return self.arrays["pga"].astype(np.int64) * csr.KEY_SHIFT + self.arrays["pgb"]
 
+    def record(self, record, columns: tuple[str, ...]):
+        """The kernel record ``record`` of this store's arrays (not copies: a kernel writes
+        into the store), ``columns`` its fields' store names (:func:`kernel_columns`)."""
+        a, sub = self.arrays, self.sub
+        return record(*[a[k] if k in a else sub[k] if k in sub else getattr(self, k)
+                        for k in columns])
+
     def pairs(self) -> Pairs:
-        a = self.arrays
-        return Pairs(a["ia"], a["ib"], a["joint"], a["normal"], self.sc_start, a["held"],
-                     a["frozen"])
+        return self.record(Pairs, PAIR_COLUMNS)
 
     def subs(self) -> Subs:
-        return Subs(*(self.sub[k] for k in SUB_COLUMNS))
+        return self.record(Subs, SUB_COLUMNS)
+
+    def planes(self) -> Planes:
+        """What a contact geometry update reads and writes of the contacts
+        (:data:`pdem.contact.detect.Planes`)."""
+        return self.record(Planes, PLANE_COLUMNS)
 
     def normal_forces(self, joints) -> np.ndarray:
         """Each sub-contact's normal force by its joint law in its stored state (overlap,

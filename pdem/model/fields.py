@@ -11,7 +11,9 @@ Each field says its trailing shape, dtype, units and where it travels:
 
 A field with none of these is per-rank scratch, (re)allocated with the store. The stores, the
 halo, migration, checkpoints and snapshots are all driven by these tables: adding a field is
-one line here.
+one line here. The kernels' records are filled from the stores by field name
+(:func:`kernel_record`, :func:`kernel_columns`), and each main kernel declares the fields it
+reads and writes (pdem.jit.access).
 """
 
 from __future__ import annotations
@@ -34,8 +36,9 @@ class Field:
     checkpoint: bool = False
     halo: bool = False
     output: str | None = None
-    # the field's name in the kernels' records (pdem.dynamics.motion.Motion, ...) where it is
-    # not its own (``applied_force`` is the motion kernel's ``applied``)
+    # the field's name in the kernels' records (pdem.dynamics.motion.Motion,
+    # pdem.model.contacts.Subs, ...) where it is not its own (``applied_force`` is the motion
+    # kernel's ``applied``, ``sc_un`` the sub-contact record's ``un``)
     kernel: str | None = None
 
     @property
@@ -152,19 +155,22 @@ def held_width(inactive: bool) -> int:
     """Columns of the contacts' ``held`` in a scene with (or without) solve.inactive."""
     return HELD_WIDTH if inactive else 0
 
+# (the kernels' records name them without the prefix: pdem.model.contacts.Subs)
 SUB: tuple[Field, ...] = (
-    Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D),
-    Field("sc_area", (), F, "m2", "area carried", **_D),
-    Field("sc_un", (), F, "m", "overlap, + closing", **_D),
-    Field("sc_fs", (3,), F, "N", "shear force on B", **_D),
-    Field("sc_us", (3,), F, "m", "total shear displacement", **_D),
-    Field("sc_dil", (), F, "m", "accumulated dilation", **_D),
-    Field("sc_state", (), U8, "1", "state bits (SLIPPING 1, FAILED 2, OPEN 4)", **_D),
+    Field("sc_pa", (3,), F, "m", "point in A's body frame", **_D, kernel="pa"),
+    Field("sc_area", (), F, "m2", "area carried", **_D, kernel="area"),
+    Field("sc_un", (), F, "m", "overlap, + closing", **_D, kernel="un"),
+    Field("sc_fs", (3,), F, "N", "shear force on B", **_D, kernel="fs"),
+    Field("sc_us", (3,), F, "m", "total shear displacement", **_D, kernel="us"),
+    Field("sc_dil", (), F, "m", "accumulated dilation", **_D, kernel="dil"),
+    Field("sc_state", (), U8, "1", "state bits (SLIPPING 1, FAILED 2, OPEN 4)", **_D,
+          kernel="state"),
 )
 
 # Joint laws may keep history of their own: ``sc_hist`` has one column per history field of
 # the laws a scene uses (width 0 when none), see pdem.contact.laws.
-SUB_HIST = Field("sc_hist", (0,), F, "law-defined", "joint-law history columns", **_D)
+SUB_HIST = Field("sc_hist", (0,), F, "law-defined", "joint-law history columns", **_D,
+                 kernel="hist")
 # Scenes with zoned blocks: each sub-contact's gridpoint and triangle weights on the zoned
 # side(s), pdem.deformable.columns.GRID_WIDTH columns (absent in other scenes)
 SUB_GRID = Field("sc_grid", (0,), F, "1", "zoned blocks: the sub-contact's gridpoint and its "
@@ -226,9 +232,27 @@ def halo_fields(inactive: bool, zoned: bool = True) -> tuple[Field, ...]:
 OUTPUT = tuple(f for f in BLOCK if f.output)
 
 
-# a kernel record's field name -> the block field it is (the declared ``kernel`` names, else
-# the field's own)
-KERNEL_FIELDS = {f.name: f.name for f in BLOCK} | {f.kernel: f.name for f in BLOCK if f.kernel}
+def kernel_names(fields: tuple[Field, ...]) -> dict[str, str]:
+    """A kernel record's field name -> the declared field it is: each field by its own name
+    and by its declared ``kernel`` name."""
+    return {f.name: f.name for f in fields} | {f.kernel: f.name for f in fields if f.kernel}
+
+
+# the block fields by the names of the kernels' block records (pdem.dynamics.motion.Motion,
+# pdem.contact.rigid.Bodies)
+KERNEL_FIELDS = kernel_names(BLOCK)
+# the contact and sub-contact fields by the names of the kernels' contact records
+# (pdem.model.contacts.Pairs and Subs, pdem.contact.detect.Planes): one table, their names
+# are distinct
+CONTACT_KERNEL_FIELDS = kernel_names(CONTACT + SUB + (SUB_HIST, SUB_GRID))
+
+
+def kernel_columns(record, table: dict[str, str], own: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The store's name of each of a kernel record's fields, in the record's order: the
+    declared field of that (kernel) name in ``table`` (:func:`kernel_names`); ``own``: record
+    fields that are the store's own members, no declared field (the contacts' CSR start
+    ``sc_start``). A KeyError names a record field that is neither."""
+    return tuple(name if name in own else table[name] for name in record._fields)
 
 
 def kernel_record(record, store, n: int | None = None, **given):

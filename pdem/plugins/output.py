@@ -11,6 +11,7 @@ from ..config.schema import MassScaling
 from ..contact.laws import FAILED
 from ..errors import writing
 from ..io.checkpoint import written_contacts
+from ..io.joints import CONTACT_FIELDS, SUB_FIELDS
 from ..io.layout import writer_range
 from ..io.surfaces import body_surfaces
 from ..io.writer import OutputWriter, quat_to_matrix
@@ -73,7 +74,8 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     ``x_A + R(q_A) p_A`` (explicit sums: the same bits on every rank). A FAILED bit is kept
     only on joints with a bond (the contact detection marks a joint that forms open as
     failed, "no bond", whatever its law). Normal forces are the law's for the stored state
-    (:func:`pdem.contact.forces.normal_forces`)."""
+    (:func:`pdem.contact.forces.normal_forces`). The columns written as stored come by field
+    name (pdem.io.joints.OutputColumn ``field``)."""
     c = state.contacts
     keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
     sel = c.take(keep)
@@ -92,10 +94,9 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
         # the output's int64 (the store's int32)
         "piece": np.stack([sel.pga, sel.pgb], axis=1).astype(np.int64),
         "block": np.stack([sel.ga, sel.gb], 1).astype(np.int64),
-        "joint": sel.joint, "point": sel.point, "normal": sel.normal, "n_sub": nsub,
-        "sub": {"point": point, "area": sel.sc_area, "overlap": sel.sc_un,
-                "normal_force": fn, "shear_force": sel.sc_fs,
-                "shear_displacement": sel.sc_us, "state": bits},
+        **{name: sel.arrays[field] for name, field in CONTACT_FIELDS}, "n_sub": nsub,
+        "sub": {"point": point, "normal_force": fn, "state": bits,
+                **{name: sel.sub[field] for name, field in SUB_FIELDS}},
     }
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from pdem.io import joints, xdmf
+from pdem.model import fields
 
 
 def test_the_sidecar_shows_the_declared_columns_in_view_order():
@@ -40,3 +41,19 @@ def test_every_reduced_value_is_a_declared_column():
     contacts, subs = joints.reduce_contacts(crows, srows)
     assert set(contacts) == {c.name for c in joints.CONTACT_SERIES}
     assert set(subs) == {c.name for c in joints.SUB_SERIES}
+
+
+def test_the_stored_columns_are_declared_fields():
+    """A column written as stored names its contact (or sub-contact) field; each is passed by
+    the ranks (``CONTACT_COLS``/``SUB_COLS``) with the field's width, so a stored field shown
+    in ParaView is its declaration (pdem.model.fields) and one column here."""
+    for series, declared, passed in ((joints.CONTACT_SERIES, fields.CONTACT, joints.CONTACT_COLS),
+                                     (joints.SUB_SERIES, fields.SUB, joints.SUB_COLS)):
+        by_name = {f.name: f for f in declared}
+        widths = dict(passed)
+        for c in series:
+            if c.field is None:
+                continue
+            assert c.field in by_name, f"{c.name}: {c.field} is not a declared field"
+            assert by_name[c.field].shape == c.shape
+            assert widths[c.name] == by_name[c.field].width

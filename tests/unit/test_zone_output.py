@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pdem.io import OutputWriter, read_xdmf, zones_path
+from pdem.io import OutputWriter, read_xdmf, xdmf, zones_path
 from pdem.io.layout import h5py_has_mpi
 from pdem.io.xdmf import contacts_path
-from pdem.io.zones import ZONE_VIEWED, zone_layout
+from pdem.io.zones import ZONE_COLUMNS, ZONE_VIEWED, zone_layout, zone_values
 
 COMM = MPI.COMM_SELF
 
@@ -183,6 +183,30 @@ def test_zones_sidecar(out):
         for i in range(3):  # every view the sidecar reads exists
             for p in ZONE_VIEWED:
                 assert f"xdmf/{i:06d}{p}" in f
+
+
+def test_the_zone_output_is_declared_once():
+    """The series of ``zones/`` and the sidecar's attributes come from one table
+    (pdem.io.zones.ZONE_COLUMNS): every column with a ``view`` is an attribute, in the table's
+    order, with its center, components and number type; every column is a value of a zoned
+    block and a view the writer makes."""
+    attrs = xdmf._ZONE_ATTRS
+    shown = [c for c in ZONE_COLUMNS if c.view is not None]
+    assert [a[0] for a in attrs] == [c.name for c in shown]
+    for (_, center, kind, width, number, precision), c in zip(attrs, shown, strict=True):
+        assert (center, kind, width) == (c.center, c.view, c.width)
+        assert np.dtype(c.dtype).itemsize == precision
+        assert (number == "Float") == np.issubdtype(c.dtype, np.floating)
+    assert ZONE_VIEWED == tuple(f"/zones/{c.name}" for c in ZONE_COLUMNS
+                                if c.center == "Node") + tuple(
+        f"/zones/{c.name}" for c in ZONE_COLUMNS if c.center == "Cell")
+    assert {c.center for c in ZONE_COLUMNS} == {"Node", "Cell"}
+    body = grid(3, 5, 2)
+    values = zone_values(body)
+    assert set(values) == {c.name for c in ZONE_COLUMNS}
+    for c in ZONE_COLUMNS:
+        n = len(body.nodes0) if c.center == "Node" else len(body.tets)
+        assert values[c.name].size == n * c.width, c.name
 
 
 def test_gather_fallback_writes_the_same_file(tmp_path, out):
