@@ -1,7 +1,9 @@
-"""Compile (and cache) the kernels once by marching a two-block scene a few steps.
+"""Compile (and cache) the common kernels once by marching a two-block scene a few steps.
 
-``run/demo`` runs ``python -m pdem.warmup`` serially before ``mpiexec`` so that the ranks load
-cached machine code instead of each compiling it (a cold compile takes ~30 s per process).
+``python -m pdem.warmup`` fills the kernel cache (pdem.jit) before a job needs it, e.g. on a
+node before a job array's runs start (both common-plane algorithms, local damping). Ranks
+started on a cold cache do not need it: one rank of a node compiles each kernel and the others
+load it (pdem.jit's compile locks).
 """
 
 from __future__ import annotations

@@ -133,7 +133,7 @@ def cached_reference(scene, path: str, steps: int | None = None) -> np.ndarray:
     plain = scene.model_copy(update={
         "parallel": type(scene.parallel)(),
         "output": scene.output.model_copy(update={"file": "reference.h5"})})
-    key = hashlib.sha256(f"{dump_scene(plain)}\n{steps}\n{Path(pdem.jit._cache_dir()).name}"
+    key = hashlib.sha256(f"{dump_scene(plain)}\n{steps}\n{Path(pdem.jit.CACHE_DIR).name}"
                          .encode()).hexdigest()[:24]
     cache = Path(os.environ.get("PDEM_TEST_REFS", tempfile.gettempdir())) / "pdem-test-refs"
     h5, keys = cache / f"{key}.h5", cache / f"{key}.keys.npy"
