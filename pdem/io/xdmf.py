@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.fields import BLOCK
 from .joints import CONTACT_SERIES, SUB_SERIES, viewer_attributes, xdmf_number
 from .zones import ZONE_COLUMNS
 
@@ -28,14 +29,15 @@ CELL_FIELDS = (
     ("removed", 1, "1"),  # 0 in the model, 1 frozen, 2 deleted (domain, excavation)
     ("stage_displacement", 3, "m"),  # since the current stage began (stages:)
 )
-_BLOCK_SERIES = ("velocity", "angular_velocity")  # point attributes of the centroid cloud
+# point attributes of the centroid cloud: the block fields declared ``view`` (name, width)
+_BLOCK_SERIES = tuple((f.output, f.width) for f in BLOCK if f.view)
 
 # Time series the sidecar reads one snapshot of, through a virtual dataset per snapshot.
 VIEWED_SERIES = (
     "/surface/points",
     *(f"/surface/{name}" for name, _, _ in CELL_FIELDS),
     "/blocks/centroid",
-    *(f"/blocks/{name}" for name in _BLOCK_SERIES),
+    *(f"/blocks/{name}" for name, _ in _BLOCK_SERIES),
 )
 
 # Point attributes of the contact and sub-contact grids (name, components, number type,
@@ -105,8 +107,10 @@ def _blocks_grid(i: int, t: float, h5: str, n_blocks: int) -> list[str]:
         for name in ("group", "fixed")
     ]
     series = [
-        _attribute(name, "Node", 3, _hdf((n_blocks, 3), "Float", h5, view_path(f"/blocks/{name}", i)))
-        for name in _BLOCK_SERIES
+        _attribute(name, "Node", width,
+                   _hdf((n_blocks, width) if width > 1 else (n_blocks,), "Float", h5,
+                        view_path(f"/blocks/{name}", i)))
+        for name, width in _BLOCK_SERIES
     ]
     return [
         f'<Grid Name="blocks_{i:06d}" GridType="Uniform">',

@@ -36,6 +36,9 @@ class Field:
     checkpoint: bool = False
     halo: bool = False
     output: str | None = None
+    # a point attribute of the centroid cloud in ParaView (run-centroids.xdmf), each snapshot
+    # of blocks/<output> (pdem.io.xdmf); needs ``output``
+    view: bool = False
     # the field's name in the kernels' records (pdem.dynamics.motion.Motion,
     # pdem.model.contacts.Subs, ...) where it is not its own (``applied_force`` is the motion
     # kernel's ``applied``, ``sc_un`` the sub-contact record's ``un``)
@@ -58,9 +61,10 @@ BLOCK: tuple[Field, ...] = (
     Field("x", (3,), F, "m", "centroid (world)", **_D, halo=True, output="centroid"),
     Field("q", (4,), F, "1", "orientation quaternion (w, x, y, z), body -> world", **_D,
           halo=True, output="orientation"),
-    Field("v", (3,), F, "m/s", "velocity at t - dt/2", **_D, halo=True, output="velocity"),
+    Field("v", (3,), F, "m/s", "velocity at t - dt/2", **_D, halo=True, output="velocity",
+          view=True),
     Field("w", (3,), F, "rad/s", "angular velocity (world) at t - dt/2", **_D, halo=True,
-          output="angular_velocity"),
+          output="angular_velocity", view=True),
     Field("L", (3,), F, "kg m2/s", "angular momentum (world) at t - dt/2", **_D),
     Field("mass", (), F, "kg", "mass", **_S),
     Field("inertia", (3,), F, "kg m2", "principal moments (body frame = principal axes)", **_S),

@@ -12,6 +12,7 @@ from mpi4py import MPI
 from pdem.io import OutputWriter, centroids_path, read_xdmf, summarise
 from pdem.io import layout as row_layout
 from pdem.io.xdmf import CELL_FIELDS, VIEWED_SERIES, view_path
+from pdem.model.fields import BLOCK
 
 
 def rows(centroid, quat, velocity, angular_velocity) -> dict:
@@ -260,6 +261,13 @@ def test_xdmf_references_resolve(out, snaps):
             assert step["topology_type"] == "Polyvertex"
             assert np.array_equal(step["geometry"], snaps[i]["centroid"])
             assert np.array_equal(step["attributes"]["velocity"][1], snaps[i]["velocity"])
+            # the cloud's series attributes are the block fields declared ``view``
+            # (pdem.model.fields: a field's one line puts it in ParaView), each snapshot's
+            viewed = {fd.output: fd for fd in BLOCK if fd.view}
+            assert set(step["attributes"]) == {"gid", "group", "fixed", *viewed}
+            for name, fd in viewed.items():
+                assert np.array_equal(step["attributes"][name][1], snaps[i][name])
+                assert step["attributes"][name][1].shape[1:] == fd.shape
         assert len(grids["blocks"]) == 3
 
 
