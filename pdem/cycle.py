@@ -41,7 +41,7 @@ from .deformable.contact import contact_forces_grid
 from .dynamics import motion
 from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices, world_vertices
-from .jit import kernel
+from .jit import inline_kernel, kernel
 from .model.contacts import Pairs, Subs
 from .model.fields import kernel_record
 from .parallel.native import allreduce_max, forward_halo
@@ -74,12 +74,14 @@ STOP_FLAGS = (FLAG_BAD, FLAG_MIGRATE, FLAG_LEFT, FLAG_SIGNAL, FLAG_FOLDED)
 # The first half of a step is two compiled phases, called by the stepper for one step (with
 # its Python hooks between them: boundary loads, a zoned block's grid step, the halo in
 # Python) and by fused_steps for many (with the compiled halo between them): one definition.
+# Inlined into fused_steps at numba's level, so a scene that steps only in the compiled loop
+# compiles no separate phase (each would cost a few seconds of a cold start).
 MOTION = 1  # motion_phase's parts: integrate the owned blocks (eqs. 44-52) ...
 CLOCK = 2  # ... and t + dt, eq. 1's motion bound, the state check (after a grid step)
 MOTION_AND_CLOCK = MOTION | CLOCK
 
 
-@kernel
+@inline_kernel
 def motion_phase(parts, m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u_acc,
                  u_geo, u_mig, step, time, speed_limit, speed_growth, max_step):
     """The motion of a step: ``parts`` :data:`MOTION` integrates ``m`` (the owned rows'
@@ -102,7 +104,7 @@ def motion_phase(parts, m, gravity, dt, damping, scalar_inertia, stats, radius, 
     return step, time, bad, u_mig_max
 
 
-@kernel
+@inline_kernel
 def force_phase(dt, q, R, bodies, pairs, subs, joints, still, grid, m_true, gravity, radius,
                 calm, speed, sleep_steps, force_frac, ref_force):
     """The forces of a step, after the forward halo: rotation matrices, the sub-contact
