@@ -445,3 +445,80 @@ def broadcast(comm, value, root: int = 0):
 def barrier(comm) -> None:
     if comm.size > 1:
         comm.Barrier()
+
+
+# --------------------------------------------------------------------------- sparse exchanges
+# The rebuild's messages go to the ranks that need them only (neighbours), not to every rank:
+# with P ranks an alltoall of per-rank lists costs every rank O(P) messages, pickles and
+# arrays at each migration, whatever the model (docs/parallel.md, Scaling: what grows with P).
+SPARSE_TAGS = (23, 24)  # sparse_exchange alternates them (see there)
+NEIGHBOUR_TAG = 25
+_round_key = None  # MPI attribute key: a communicator's count of sparse exchanges
+
+
+def _sparse_tag(comm) -> int:
+    """The tag of this sparse exchange on ``comm``: alternating between two, counted on the
+    communicator itself (an MPI attribute, freed with it), so every rank agrees."""
+    global _round_key
+    from mpi4py import MPI
+
+    if _round_key is None:
+        _round_key = MPI.Comm.Create_keyval()
+    k = comm.Get_attr(_round_key) or 0
+    comm.Set_attr(_round_key, k + 1)
+    return SPARSE_TAGS[k % 2]
+
+
+def sparse_exchange(comm, messages: dict) -> dict:
+    """Each ``messages[r]`` (``r`` another rank) goes to rank ``r``; returns the messages sent
+    here as ``{source: message}`` in source order (collective; pickled: a rare path). No rank
+    needs to know who sends to it, and no array of ``comm.size`` is made: the NBX algorithm
+    (Hoefler, Siebert, Lumsdaine 2010): synchronous sends, arrivals probed for, and a
+    non-blocking barrier entered once this rank's sends have all been received; done when the
+    barrier completes. O(messages + log P) per rank. Consecutive exchanges alternate two tags:
+    a rank still waiting for one's barrier never takes the next one's messages (those of the
+    one after cannot be sent before it has left)."""
+    if comm.size == 1:
+        return {}
+    from mpi4py import MPI
+
+    tag = _sparse_tag(comm)
+    sleep = comm.py2f() in _sleeping
+    sends = [comm.issend(m, dest=int(r), tag=tag) for r, m in sorted(messages.items())]
+    got = {}
+    status = MPI.Status()
+    barrier = None
+    while True:
+        if comm.iprobe(source=MPI.ANY_SOURCE, tag=tag, status=status):
+            src = status.Get_source()
+            got[src] = comm.recv(source=src, tag=tag)
+            continue
+        if barrier is None:
+            if MPI.Request.Testall(sends):
+                barrier = comm.Ibarrier()
+        elif barrier.Test():
+            break
+        if sleep:
+            time.sleep(SLEEP_POLL)
+    return dict(sorted(got.items()))
+
+
+def neighbour_exchange(comm, messages: dict, sources) -> dict:
+    """Each ``messages[r]`` goes to rank ``r``; returns ``{s: message}`` from each rank of
+    ``sources`` (each must send one here), in source order. Point-to-point (pickled), between
+    ranks that know each other already (after a :func:`sparse_exchange`)."""
+    if comm.size == 1:
+        return {}
+    sends = [comm.isend(m, dest=int(r), tag=NEIGHBOUR_TAG) for r, m in sorted(messages.items())]
+    got = {int(s): comm.recv(source=int(s), tag=NEIGHBOUR_TAG) for s in sorted(sources)}
+    wait_all(comm, sends)
+    return got
+
+
+def max_over_ranks(comm, value: float) -> float:
+    """The largest of every rank's ``value`` (a float; exact)."""
+    if comm.size == 1:
+        return float(value)
+    from mpi4py import MPI
+
+    return float(comm.allreduce(float(value), op=MPI.MAX))

@@ -68,6 +68,15 @@ class Decomposition:
             idx[:, k] = np.searchsorted(self.edges[k][1:-1], points[:, k], side="right")
         return (idx[:, 0] * self.dims[1] + idx[:, 1]) * self.dims[2] + idx[:, 2]
 
+    def ranks_near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The ranks whose cell (brick; the outer ones unbounded: they own what lies beyond
+        the box) meets the box ``[lo, hi]``, ascending; O(those ranks), no array of size P."""
+        rng = [np.arange(np.searchsorted(self.edges[k][1:-1], lo[k], side="right"),
+                         np.searchsorted(self.edges[k][1:-1], hi[k], side="right") + 1)
+               for k in range(3)]
+        i, j, k = np.meshgrid(*rng, indexing="ij")
+        return np.sort(((i * self.dims[1] + j) * self.dims[2] + k).ravel())
+
     def brick(self, rank: int) -> tuple[np.ndarray, np.ndarray]:
         c = self.cart.Get_coords(rank)
         lo = np.array([self.edges[k][c[k]] for k in range(3)])
@@ -146,6 +155,23 @@ class CutTree:
             node[inner] = np.where(right, self.right[nd], self.left[nd])
         return self.rank[node]
 
+    def ranks_near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The ranks whose cell (the leaf's region, unbounded where the model's box bounds it:
+        :meth:`owner_of` follows the cuts only) meets the box ``[lo, hi]``, ascending: the
+        tree walked down the sides the box reaches, O(those ranks x depth)."""
+        out, todo = [], [0]
+        while todo:
+            i = todo.pop()
+            if self.rank[i] >= 0:
+                out.append(int(self.rank[i]))
+                continue
+            a, c = self.axis[i], self.cut[i]
+            if lo[a] < c:
+                todo.append(int(self.left[i]))
+            if hi[a] >= c:
+                todo.append(int(self.right[i]))
+        return np.array(sorted(out), np.int64)
+
     def region(self, rank: int) -> tuple[np.ndarray, np.ndarray]:
         i = int(np.nonzero(self.rank == rank)[0][0])
         return self.lo[i].copy(), self.hi[i].copy()
@@ -158,6 +184,12 @@ def _depth(left, right, rank) -> int:
         if not level:
             return depth
         depth += 1
+
+
+def _mpi_op(name: str):
+    from mpi4py import MPI
+
+    return getattr(MPI, name)
 
 
 def _allreduce(comm, a: np.ndarray, op) -> np.ndarray:
@@ -366,6 +398,9 @@ class RCBDecomposition:
     def owner_of(self, points: np.ndarray) -> np.ndarray:
         return self.tree.owner_of(points)
 
+    def ranks_near(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        return self.tree.ranks_near(lo, hi)
+
     def brick(self, rank: int) -> tuple[np.ndarray, np.ndarray]:
         """The region of ``rank`` (the outer ones bounded by the model's box at start; blocks
         beyond it belong to the nearest region)."""
@@ -381,9 +416,13 @@ class RCBDecomposition:
         if self.threshold is None or self.size == 1:
             return False
         w = block_work(blocks, n_owned, contacts)
-        works = np.array(self.comm.allgather(int(w.sum())), float)
-        mean = works.mean()
-        self.imbalance = float(works.max() / mean) if mean > 0 else 1.0
+        # the largest and the total owned work: two reductions of one integer (not an
+        # allgather of every rank's, O(P) on every rank); integer sums are exact, so the
+        # mean is the same double as the mean of the gathered works
+        mine = int(w.sum())
+        most = self.comm.allreduce(mine, op=_mpi_op("MAX"))
+        mean = float(self.comm.allreduce(mine, op=_mpi_op("SUM"))) / self.size
+        self.imbalance = float(most / mean) if mean > 0 else 1.0
         if self.imbalance <= self.threshold:
             return False
         self.tree = rcb_tree(self.comm, blocks.x[:n_owned], w, self.size, self.lo, self.hi)

@@ -12,8 +12,12 @@
    free block has both blocks on the rank.
 3. A rank keeps the contacts in which it owns a free block: those it computes every step.
 
-The messages here are rare (not per step) and ragged, so they use mpi4py's pickle-based
-``alltoall`` of dicts of numpy arrays.
+The messages here are rare (not per step) and ragged, so they are mpi4py's pickles of dicts
+of numpy arrays, sent to the ranks concerned only: no rank makes a message, an array or a loop
+of size P (the rank count) in a migration (docs/parallel.md, Scaling). Blocks go to their new
+owners by a sparse exchange (pdem.mpi.sparse_exchange: the receivers need not know who sends);
+interest boxes are asked of the ranks whose cells lie within reach of a rank's blocks
+(``decomp.ranks_near``), and the ghosts go to those of them whose box they reach.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from ..model import csr
 from ..model.blocks import BlockStore, pack, take_rows, unpack, whole_message
 from ..model.contacts import ContactStore
 from ..model.fields import HALO, MIGRATE
-from ..mpi import allgather, alltoall, alltoall_rows
+from ..mpi import alltoall_rows, max_over_ranks, neighbour_exchange, sparse_exchange
 from .halo import Halo
 
 
@@ -163,7 +167,7 @@ def route_contacts(comm, to_a: np.ndarray, to_b: np.ndarray, nsub: np.ndarray,
     batch beyond what it keeps, and the result needs no reordering copy. Read whole, sent,
     then sorted, a restart's contacts were its peak (~60 MB a rank above a fresh run's at
     64,000 cubes on 2 ranks)."""
-    n_batches = max(allgather(comm, len(bounds) - 1))
+    n_batches = int(max_over_ranks(comm, len(bounds) - 1))
     bounds = np.concatenate([bounds, np.full(n_batches + 1 - len(bounds), bounds[-1])])
     batches = [(int(bounds[j]), int(bounds[j + 1])) for j in range(n_batches)]
     counts = np.zeros((n_batches, comm.size), np.int64)
@@ -252,11 +256,12 @@ def _migrate_owned(comm, decomp, source: BlockStore, owned_gids: np.ndarray, sta
     centroid, and to a rank that did not own it with its store rows and the contacts of
     its free blocks that leave. Returns the gids owned now (ascending), their MIGRATE rows
     and store in that order, the contacts received and the extras held (None without)."""
-    size, rank = comm.size, comm.rank
+    rank = comm.rank
     src_rows = rows_of(source.gid, owned_gids)
     dest = decomp.owner_of(state["x"]) if len(owned_gids) else np.zeros(0, np.int64)
-    out = []
-    for r in range(size):
+    out = {}
+    # only the ranks that get blocks (a loop over every rank was O(P x blocks) a migration)
+    for r in np.unique(np.append(dest, rank)).tolist():
         go = dest == r
         msg = {"gid": owned_gids[go], **{k: state[k][go] for k in MIGRATE}}
         if extras is not None:
@@ -266,23 +271,24 @@ def _migrate_owned(comm, decomp, source: BlockStore, owned_gids: np.ndarray, sta
             if contacts.n:
                 leaving_free = owned_gids[go & ~fixed[owned_gids]]
                 msg["contacts"] = contacts.select(contacts_needed(contacts, leaving_free))
-        out.append(msg)
+        out[r] = msg
     stays = pack(source, src_rows[dest == rank])
     if consume:
         source.clear()
     held = None if extras is None else out[rank]["extras"]
-    out[rank] = {k: v for k, v in out[rank].items() if k != "extras"}
-    got = alltoall(comm, out)
+    own = {k: v for k, v in out.pop(rank).items() if k != "extras"}
+    got = sparse_exchange(comm, out)  # {source: message}, in rank order
     del out
     if held is not None:
-        for r, m in enumerate(got):
-            if r != rank:
-                held.update(m["extras"])
+        for m in got.values():
+            held.update(m["extras"])
+    got[rank] = own
+    got = [got[r] for r in sorted(got)]  # rank order, this rank's own part included
     gids = np.concatenate([m["gid"] for m in got])
     order = np.argsort(gids, kind="stable")
     gids = gids[order]
     new_state = {k: np.concatenate([m[k] for m in got])[order] for k in MIGRATE}
-    arrived = unpack([stays if r == rank else m["store"] for r, m in enumerate(got)],
+    arrived = unpack([m["store"] if "store" in m else stays for m in got],
                      np.zeros(len(gids), np.uint8))
     del stays  # the messages are in ``arrived`` now: not kept through its copy below
     for m in got:
@@ -293,50 +299,68 @@ def _migrate_owned(comm, decomp, source: BlockStore, owned_gids: np.ndarray, sta
     return gids, new_state, mine_store, received, held
 
 
-def _interest_boxes(comm, gids: np.ndarray, x: np.ndarray, radius: np.ndarray,
-                    fixed: np.ndarray, pad: float, margin: float) -> np.ndarray:
-    """Every rank's interest box (rows ``lo``, ``hi``): the box around its owned free blocks
-    (``gids``, centroids ``x``), padded by ``pad`` and enlarged by ``margin``; empty
-    (inverted) on a rank that owns no free block."""
+def _interest_boxes(comm, decomp, gids: np.ndarray, x: np.ndarray, radius: np.ndarray,
+                    fixed: np.ndarray, pad: float, margin: float) -> tuple[dict, list]:
+    """The interest boxes (``lo``, ``hi`` in a row of 6) of the ranks this rank's owned
+    blocks may reach, by rank, and the ranks that asked for this rank's (collective). A
+    rank's box is the box around its owned free blocks (``gids``, centroids ``x``), padded
+    by ``pad`` and enlarged by ``margin``; empty (inverted) on a rank that owns no free
+    block.
+
+    A rank's box lies within its cell (``decomp.ranks_near``: a block is owned where its
+    centroid is) grown by the largest padded radius of a free block (one reduction) and the
+    margin. So the ranks whose cells meet this rank's blocks' box grown by that much are
+    the only ones whose boxes its blocks can reach: it asks them for theirs (a sparse
+    exchange: they learn who asks) and they answer, O(neighbours) a rank. (An ``allgather``
+    of every rank's box was O(P) on every rank at every migration.)"""
     sel = ~fixed[gids]
     if sel.any():
         lo, hi = _boxes(x[sel], radius[sel], pad)
         box = np.concatenate([lo.min(0) - margin, hi.max(0) + margin])
+        reach = float((radius[sel] + pad).max())
     else:
         box = np.array([np.inf] * 3 + [-np.inf] * 3)
-    return np.array(allgather(comm, box))
+        reach = 0.0
+    reach = max_over_ranks(comm, reach) + margin
+    asked = np.zeros(0, np.int64)
+    if len(gids):
+        blo, bhi = _boxes(x, radius, pad)
+        grow = reach * (1.0 + 1e-6) + 1e-9  # generous: a neighbour too many costs a message
+        lo_all, hi_all = blo.min(0), bhi.max(0)
+        grow = grow + 1e-12 * np.maximum(np.abs(lo_all), np.abs(hi_all))
+        asked = decomp.ranks_near(lo_all - grow, hi_all + grow)
+        asked = asked[asked != comm.rank]
+    askers = list(sparse_exchange(comm, {int(r): None for r in asked}))
+    return neighbour_exchange(comm, {r: box for r in askers}, asked.tolist()), askers
 
 
-def _send_ghosts(comm, boxes: np.ndarray, gids: np.ndarray, new_state: dict,
+def _send_ghosts(comm, boxes: dict, askers, gids: np.ndarray, new_state: dict,
                  mine_store: BlockStore, pad: float, held: dict | None):
     """Each owned block whose padded bounding box reaches into another rank's interest box
-    goes there as a ghost (with its geometry, and its extras). Returns the messages sent
-    (None to itself) and those received."""
-    size, rank = comm.size, comm.rank
+    (``boxes``: by rank, those of the ranks this rank's blocks may reach) goes there as a
+    ghost (with its geometry, and its extras); ``askers``: the ranks whose blocks may reach
+    this rank's box (each sends a message here, empty or not). Returns the messages sent
+    and those received, by rank in rank order."""
     blo, bhi = _boxes(new_state["x"], mine_store.radius, pad)
-    out = []
-    for r in range(size):
-        if r == rank:
-            out.append(None)
-            continue
-        hit = np.all(blo <= boxes[r, 3:], axis=1) & np.all(bhi >= boxes[r, :3], axis=1)
-        out.append({"gid": gids[hit], **{k: new_state[k][hit] for k in MIGRATE},
-                    "store": pack(mine_store, np.nonzero(hit)[0])})
+    out = {}
+    for r, box in boxes.items():
+        hit = np.all(blo <= box[3:], axis=1) & np.all(bhi >= box[:3], axis=1)
+        out[r] = {"gid": gids[hit], **{k: new_state[k][hit] for k in MIGRATE},
+                  "store": pack(mine_store, np.nonzero(hit)[0])}
         if held is not None:
-            out[-1]["extras"] = {int(g): held[int(g)] for g in gids[hit] if int(g) in held}
-    got = alltoall(comm, out)
+            out[r]["extras"] = {int(g): held[int(g)] for g in gids[hit] if int(g) in held}
+    got = neighbour_exchange(comm, out, askers)
     if held is not None:
-        for m in got:
-            if m is not None:
-                held.update(m["extras"])
+        for m in got.values():
+            held.update(m["extras"])
     return out, got
 
 
 def _ghost_rows(got: list, state: dict):
-    """The ghosts received (:func:`_send_ghosts`): the messages that hold some, as (rank,
-    message), their gids in gid order, the rank each came from, that order, and their
-    MIGRATE rows in it (shaped as ``state``'s when none came)."""
-    ghost_parts = [(r, m) for r, m in enumerate(got) if m is not None and len(m["gid"])]
+    """The ghosts received (:func:`_send_ghosts`, by rank): the messages that hold some, as
+    (rank, message) in rank order, their gids in gid order, the rank each came from, that
+    order, and their MIGRATE rows in it (shaped as ``state``'s when none came)."""
+    ghost_parts = [(r, m) for r, m in sorted(got.items()) if len(m["gid"])]
     g_gids = np.concatenate([m["gid"] for _, m in ghost_parts]) if ghost_parts else np.zeros(0, np.int64)
     g_from = np.concatenate([np.full(len(m["gid"]), r) for r, m in ghost_parts]) if ghost_parts \
         else np.zeros(0, np.int64)
@@ -347,14 +371,12 @@ def _ghost_rows(got: list, state: dict):
     return ghost_parts, g_gids, g_from, g_order, g_state
 
 
-def _halo_plan(out: list, gids: np.ndarray, g_gids: np.ndarray, g_from: np.ndarray,
+def _halo_plan(out: dict, gids: np.ndarray, g_gids: np.ndarray, g_from: np.ndarray,
                fixed: np.ndarray, n_owned: int) -> tuple[dict, dict]:
     """The per-step halo's rows (free blocks only; fixed ghosts were sent once): by rank,
     the owned rows sent there and the ghost rows received from there."""
     send = {}
-    for r, m in enumerate(out):
-        if m is None:
-            continue
+    for r, m in sorted(out.items()):
         gi = m["gid"][~fixed[m["gid"]]]
         send[r] = np.searchsorted(gids, gi)  # owned rows are [0, n_owned) in gid order
     recv = {}
@@ -399,8 +421,9 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     # dropped as they are merged)
     mine = _merge_contacts(parts, free_now, drop)
     del parts
-    boxes = _interest_boxes(comm, gids, new_state["x"], mine_store.radius, fixed, pad, margin)
-    out, got = _send_ghosts(comm, boxes, gids, new_state, mine_store, pad, held)
+    boxes, askers = _interest_boxes(comm, decomp, gids, new_state["x"], mine_store.radius, fixed,
+                                    pad, margin)
+    out, got = _send_ghosts(comm, boxes, askers, gids, new_state, mine_store, pad, held)
     ghost_parts, g_gids, g_from, g_order, g_state = _ghost_rows(got, state)
 
     # 3. the local store: owned rows first, then ghosts, each in gid order
@@ -413,9 +436,8 @@ def rebuild(comm, decomp, glob: BlockStore, source: BlockStore, owned_gids: np.n
     del mine_msg, got
     for _, m in ghost_parts:
         m.pop("store")
-    for m in out:
-        if m is not None:
-            m.pop("store")
+    for m in out.values():
+        m.pop("store")
     blocks = take_rows(both, np.concatenate([np.arange(n_owned), n_owned + g_order]), owned)
     del both
     for k in MIGRATE:
