@@ -4,6 +4,8 @@ in time) and boundary stresses (tractions on the exposed faces of blocks).
 Conditions come from the scene's ``boundary:`` (in force from the start) and from the stages'
 ``velocity:`` and ``stress:`` (from the stage's start). Both are declarative, so a restart
 rebuilds them from the scene (and the stage replay) exactly as the straight run made them.
+Each kind (these two, or one registered from outside pdem's tree) is one entry of
+:data:`BOUNDARY_KINDS` carrying its condition model, its scene key and its hooks.
 
 Velocities (docs/scene-file.md, ``boundary.velocity``)
     The block's ``vfix`` code says what is prescribed (pdem.dynamics.motion.VFIX_*): the whole
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import ConfigError
+from .config.schema import CONDITION_MODELS, BoundaryStress, BoundaryVelocity, Selection
 from .dynamics import motion
 from .dynamics.rotation import quat_to_matrix
 from .registry import Registry
@@ -278,7 +281,8 @@ def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True
     stage) lists on the blocks they select (every rank alike); ``where``: the key path of
     ``source`` in the scene (for messages), ``t0``: when their histories start."""
     for key, kind in BOUNDARY_KINDS.items():
-        for j, cond in enumerate(getattr(source, key)):
+        # a scene validated before its kind was registered has none of its conditions
+        for j, cond in enumerate(getattr(source, key, ())):
             gids = selected(s, cond)
             if not len(gids):
                 raise ConfigError([f"{s.scene.at(*where, key, j)}: selects no block"])
@@ -298,29 +302,40 @@ def needs_every_block(scene, stages_only: bool = False) -> bool:
     stage finds what it acts on among every block (its kind's ``whole_scene``: exposed
     faces), so every rank keeps every block's geometry (at set-up; after it too where a
     stage's condition needs it)."""
-    return any(kind.whole_scene and ((not stages_only and getattr(scene.boundary, key))
-                                     or any(getattr(st, key) for st in scene.stages))
+    return any(kind.whole_scene and ((not stages_only and getattr(scene.boundary, key, ()))
+                                     or any(getattr(st, key, ()) for st in scene.stages))
                for key, kind in BOUNDARY_KINDS.items())
 
 
 @dataclass(frozen=True)
 class BoundaryKind:
-    """One kind of boundary condition, by its scene key (``boundary.<key>`` and a stage's
-    ``<key>``, lists of conditions with a selection; their models are in config/schema.py).
+    """One kind of boundary condition, by its scene key (its name in :data:`BOUNDARY_KINDS`:
+    ``boundary.<key>`` and a stage's ``<key>``, lists of conditions).
 
+    ``condition``: the pydantic model of one condition, a
+    :class:`pdem.config.schema.Selection` (the blocks it acts on) with the kind's own keys;
+    registering the kind makes the key a field of ``boundary:`` and of every stage (the
+    grammar's ``CONDITION_MODELS`` follows this registry), unregistering it takes it away.
     ``add(boundary, s, cond, gids, t0, motion_too)`` puts a condition on its selected
     blocks and returns None, or the text of why it cannot (named with the condition's key
     path); ``active(boundary)``: some condition of the kind is in force;
     ``before_step(boundary, s)``: its work before each step from t; ``at_start``: before
     the first step (None: nothing); ``whole_scene``: it looks for what it acts on among
     every block, so set-up keeps every block's geometry on every rank. A stage with an
-    active condition steps in Python (the compiled loop runs none yet)."""
+    active condition steps in Python (the compiled loop runs none yet). A kind keeps its
+    own state on the :class:`Boundary` (an attribute it sets in ``add``)."""
 
+    condition: type[Selection]
     add: Callable[..., str | None]
     active: Callable[[Boundary], bool]
     before_step: Callable[[Boundary, object], None]
     at_start: Callable[[Boundary, object], None] | None = None
     whole_scene: bool = False
+
+    def __post_init__(self):
+        if not (isinstance(self.condition, type) and issubclass(self.condition, Selection)):
+            raise TypeError(f"BoundaryKind.condition: {self.condition!r} is not a "
+                            "pdem.config.schema.Selection (the blocks a condition acts on)")
 
 
 def _add_velocity(boundary, s, cond, gids, t0, motion_too):
@@ -336,7 +351,9 @@ def _add_stress(boundary, s, cond, gids, t0, motion_too):
 BOUNDARY_KINDS: Registry[BoundaryKind] = Registry("boundary condition")
 # velocities first: their histories are written into v before the tractions are computed
 BOUNDARY_KINDS.register("velocity", BoundaryKind(
-    _add_velocity, lambda b: bool(b.histories), Boundary.prescribe))
+    BoundaryVelocity, _add_velocity, lambda b: bool(b.histories), Boundary.prescribe))
 BOUNDARY_KINDS.register("stress", BoundaryKind(
-    _add_stress, lambda b: len(b.f_gid) > 0, Boundary.tractions, at_start=Boundary.tractions,
-    whole_scene=True))
+    BoundaryStress, _add_stress, lambda b: len(b.f_gid) > 0, Boundary.tractions,
+    at_start=Boundary.tractions, whole_scene=True))
+# the scene grammar's keys follow the kinds: one registration here, from anywhere, is a kind
+CONDITION_MODELS.follow(BOUNDARY_KINDS, lambda kind: kind.condition)

@@ -13,6 +13,11 @@ class SimulationError(UserError):
     """The run cannot go on (a NaN, a runaway block); names the block, step and likely cause."""
 
 
+class NoProgressError(SimulationError):
+    """A solve to a ratio stopped improving (``solve.no_progress_steps``): names the blocks
+    that keep it from its target, what they do, and the scene keys that help."""
+
+
 class OutputError(UserError):
     """A file of the run could not be written (disk full, quota, a vanished directory)."""
 

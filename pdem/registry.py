@@ -24,7 +24,14 @@ class Registry(Generic[T]):
         if name in self._entries:
             raise ValueError(f"{self.kind} {name!r} is registered twice")
         self._entries[name] = entry
-        self._changed()
+        try:
+            self._changed()
+        except Exception:
+            # a watcher refused it (a scene key taken, a model of the wrong kind): undone, so
+            # the registry and what follows it stay as they were
+            del self._entries[name]
+            self._changed()
+            raise
         return entry
 
     def unregister(self, name: str) -> T:
@@ -39,6 +46,28 @@ class Registry(Generic[T]):
         elsewhere (the scene grammar's union of joint laws) follows a registration made from
         outside pdem's tree."""
         self._watchers.append(callback)
+
+    def follow(self, source: Registry, project: Callable[[object], T]) -> None:
+        """Keep this registry's entries ``project(entry)`` of ``source``'s, by the same names
+        in the same order, now and after every change of ``source``: a registry of a higher
+        floor (the boundary-condition kinds with their run-time hooks) drives one of a lower
+        floor (the scene grammar's condition models), whose watchers rebuild what follows it,
+        so one registration in ``source`` from outside pdem's tree is all a kind needs."""
+
+        def sync() -> None:
+            want = [(name, project(entry)) for name, entry in source.items()]
+            have = list(self._entries.items())
+            same = 0
+            while same < min(len(want), len(have)) and want[same][0] == have[same][0] \
+                    and want[same][1] == have[same][1]:
+                same += 1
+            for name, _ in reversed(have[same:]):
+                self.unregister(name)
+            for name, entry in want[same:]:
+                self.register(name, entry)
+
+        source.watch(sync)
+        sync()
 
     def _changed(self) -> None:
         for callback in self._watchers:

@@ -25,6 +25,13 @@ class Run:
         self.plugins = list(plugins)
         self.n_estimate = None
         self._step_seconds = 1e-2  # measured once steps run fused
+        # the march in progress, as the plugins read it: its ratio target (None: it ends by
+        # time or steps) and the steps a ratio may go without improving (0: no bound)
+        self.ratio_target = None
+        self.no_progress_steps = 0
+        # a plugin's verdict that the march cannot succeed (a UserError, set on every rank
+        # alike): the march ends after the plugins' finish, and this is raised
+        self.halt = None
 
     def plugin(self, name: str):
         """The plugin called ``name``, or None."""
@@ -72,7 +79,7 @@ class Run:
         if done >= 1:
             self._step_seconds = (wallclock.perf_counter() - t0) / done
 
-    def _end(self, time, steps, ratio=None, max_steps=None):
+    def _end(self, time, steps, ratio=None, max_steps=None, no_progress=None):
         s = self.state
         sv = s.scene.solve
         if time is None and steps is None and ratio is None:
@@ -83,6 +90,10 @@ class Run:
             end_time = s.time + time if time is not None else None
             ratio_target = ratio
         max_steps = max_steps or sv.max_steps or (10_000_000 if ratio_target else None)
+        self.ratio_target = ratio_target
+        self.no_progress_steps = 0 if ratio_target is None else (
+            sv.no_progress_steps if no_progress is None else no_progress)
+        self.halt = None
         if end_time is not None:
             self.n_estimate = int(math.ceil((end_time - s.time) / s.dt))
         elif end_step is not None:
@@ -92,12 +103,17 @@ class Run:
         return end_step, end_time, ratio_target, max_steps
 
     def run(self, *, time: float | None = None, steps: int | None = None,
-            ratio: float | None = None, max_steps: int | None = None) -> dict:
+            ratio: float | None = None, max_steps: int | None = None,
+            no_progress: int | None = None) -> dict:
         """March until the scene's end condition (or the given model time / step count), or
         until a stop request (``stepper.stop``): then the summary has ``stopped`` (the signal)
-        and ``checkpoint`` (the file to restart from), written after the output is flushed."""
+        and ``checkpoint`` (the file to restart from), written after the output is flushed.
+        ``no_progress``: the steps a ``ratio`` may go without improving (None: the scene's
+        ``solve.no_progress_steps``); a plugin that finds the march cannot succeed ends it
+        (``halt``), and its error is raised once the output is flushed."""
         s = self.state
-        end_step, end_time, ratio_target, max_steps = self._end(time, steps, ratio, max_steps)
+        end_step, end_time, ratio_target, max_steps = self._end(time, steps, ratio, max_steps,
+                                                                no_progress)
         log.info("%s: %d blocks, %d contacts, dt=%.4g s, ctol=%.4g m, %s damping; %d steps",
                  s.scene.name, s.glob.n, s.contacts.n, s.dt, s.ctol, s.scene.solve.damping.mode,
                  self.n_estimate)
@@ -121,6 +137,8 @@ class Run:
                 break
             if self.stepper.stop_signal:  # agreed by every rank in the last step's reduction
                 break
+            if self.halt is not None:  # set by a plugin on every rank alike
+                break
             try:
                 self._advance_to_event(end_step, end_time, ratio_target, max_steps - (s.step - s0)
                                        if max_steps is not None else None)
@@ -136,6 +154,9 @@ class Run:
                 raise
         for p in self.plugins:
             p.finish(self)
+        if self.halt is not None:  # every rank alike: the output is flushed, no checkpoint
+            halt, self.halt = self.halt, None
+            raise halt
         stopped = self.stepper.stop_signal
         checkpoint = None
         if stopped:

@@ -136,7 +136,7 @@ def run_stages(run) -> list[dict]:
             summary = run.run(
                 time=None if sv.time is None else s.stage_t0 + sv.time - s.time,
                 steps=None if sv.steps is None else s.stage_step0 + sv.steps - s.step,
-                ratio=sv.ratio, max_steps=sv.max_steps)
+                ratio=sv.ratio, max_steps=sv.max_steps, no_progress=sv.no_progress_steps)
         summary["stage"] = st.name
         summaries.append(summary)
         if summary.get("stopped"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Literal, Union
 
 from pydantic import (
@@ -17,11 +18,13 @@ from pydantic import (
     model_serializer,
     model_validator,
 )
+from pydantic.fields import FieldInfo
 
 from ..contact.algorithms import ALGORITHMS
 from ..contact.laws import JOINT_LAWS
 from ..deformable.constitutive import ZONE_MODELS
 from ..dynamics.damping import DAMPING
+from ..registry import Registry
 from ..strict import Strict
 from .sizes import parse_bytes
 
@@ -37,6 +40,29 @@ Force = Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]
 Vec3 = tuple[Length, Length, Length]
 Vec3Speed = tuple[Speed, Speed, Speed]
 Vec3Force = tuple[Force, Force, Force]
+
+# the scene keys a registry put among a model's fields (:func:`_follow_keys`), by model
+_KEYED: dict[type, tuple[str, ...]] = {}
+
+
+def _follow_keys(model: type[Strict], after: str | None, keyed: dict[str, FieldInfo]) -> None:
+    """Put ``keyed`` (a registry's scene keys, in its order) among ``model``'s fields right
+    after the field ``after`` (first when None), in place of the keys put there before, and
+    rebuild the model's validator in place: the class, its messages and the other fields stay
+    as declared. A key that is already another field of the model is refused."""
+    old = _KEYED.get(model, ())
+    fixed = [name for name in model.__pydantic_fields__ if name not in old]
+    taken = sorted(set(keyed) & set(fixed))
+    if taken:
+        raise ValueError(f"{', '.join(map(repr, taken))}: already a key of {model.__name__}")
+    fields = dict(keyed) if after is None else {}
+    for name in fixed:
+        fields[name] = model.__pydantic_fields__[name]
+        if name == after:
+            fields.update(keyed)
+    model.__pydantic_fields__ = fields
+    _KEYED[model] = tuple(keyed)
+    model.model_rebuild(force=True)
 
 
 Angle = Annotated[float, Field(ge=0.0, lt=90.0)]
@@ -211,21 +237,45 @@ class Zones(Strict):
     nmd: bool = True
 
 
-# shapes a zoned block may have today (one convex piece); the others are refused with why
-ZONED_SHAPES = ("box", "polyhedron", "prism", "planes", "array", "random")
+@dataclass(frozen=True)
+class ShapeModel:
+    """A block shape kind as the grammar knows it: ``model``, the pydantic model of its key
+    (``blocks[i].<key>``), and whether a block of the kind may be ``zoned`` (today: one convex
+    piece; the others are refused with why)."""
+
+    model: type[Strict]
+    zoned: bool = False
+
+
+# The block shape kinds by scene key, in the order ``Block`` lists them: the grammar's own
+# registry, which follows pdem.model.shapes.SHAPES (each kind there carries its model and
+# builder: register a kind there); ``Block`` takes a field per entry, SHAPE_KEYS and
+# ZONED_SHAPES are its names (:func:`_shapes_changed`).
+SHAPE_MODELS: Registry[ShapeModel] = Registry("block shape")
+for _key, _model, _zoned in (
+    ("box", BoxShape, True), ("polyhedron", PolyhedronShape, True), ("prism", PrismShape, True),
+    ("planes", PlanesShape, True), ("array", ArrayOf, True), ("random", RandomPolyhedra, True),
+    ("mesh", MeshShape, False),
+):
+    SHAPE_MODELS.register(_key, ShapeModel(_model, _zoned))
+SHAPE_KEYS = SHAPE_MODELS.names()
+ZONED_SHAPES = tuple(k for k, s in SHAPE_MODELS.items() if s.zoned)
+
+
+def _shape_fields() -> dict[str, FieldInfo]:
+    for key, s in SHAPE_MODELS.items():
+        if not (isinstance(s.model, type) and issubclass(s.model, Strict)):
+            raise TypeError(f"block shape {key!r}: its model must be a pdem.strict.Strict "
+                            "(a scene model)")
+    return {key: FieldInfo.from_annotated_attribute(s.model | None, None)
+            for key, s in SHAPE_MODELS.items()}
 
 
 class Block(Strict):
-    """One block (or, for ``array``/``random``, a family named ``name[i]``)."""
+    """One block (or, for ``array``/``random``, a family named ``name[i]``); its shape is
+    the one key of a registered kind given (:data:`SHAPE_MODELS`, fields after ``name``)."""
 
     name: str
-    box: BoxShape | None = None
-    polyhedron: PolyhedronShape | None = None
-    prism: PrismShape | None = None
-    planes: PlanesShape | None = None
-    array: ArrayOf | None = None
-    random: RandomPolyhedra | None = None
-    mesh: MeshShape | None = None
     material: str
     group: str = "default"
     fixed: bool = False
@@ -266,7 +316,7 @@ class Block(Strict):
         return next(k for k in SHAPE_KEYS if getattr(self, k) is not None)
 
 
-SHAPE_KEYS = ("box", "polyhedron", "prism", "planes", "array", "random", "mesh")
+_follow_keys(Block, "name", _shape_fields())
 
 
 class CutRange(Strict):
@@ -396,17 +446,36 @@ class Inactive(Strict):
     force: PositiveFloat = 0.01
 
 
+# solve.no_progress_steps: the default window, and the smallest window other than 0 (off):
+# the ratio is sampled 20 times a window (pdem.plugins.no_progress), so a window of a few
+# hundred steps would judge a model by its first contact oscillations
+NO_PROGRESS_STEPS = 20_000
+NO_PROGRESS_MIN = 2_000
+NoProgressSteps = Annotated[int, Field(ge=0)]
+
+
+def _check_no_progress(v: int | None) -> int | None:
+    if v is not None and 0 < v < NO_PROGRESS_MIN:
+        raise ValueError(f"{v} steps is too short a window to judge a solve by (at least "
+                         f"{NO_PROGRESS_MIN}, or 0: never stop for want of progress)")
+    return v
+
+
 class Solve(Strict):
     """The end condition (one of ``time``, ``steps``, ``ratio``) and the integration knobs.
     ``fused``: serial runs march many steps in one compiled call between Python-level events
     (pdem.cycle; bitwise the same result), off to time each phase of a step separately.
     ``energy_tolerance``: the run stops, naming the cause, when the energy balance error grows
-    by more than this fraction of the energy put in between two budget samples (0: never)."""
+    by more than this fraction of the energy put in between two budget samples (0: never).
+    ``no_progress_steps``: a solve to a ``ratio`` stops, naming the blocks that keep it from
+    its target and what they do, when its ratio has not improved for this many steps
+    (pdem.plugins.no_progress; 0: never)."""
 
     time: PositiveFloat | None = None
     steps: PositiveInt | None = None
     ratio: PositiveFloat | None = None
     max_steps: PositiveInt | None = None
+    no_progress_steps: NoProgressSteps = NO_PROGRESS_STEPS
     timestep: Timestep = Timestep()
     damping: Damping = Damping()
     mass_scaling: MassScalingSetting = False
@@ -420,6 +489,11 @@ class Solve(Strict):
     @classmethod
     def _damping_shorthand(cls, v):
         return {"mode": v} if isinstance(v, str) else v
+
+    @field_validator("no_progress_steps")
+    @classmethod
+    def _no_progress_window(cls, v):
+        return _check_no_progress(v)
 
     @model_validator(mode="after")
     def _one_end(self):
@@ -584,12 +658,32 @@ class BoundaryStress(Selection):
         return ((sxx, sxy, szx), (sxy, syy, syz), (szx, syz, szz))
 
 
+# The boundary-condition kinds' condition models by scene key (``boundary.<key>`` and a
+# stage's ``<key>``: lists of conditions, each a Selection of the blocks it acts on), in the
+# order the kinds apply: the grammar's own registry, which follows pdem.boundary.BOUNDARY_KINDS
+# (each kind there carries its model and its hooks: register a kind there); BoundaryConditions
+# and Stage take a list field per entry (:func:`_conditions_changed`).
+CONDITION_MODELS: Registry[type[Selection]] = Registry("boundary condition")
+CONDITION_MODELS.register("velocity", BoundaryVelocity)
+CONDITION_MODELS.register("stress", BoundaryStress)
+
+
+def _condition_fields() -> dict[str, FieldInfo]:
+    for key, model in CONDITION_MODELS.items():
+        if not (isinstance(model, type) and issubclass(model, Selection)):
+            raise TypeError(f"boundary condition {key!r}: its condition model must be a "
+                            "pdem.config.schema.Selection (the blocks it acts on)")
+    return {key: FieldInfo.from_annotated_attribute(list[model], [])
+            for key, model in CONDITION_MODELS.items()}
+
+
 class BoundaryConditions(Strict):
     """Scene-level boundary conditions, in force from the start: prescribed velocities and
-    boundary stresses (a stage may add more)."""
+    boundary stresses (a stage may add more); a list field per registered kind
+    (:data:`CONDITION_MODELS`)."""
 
-    velocity: list[BoundaryVelocity] = []
-    stress: list[BoundaryStress] = []
+
+_follow_keys(BoundaryConditions, None, _condition_fields())
 
 
 class StageForce(Selection):
@@ -601,12 +695,14 @@ class StageForce(Selection):
 
 class StageSolve(Strict):
     """A stage's end condition (one of ``time`` (a duration), ``steps``, ``ratio``) and the
-    knobs a stage may change; the rest comes from the scene's ``solve``."""
+    knobs a stage may change (``no_progress_steps``: None for the scene's); the rest comes
+    from the scene's ``solve``."""
 
     time: PositiveFloat | None = None
     steps: PositiveInt | None = None
     ratio: PositiveFloat | None = None
     max_steps: PositiveInt | None = None
+    no_progress_steps: NoProgressSteps | None = None
     damping: Damping | None = None
     mass_scaling: MassScalingSetting | None = None
 
@@ -614,6 +710,11 @@ class StageSolve(Strict):
     @classmethod
     def _damping_shorthand(cls, v):
         return {"mode": v} if isinstance(v, str) else v
+
+    @field_validator("no_progress_steps")
+    @classmethod
+    def _no_progress_window(cls, v):
+        return _check_no_progress(v)
 
     @model_validator(mode="after")
     def _one_end(self):
@@ -647,8 +748,7 @@ class Stage(Strict):
     joints: dict[str, dict[str, float]] = {}
     fix: Selection | None = None
     free: Selection | None = None
-    velocity: list[StageVelocity] = []
-    stress: list[BoundaryStress] = []
+    # here: a list field per boundary-condition kind (CONDITION_MODELS: velocity, stress, ...)
     force: list[StageForce] = []
     reset_displacements: bool = False
     solve: StageSolve | None = None
@@ -662,6 +762,9 @@ class Stage(Strict):
             if e.time != 0.0:
                 raise ValueError("a stage's excavations happen when it starts: no time")
         return self
+
+
+_follow_keys(Stage, "free", _condition_fields())
 
 
 class Contact(Strict):
@@ -766,11 +869,15 @@ class Limits(Strict):
     preflight, docs/limits.md). ``max_blocks``: blocks after expanding ``array``/``random``;
     ``auto`` = what fits in ``max_memory_per_rank``. ``max_memory_per_rank``: bytes (a number
     or text like ``8 GiB``); ``auto`` = 0.85 of this machine's memory shared by the ranks.
-    ``max_steps``: the steps a run's end may imply (``solve.time`` / dt, ``solve.steps``)."""
+    ``max_steps``: the steps a run's end may imply (``solve.time`` / dt, ``solve.steps``).
+    ``max_snapshots``: the snapshots one output file may hold: a scene whose end and
+    ``output.every`` imply more is refused; a solve to a ratio stops its periodic snapshots
+    there (pdem.plugins.output; null: no bound)."""
 
     max_blocks: PositiveInt | Literal["auto"] = "auto"
     max_memory_per_rank: PositiveFloat | str = "auto"
     max_steps: PositiveInt = 1_000_000_000
+    max_snapshots: PositiveInt | None = 10_000
 
     @field_validator("max_memory_per_rank")
     @classmethod
@@ -860,7 +967,7 @@ class Scene(Strict):
                 if bad:
                     errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
                                   + ("; use none or local" if key == "solve.damping.mode" else ""))
-            if self.boundary.velocity or self.boundary.stress:
+            if any(getattr(self.boundary, key) for key in CONDITION_MODELS):
                 errors.append(f"boundary: not yet supported with zoned blocks ({', '.join(zoned)})")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
@@ -898,7 +1005,7 @@ class Scene(Strict):
                 for g in (sel.groups or ()) if sel else ():
                     if g not in groups and not open_groups:
                         errors.append(f"stages[{i}].{key}.groups: no block has group {g!r}")
-            for key in ("velocity", "stress", "force"):
+            for key in (*CONDITION_MODELS, "force"):
                 for j, sel in enumerate(getattr(st, key)):
                     for g in sel.groups or ():
                         if g not in groups and not open_groups:
@@ -908,7 +1015,7 @@ class Scene(Strict):
             for j in (fos.joints or ()) if fos else ():
                 if j not in self.joints:
                     errors.append(f"stages[{i}].factor_of_safety.joints: unknown joint {j!r}")
-        for key in ("velocity", "stress"):
+        for key in CONDITION_MODELS:
             for j, sel in enumerate(getattr(self.boundary, key)):
                 for g in sel.groups or ():
                     if g not in groups and not open_groups:
@@ -946,3 +1053,27 @@ def _joint_laws_changed() -> None:
 
 
 JOINT_LAWS.watch(_joint_laws_changed)
+
+
+def _conditions_changed() -> None:
+    """A boundary-condition kind was registered (or removed): ``boundary:`` and every stage
+    take a list field per registered kind from now on, in the registry's order (the shipped
+    keys where they always were), and ``boundary:``'s default has them all empty."""
+    _follow_keys(BoundaryConditions, None, _condition_fields())
+    _follow_keys(Stage, "free", _condition_fields())
+    Scene.model_fields["boundary"].default = BoundaryConditions()
+    Scene.model_rebuild(force=True)
+
+
+def _shapes_changed() -> None:
+    """A block shape kind was registered (or removed): ``Block`` takes a field per kind after
+    ``name``, and SHAPE_KEYS/ZONED_SHAPES name the kinds, from now on."""
+    global SHAPE_KEYS, ZONED_SHAPES
+    _follow_keys(Block, "name", _shape_fields())
+    SHAPE_KEYS = SHAPE_MODELS.names()
+    ZONED_SHAPES = tuple(k for k, s in SHAPE_MODELS.items() if s.zoned)
+    Scene.model_rebuild(force=True)
+
+
+CONDITION_MODELS.watch(_conditions_changed)
+SHAPE_MODELS.watch(_shapes_changed)

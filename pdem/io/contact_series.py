@@ -3,15 +3,58 @@ their snapshot offsets, ``xdmf/index`` and each snapshot's views (:mod:`pdem.io.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Protocol
 
+import numpy as np
+from mpi4py import MPI
+
+from ..model import csr
 from . import joints
 from .h5core import H5Core, add_range_view
 from .xdmf import CONTACT_VIEWED, SUB_VIEWED, view_path
 
-__all__ = ["ContactSeries", "CONTACT_CHUNK"]
+__all__ = ["ContactSeries", "ContactSource", "DictContacts", "CONTACT_CHUNK", "ROUND_ROWS"]
 
 CONTACT_CHUNK = 1024  # rows per chunk of the flat contact and sub-contact datasets
+# rows (contacts and sub-contacts) a rank receives and writes per round of a snapshot's
+# contacts: what the writer holds at once is bounded by this, not by the rank's contacts
+ROUND_ROWS = 1 << 16
+
+
+class ContactSource(Protocol):
+    """A rank's contacts for one snapshot, made row by row as the writer streams them:
+    ``block_a`` (k,) the gid of each contact's block A, ``n_sub`` (k,) its sub-contacts,
+    ``n_subs`` their total as given (None: not known before ``rows``), and ``rows(idx)`` the
+    contacts ``idx`` (ascending) in :meth:`pdem.io.writer.OutputWriter.write_snapshot`'s dict
+    format, their sub-contacts in contact order."""
+
+    block_a: np.ndarray
+    n_sub: np.ndarray
+    n_subs: int | None
+
+    def rows(self, idx: np.ndarray) -> dict: ...
+
+
+class DictContacts:
+    """A :class:`ContactSource` of contacts passed whole (a dict; ``None``: none)."""
+
+    def __init__(self, contacts: dict | None) -> None:
+        self.d = contacts
+        if contacts is None:
+            self.block_a, self.n_sub, self.n_subs = np.zeros(0, np.int64), np.zeros(0, np.int64), 0
+            return
+        self.block_a = np.asarray(contacts["block"], np.int64).reshape(-1, 2)[:, 0]
+        self.n_sub = np.asarray(contacts["n_sub"], np.int64).reshape(-1)
+        self.n_subs = np.asarray(contacts["sub"]["point"]).size // 3
+
+    def rows(self, idx: np.ndarray) -> dict:
+        d = self.d
+        if len(idx) == len(self.n_sub):  # every contact (idx ascends): the dict as given
+            return d
+        sub_idx, _ = csr.take(csr.starts(self.n_sub), idx)
+        out = {k: np.asarray(v)[idx] for k, v in d.items() if k != "sub"}
+        out["sub"] = {k: np.asarray(v)[sub_idx] for k, v in d["sub"].items()}
+        return out
 
 
 class ContactSeries:
@@ -49,26 +92,65 @@ class ContactSeries:
         f.create_dataset("xdmf/index", (0,), maxshape=(None,), chunks=(CONTACT_CHUNK,),
                          dtype=np.int64)
 
-    def pack(self, contacts: dict | None) -> tuple[np.ndarray, np.ndarray]:
-        """This rank's contacts and sub-contacts as float64 rows (``ValueError`` if bad)."""
+    def prepare(self, contacts) -> ContactSource:
+        """This rank's contacts as a :class:`ContactSource` (a dict is wrapped; ``None``: none),
+        checked: block A in range, ``n_sub`` summing to the sub-contacts (``ValueError``)."""
         if contacts is None:
-            return np.zeros((0, joints.C_WIDTH)), np.zeros((0, joints.S_WIDTH))
-        crows = joints.pack(contacts, joints.CONTACT_COLS, joints.C_AT, joints.C_WIDTH)
-        srows = joints.pack(contacts["sub"], joints.SUB_COLS, joints.S_AT, joints.S_WIDTH)
-        nsub = joints.col(crows, joints.C_AT, "n_sub")
-        if (nsub < 0).any() or nsub.sum() != len(srows):
+            return DictContacts(None)
+        source = contacts if hasattr(contacts, "rows") else DictContacts(contacts)
+        block_a = np.asarray(source.block_a, np.int64).reshape(-1)
+        nsub = np.asarray(source.n_sub, np.int64).reshape(-1)
+        if len(nsub) != len(block_a) or (nsub < 0).any() or (
+                source.n_subs is not None and nsub.sum() != source.n_subs):
             raise ValueError(f"write_snapshot: contacts n_sub sums to {nsub.sum()}, "
-                             f"{len(srows)} sub-contacts given")
-        block = joints.col(crows, joints.C_AT, "block")
-        if len(block) and (block.min() < 0 or block.max() >= self.n_blocks):
+                             f"{source.n_subs} sub-contacts given")
+        if len(block_a) and (block_a.min() < 0 or block_a.max() >= self.n_blocks):
             raise ValueError(f"write_snapshot: contact blocks outside [0, {self.n_blocks})")
-        return crows, srows
+        return source
 
-    def assemble(self, crows, srows) -> tuple[np.ndarray, np.ndarray]:
-        """Each contact (and its sub-contacts) to the rank whose gid range holds block A: piece
-        gids are numbered block by block, so rank r's keys all precede rank r+1's; then sorted
-        by key. Raises ``ValueError`` on every rank if a contact came twice."""
+    def _rounds(self, block_a: np.ndarray, nsub: np.ndarray):
+        """Plan a snapshot's streaming (collective): the round of each contact, the number of
+        rounds, the totals over the ranks and this rank's first rows (n_c, n_s, off_c, off_s).
+
+        Rank ``r`` receives the contacts whose block A lies in its gid range (``bounds``), in
+        ``k`` rounds: round ``j`` brings those whose block A lies in the ``j``-th of ``k`` even
+        parts of that range. Piece gids are numbered block by block, so the rounds' sorted
+        rows follow one another in key order; ``k`` is chosen so that a rank receives about
+        :data:`ROUND_ROWS` rows (contacts and sub-contacts) a round."""
         core = self.core
+        comm, size, bounds = core.comm, core.comm.size, core.bounds
+        dest = np.searchsorted(bounds, block_a, side="right") - 1
+        counts = np.zeros((2, size), np.int64)
+        counts[0] = np.bincount(dest, minlength=size)
+        counts[1] = np.bincount(dest, weights=nsub, minlength=size).astype(np.int64)
+        total = np.empty_like(counts)
+        comm.Allreduce(counts, total, op=MPI.SUM)
+        k = max(1, -(-int((total[0] + total[1]).max()) // ROUND_ROWS))
+        lo, hi = bounds[:-1], bounds[1:]
+        part_starts = (lo[:, None] + (hi - lo)[:, None] * np.arange(k)[None, :] // k).ravel()
+        rounds = (np.searchsorted(part_starts, block_a, side="right") - 1) % k
+        before = total[:, :comm.rank].sum(axis=1)
+        return (rounds, k, int(total[0].sum()), int(total[1].sum()), int(before[0]),
+                int(before[1]))
+
+    def _round_rows(self, source: ContactSource, idx: np.ndarray) -> tuple[np.ndarray, ...]:
+        """One round: the contacts ``idx`` of this rank's source, packed, sent to the rank of
+        their block A, sorted by key (``ValueError`` on every rank if one came twice)."""
+        core, msg = self.core, None
+        crows = np.zeros((0, joints.C_WIDTH))
+        srows = np.zeros((0, joints.S_WIDTH))
+        try:
+            if len(idx):
+                d = source.rows(idx)
+                crows = joints.pack(d, joints.CONTACT_COLS, joints.C_AT, joints.C_WIDTH)
+                srows = joints.pack(d["sub"], joints.SUB_COLS, joints.S_AT, joints.S_WIDTH)
+                del d
+                if joints.col(crows, joints.C_AT, "n_sub").sum() != len(srows):
+                    raise ValueError("write_snapshot: contacts n_sub does not match the "
+                                     "sub-contacts given")
+        except ValueError as e:
+            msg = str(e)
+        core.raise_if_any(msg)
         ga = joints.col(crows, joints.C_AT, "block")[:, 0].astype(np.int64)
         dest = np.searchsorted(core.bounds, ga, side="right") - 1
         nsub = joints.col(crows, joints.C_AT, "n_sub").astype(np.int64)
@@ -76,7 +158,6 @@ class ContactSeries:
         (srows,) = core.exchange(np.repeat(dest, nsub), srows)
         crows, srows = joints.sort_contacts(crows, srows)
         piece = joints.col(crows, joints.C_AT, "piece")
-        msg = None
         if len(piece) > 1:
             same = np.flatnonzero((piece[1:] == piece[:-1]).all(axis=1))
             if len(same):
@@ -85,37 +166,52 @@ class ContactSeries:
         core.raise_if_any(msg)
         return crows, srows
 
-    def count(self, crows, srows) -> tuple[int, int, int, int]:
-        """Totals over the ranks and this rank's offsets: (n_c, n_s, off_c, off_s)."""
-        comm = self.core.comm
-        counts = np.array([len(crows), len(srows)], np.int64)
-        every = np.array(comm.allgather(counts)).reshape(-1, 2)
-        before = every[: comm.rank].sum(axis=0)
-        tot = every.sum(axis=0)
-        self.n_contacts.append(int(tot[0]))
-        self.n_subs.append(int(tot[1]))
-        return int(tot[0]), int(tot[1]), int(before[0]), int(before[1])
-
-    def write(self, i: int, crows: np.ndarray, srows: np.ndarray) -> None:
-        """Snapshot ``i``'s contacts: this rank's sorted slab of the flat series (collective),
-        the offsets, and the views of the contact sidecars."""
+    def write(self, i: int, source: ContactSource) -> None:
+        """Snapshot ``i``'s contacts (collective over every rank; the IO ranks write): this
+        rank's sorted slab of the flat series, streamed in rounds of about
+        :data:`ROUND_ROWS` rows (no rank holds more than a round's rows at once), the
+        offsets, and the views of the contact sidecars."""
         core, f = self.core, self.core.f
-        n_c, n_s, off_c, off_s = self.count(crows, srows)
-        cvals, svals = joints.reduce_contacts(crows, srows)
+        block_a = np.asarray(source.block_a, np.int64).reshape(-1)
+        rounds, k, n_c, n_s, off_c, off_s = self._rounds(
+            block_a, np.asarray(source.n_sub, np.int64).reshape(-1))
+        del block_a
+        groups = (("contacts", joints.CONTACT_SERIES, n_c, off_c),
+                  ("subcontacts", joints.SUB_SERIES, n_s, off_s))
+        if core.io:
+            for group, series, n, _ in groups:
+                for c in series:
+                    f[f"{group}/{c.name}"].resize(self.bases[group] + n, axis=0)
+        order = np.argsort(rounds, kind="stable")
+        ends = np.searchsorted(rounds[order], np.arange(1, k + 1))
+        del rounds
+        done = [0, 0]  # rows of contacts and sub-contacts this rank has written
+        for j in range(k):
+            idx = np.sort(order[(ends[j - 1] if j else 0):ends[j]])
+            crows, srows = self._round_rows(source, idx)
+            cvals, svals = joints.reduce_contacts(crows, srows)
+            del crows, srows
+            for g, ((group, series, _, off), values) in enumerate(zip(groups, (cvals, svals),
+                                                                      strict=True)):
+                first = self.bases[group] + off + done[g]
+                for c in series:
+                    data = np.asarray(values[c.name]).reshape(-1, *c.shape).astype(c.dtype)
+                    if core.io:
+                        core.write(f[f"{group}/{c.name}"], (first,) + (0,) * len(c.shape), data)
+                    done[g] += len(data) if c is series[0] else 0
+            del cvals, svals
+        self.n_contacts.append(n_c)
+        self.n_subs.append(n_s)
         root = core.comm.rank == 0
-        for group, series, values, n, off in (
-                ("contacts", joints.CONTACT_SERIES, cvals, n_c, off_c),
-                ("subcontacts", joints.SUB_SERIES, svals, n_s, off_s)):
-            offset = f[f"{group}/offset"]
-            base = self.bases[group]
-            offset.resize(i + 2, axis=0)
-            core.write(offset, (i + 1,), np.array([base + n], np.int64) if root else None)
-            for c in series:
-                d = f[f"{group}/{c.name}"]
-                d.resize(base + n, axis=0)
-                data = np.asarray(values[c.name]).reshape(-1, *c.shape).astype(c.dtype)
-                core.write(d, (base + off,) + (0,) * len(c.shape), data)
-            self.bases[group] = base + n
+        for group, _, n, _ in groups:
+            self.bases[group] += n
+            if core.io:
+                offset = f[f"{group}/offset"]
+                offset.resize(i + 2, axis=0)
+                core.write(offset, (i + 1,),
+                           np.array([self.bases[group]], np.int64) if root else None)
+        if not core.io:
+            return
         need = max(n_c, n_s)
         if need > self.pool:
             pool = f["xdmf/index"]

@@ -81,7 +81,9 @@ class OutputWriter:
     The file layout depends only on the scene, never on the rank count. In parallel mode
     every snapshot's rows are first redistributed (one ``Alltoallv``) so that rank ``r`` holds
     a contiguous gid range; every rank then writes one hyperslab per dataset with collective
-    I/O, a rank with an empty range taking part with an empty selection.
+    I/O, a rank with an empty range taking part with an empty selection. The contacts go the
+    same way in rounds (a part of every rank's gid range each), so that no rank holds more
+    than a round's contacts (``pdem.io.contact_series.ROUND_ROWS`` rows) at once.
     """
 
     def __init__(
@@ -181,7 +183,9 @@ class OutputWriter:
         are taken from rank 0.
 
         ``contacts`` (writers made with ``contacts=True``; ``None``: none on this rank): the
-        contacts this rank writes, each contact passed by exactly one rank, in any order, a
+        contacts this rank writes, each contact passed by exactly one rank, in any order: a
+        :class:`pdem.io.contact_series.ContactSource` that makes them a round at a time (the
+        writer streams them to the file in rounds of ``ROUND_ROWS`` rows), or a
         dict of per-contact ``piece`` (k, 2) piece gids A < B, ``block`` (k, 2), ``joint``
         (k,), ``point`` (k, 3), ``normal`` (k, 3), ``n_sub`` (k,) and, for their sub-contacts
         in contact order, ``sub`` = dict of ``point`` (m, 3) world, ``area``, ``overlap``,
@@ -194,10 +198,10 @@ class OutputWriter:
         core = self._core
         core.check_open()
         msg, gids, rows = self._blocks.pack(gids, fields)
-        crows = srows = None
+        source = None
         if self.contacts:
             try:
-                crows, srows = self._contacts.pack(contacts)
+                source = self._contacts.prepare(contacts)
             except ValueError as e:
                 msg = msg or str(e)
         zone_items = None
@@ -208,8 +212,6 @@ class OutputWriter:
         mine = self._blocks.assemble(gids, rows)
         if "stage_origin" not in fields:
             self._fields.fill_origin(mine)
-        if self.contacts:
-            crows, srows = self._contacts.assemble(crows, srows)
         if self.zone_layout is not None:
             zone_items = self._zones.gather(zone_items)
         i = self.n_snap
@@ -217,16 +219,16 @@ class OutputWriter:
         self._times.append(float(time))
         if core.io:
             self._blocks.write(i, mine, step, time, stage)
-            if self.contacts:
-                self._contacts.write(i, crows, srows)
+        if self.contacts:  # every rank: the contacts are streamed in rounds
+            self._contacts.write(i, source)
+            del source
+        if core.io:
             if self.zone_layout is not None:
                 self._zones.write(i, zone_items)
             self._fields.write(i, mine)
             if self.parallel and (i + 1) % REOPEN_EVERY == 0:
                 core.reopen()
             core.f.flush()
-        elif self.contacts:
-            self._contacts.count(crows, srows)
         if self.xdmf_path is not None and self.comm.rank == 0:
             self._write_xdmf()
 

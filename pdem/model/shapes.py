@@ -3,8 +3,9 @@ holds everything the code knows of it (its builder, its member count, its size e
 the pre-flight, whether it may be zoned), so build (pdem.model.build) and pre-flight
 (pdem.preflight) look a kind up instead of naming it.
 
-A new shape kind: its schema model and field on ``Block`` (config/schema.py, ``SHAPE_KEYS``,
-``ZONED_SHAPES`` if it may be zoned) and one entry in :data:`SHAPES` here."""
+A new shape kind is one entry in :data:`SHAPES` (here, or registered from outside pdem's tree):
+it carries its scene model (``params``), and the scene grammar follows the registry (the
+``Block`` field, ``SHAPE_KEYS``, ``ZONED_SHAPES``: config.schema.SHAPE_MODELS)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,17 @@ from typing import Any
 
 import numpy as np
 
-from ..config.schema import SHAPE_KEYS, ZONED_SHAPES, BoxShape
+from ..config.schema import (
+    SHAPE_MODELS,
+    ArrayOf,
+    BoxShape,
+    MeshShape,
+    PlanesShape,
+    PolyhedronShape,
+    PrismShape,
+    RandomPolyhedra,
+    ShapeModel,
+)
 from ..geometry import (
     GeometryError,
     box,
@@ -30,9 +41,12 @@ from ..registry import Registry
 
 @dataclass(frozen=True)
 class ShapeKind:
-    """One shape kind of a ``blocks:`` entry; ``params`` below is the entry's shape model
-    (``getattr(block, kind)``).
+    """One shape kind of a ``blocks:`` entry, by its scene key (its name in :data:`SHAPES`).
 
+    ``params``: the pydantic model of the key's value (a :class:`pdem.strict.Strict`);
+    registering the kind makes the key a field of ``Block`` (the grammar's ``SHAPE_MODELS``
+    follows this registry). ``params`` below is an entry's value of it
+    (``getattr(block, kind)``).
     ``build(params)`` yields (member index or None, world-frame shape, or a list of convex
     pieces for a concave block); a family (index given) names its members ``NAME[k]``. With
     ``builds_share``, ``build(params, members)`` builds only the member indices in the range
@@ -43,6 +57,7 @@ class ShapeKind:
     ``members(params)``: a family's member count; None for a single block.
     ``zoned``: a block of this kind may be zoned (config.schema.ZONED_SHAPES)."""
 
+    params: type
     build: Callable[..., Iterator[tuple[int | None, Any]]] | None
     polytope: Callable[[Any], tuple[int, int, int]]
     members: Callable[[Any], int] | None = None
@@ -189,25 +204,27 @@ def _random_polytope(p) -> tuple[int, int, int]:
     return v, 2 * v - 4, 3 * v - 6
 
 
-# The kinds, in SHAPE_KEYS order
+# The kinds, in the order ``Block`` lists their keys
 SHAPES: Registry[ShapeKind] = Registry("block shape")
 for _name, _kind in (
-    ("box", ShapeKind(_box, _cuboid, zoned=True)),
-    ("polyhedron", ShapeKind(_polyhedron, lambda p: _triangulated(len(p.vertices)), zoned=True)),
-    ("prism", ShapeKind(_prism, lambda p: _triangulated(2 * len(p.base)), zoned=True)),
-    ("planes", ShapeKind(_planes, lambda p: _triangulated(2 * len(p.normals)), zoned=True)),
-    ("array", ShapeKind(_array, _cuboid, members=lambda p: math.prod(p.count),
+    ("box", ShapeKind(BoxShape, _box, _cuboid, zoned=True)),
+    ("polyhedron", ShapeKind(PolyhedronShape, _polyhedron,
+                             lambda p: _triangulated(len(p.vertices)), zoned=True)),
+    ("prism", ShapeKind(PrismShape, _prism, lambda p: _triangulated(2 * len(p.base)),
+                        zoned=True)),
+    ("planes", ShapeKind(PlanesShape, _planes, lambda p: _triangulated(2 * len(p.normals)),
+                         zoned=True)),
+    ("array", ShapeKind(ArrayOf, _array, _cuboid, members=lambda p: math.prod(p.count),
                         builds_share=True, zoned=True)),
-    ("random", ShapeKind(_random, _random_polytope, members=lambda p: p.count, zoned=True)),
+    ("random", ShapeKind(RandomPolyhedra, _random, _random_polytope, members=lambda p: p.count,
+                         zoned=True)),
     # counted once the mesh is read (the cuts' blocks likewise): one box-like block here
-    ("mesh", ShapeKind(None, _cuboid)),
+    ("mesh", ShapeKind(MeshShape, None, _cuboid)),
 ):
     SHAPES.register(_name, _kind)
-# the grammar keeps its own lists (config cannot import model): they must name these entries
-if SHAPES.names() != SHAPE_KEYS or \
-        tuple(k for k, s in SHAPES.items() if s.zoned) != ZONED_SHAPES:
-    raise RuntimeError("pdem.model.shapes.SHAPES and config.schema's SHAPE_KEYS/ZONED_SHAPES "
-                       "differ: a shape kind needs its schema field and one entry here")
+# the scene grammar's shape keys follow the kinds (config cannot import model: it keeps its own
+# registry, kept equal to this one): one registration here, from anywhere, is a kind
+SHAPE_MODELS.follow(SHAPES, lambda kind: ShapeModel(kind.params, kind.zoned))
 
 
 def family_size(block) -> int | None:

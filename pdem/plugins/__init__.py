@@ -12,13 +12,14 @@ from .base import PLUGINS, Plugin, PluginEntry, interval_steps
 from .checkpoints import Checkpoints
 from .energy import EnergyBudget
 from .excavation import Excavations
+from .no_progress import NoProgress
 from .output import Histories, Snapshots
 from .progress import LoadReport, Progress
 from .stage_state import StageState
 
 __all__ = ["PLUGINS", "Checkpoints", "EnergyBudget", "Excavations", "Histories", "LoadReport",
-           "Plugin", "PluginEntry", "Progress", "Snapshots", "StageState", "default_plugins",
-           "interval_steps"]
+           "NoProgress", "Plugin", "PluginEntry", "Progress", "Snapshots", "StageState",
+           "default_plugins", "interval_steps"]
 
 
 def default_plugins(state, output: bool = True) -> list[Plugin]:

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import logging
+import math
 
 import numpy as np
 
 from .. import __version__
+from ..config.errors import ConfigError
 from ..config.schema import MassScaling
 from ..contact.laws import FAILED
 from ..errors import writing
@@ -20,6 +23,8 @@ from ..model.fields import OUTPUT
 from ..resolve import mass_scaling_summary
 from ..selection import timestep_rows
 from .base import PLUGINS, Plugin, PluginEntry, interval_steps, next_multiple
+
+log = logging.getLogger("pdem")
 
 
 def owned_zoned(grids) -> list | None:
@@ -78,9 +83,36 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     name (pdem.io.joints.OutputColumn ``field``)."""
     c = state.contacts
     keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
+    return _contact_dict(state, bonded, keep, c.normal_forces(state.joints.kernel_args))
+
+
+class SnapshotContacts:
+    """This rank's share of a snapshot's contacts as the writer streams them
+    (:class:`pdem.io.contact_series.ContactSource`): :func:`contact_rows`' contacts, each
+    round's rows made when the writer asks for them, so that no rank holds every contact's
+    output rows at once (issue 39: they were most of the output's memory)."""
+
+    def __init__(self, state, bonded: np.ndarray) -> None:
+        c = state.contacts
+        self.state, self.bonded = state, bonded
+        self.keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
+        self.block_a = c.ga[self.keep].astype(np.int64)
+        self.n_sub = np.diff(c.sc_start)[self.keep]
+        self.n_subs = int(self.n_sub.sum())
+        self.fn = c.normal_forces(state.joints.kernel_args)  # every sub-contact's, 8 B each
+
+    def rows(self, idx: np.ndarray) -> dict:
+        """The contacts ``idx`` (of those this rank writes) in the writer's dict format."""
+        return _contact_dict(self.state, self.bonded, self.keep[idx], self.fn)
+
+
+def _contact_dict(state, bonded: np.ndarray, keep: np.ndarray, fn_all: np.ndarray) -> dict:
+    """:func:`contact_rows` of the contacts ``keep`` (rows of the store), ``fn_all`` every
+    sub-contact's normal force."""
+    c = state.contacts
     sel = c.take(keep)
     nsub = np.diff(sel.sc_start)
-    fn = c.normal_forces(state.joints.kernel_args)[csr.take(c.sc_start, keep)[0]]
+    fn = fn_all[csr.take(c.sc_start, keep)[0]]
     b = state.blocks
     ia = np.repeat(sel.ia, nsub)
     R = quat_to_matrix(b.q[ia])
@@ -100,9 +132,56 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     }
 
 
+def planned_steps(scene, dt: float) -> tuple[float, str] | None:
+    """The steps the scene's ends fix in advance at the step ``dt`` (``solve.time`` or
+    ``solve.steps``, or the stages' together, each capped by its ``max_steps``) and the keys
+    they come from; None when none does (solves to a ratio, factor-of-safety searches)."""
+    ends = [("solve", scene.solve)] if not scene.stages else [
+        (f"stages[{k}].solve", st.solve) for k, st in enumerate(scene.stages)
+        if st.solve is not None]
+    total, keys = 0.0, []
+    for key, sv in ends:
+        if sv.time is not None:
+            steps, keys = sv.time / dt, [*keys, f"{key}.time = {sv.time:g} s"]
+        elif sv.steps is not None:
+            steps, keys = float(sv.steps), [*keys, f"{key}.steps = {sv.steps}"]
+        else:
+            continue
+        total += min(steps, sv.max_steps or math.inf)
+    return (total, ", ".join(keys)) if keys else None
+
+
+def check_snapshot_count(scene, dt: float, every: int) -> None:
+    """Refuse a scene whose ends fix more snapshots (one every ``every`` steps, and the first)
+    than ``limits.max_snapshots``, naming the interval's key and the interval that fits (every
+    rank alike: the scene and dt are the same on every rank)."""
+    limit = scene.limits.max_snapshots
+    planned = planned_steps(scene, dt)
+    if limit is None or planned is None:
+        return
+    steps, ends = planned
+    count = int(steps // every) + 1
+    if count <= limit:
+        return
+    out = scene.output
+    key = (f"output.every = {out.every:g} s" if out.every is not None
+           else f"output.every_steps = {out.every_steps}" if out.every_steps is not None
+           else "output.every (default: 100 snapshots per scene run)")
+    fits = max(1, math.ceil(steps / max(limit - 1, 1)))
+    raise ConfigError([
+        f"{key}: a snapshot every {every} step{'s' if every != 1 else ''} (dt = {dt:.4g} s) "
+        f"over {ends} ({steps:.4g} "
+        f"steps) is {count} snapshots, more than limits.max_snapshots = {limit}: give "
+        f"output.every >= {fits * dt:.3g} s (or output.every_steps >= {fits}), or raise "
+        "limits.max_snapshots"])
+
+
 class Snapshots(Plugin):
     """Every ``output.every`` model seconds (or ``every_steps``) the owned blocks' output
-    fields (pdem.model.fields, ``output=``) go to the HDF5 file; opened at construction."""
+    fields (pdem.model.fields, ``output=``) go to the HDF5 file; opened at construction.
+    ``limits.max_snapshots``: a scene whose ends fix more is refused before the file is
+    made; a solve to a ratio writes no periodic snapshot past it (the last state of each solve
+    still is), with a warning."""
 
     name = "snapshots"
 
@@ -110,6 +189,11 @@ class Snapshots(Plugin):
         self.state = state
         out = state.scene.output
         self.every = interval_steps(state, out.every_steps, out.every)
+        check_snapshot_count(state.scene, state.dt, self.every)
+        self.limit = state.scene.limits.max_snapshots
+        self.written = 0  # snapshots in this run's file
+        self.last = None  # the step of the last one
+        self.full = False  # the file holds limits.max_snapshots: no more periodic ones
         self.after_write = []  # callbacks run after each snapshot (histories flush)
         r = state.resolved
         self.contacts = bool(out.contacts)
@@ -133,13 +217,29 @@ class Snapshots(Plugin):
         s = self.state
         b, n = s.blocks, s.n_owned
         with s.timers.phase("io"), writing(self.writer.path):
-            contacts = contact_rows(s, self.bonded) if self.contacts else None
+            contacts = SnapshotContacts(s, self.bonded) if self.contacts else None
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
                                        contacts=contacts, stage=s.stage,
                                        zones=owned_zoned(s.grids))
+            self.written += 1
+            self.last = s.step
             for callback in self.after_write:
                 callback()
+
+    def _room(self) -> bool:
+        """Whether a periodic snapshot may still be written (limits.max_snapshots)."""
+        if self.limit is None or self.written < self.limit:
+            return True
+        if not self.full:
+            s = self.state
+            log.warning("output: %s holds limits.max_snapshots = %d snapshots at step %d; no "
+                        "more periodic snapshots in this run (the last state of each solve is "
+                        "still written): raise output.every (now every %d steps) or "
+                        "limits.max_snapshots", self.writer.path, self.limit, s.step,
+                        self.every)
+            self.full = True
+        return False
 
     def start(self, run):
         if self.state.step == 0:
@@ -147,13 +247,17 @@ class Snapshots(Plugin):
 
     def after_step(self, run):
         if self.state.step % self.every == 0:
-            self.write()
+            if self._room():
+                self.write()
+            else:
+                for callback in self.after_write:  # histories flush on the same schedule
+                    callback()
 
     def horizon(self, run):
         return next_multiple(self.state.step, self.every), None
 
     def finish(self, run):
-        if self.state.step % self.every != 0:
+        if self.state.step % self.every != 0 or (self.full and self.last != self.state.step):
             self.write()
 
     def close(self):

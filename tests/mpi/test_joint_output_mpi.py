@@ -161,3 +161,78 @@ def test_writer_contacts_any_split(tmp_path, parallel):
     bad, counts, consistent = on_rank0(comm, check)
     assert not bad and consistent, bad
     assert counts == [len(s["n_sub"]) for s in snaps] and counts[0] == 0
+
+
+def test_writer_streams_each_ranks_rows(tmp_path, monkeypatch):
+    """Issue 39: each rank writes only the rows of its gid range (no rank gathers the model)
+    and the contacts of its range's blocks A, in several rounds when they exceed ROUND_ROWS,
+    and the file is the one written whole on one rank. A spy on the low-level write records
+    every selection each rank writes."""
+    import pdem.io.contact_series as contact_series
+    from pdem.io import OutputWriter
+    from pdem.io.h5core import H5Core
+
+    if not h5py.get_config().mpi:
+        pytest.skip("h5py without MPI: the fallback gathers on rank 0 by design")
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    n = 11
+    v = np.array([[x, y, z] for x in (-.5, .5) for y in (-.5, .5) for z in (-.5, .5)])
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    kw = {"block_names": [f"b{i}" for i in range(n)], "body_vertices": [v] * n,
+          "body_faces": [faces] * n, "scene_yaml": "name: x\n", "contacts": True,
+          "joint_names": ["default"]}
+    snaps = synthetic(n, 6, seed=3)
+
+    def write(path, comm):
+        with OutputWriter(path, comm, parallel=comm.size > 1 or None, **kw) as w:
+            for i, snap in enumerate(snaps):
+                gids = np.arange(n)[::-1][comm.rank::comm.size]  # not the writer's ranges
+                k = len(gids)
+                fields = {"centroid": np.zeros((k, 3)) + gids[:, None],
+                          "orientation": np.tile([1.0, 0, 0, 0], (k, 1)),
+                          "velocity": np.zeros((k, 3)), "angular_velocity": np.zeros((k, 3))}
+                rank = (np.arange(len(snap["n_sub"])) + 1) % comm.size
+                w.write_snapshot(i, 0.1 * i, gids, fields,
+                                 contacts=share(snap, rank == comm.rank))
+            return w._lo, w._hi, w._blocks.vlo, w._blocks.vhi
+
+    writes = []
+    real = H5Core.write
+
+    def spy(self, dset, start, data):
+        if data is not None and data.size:
+            writes.append((dset.name, tuple(int(s) for s in start), data.shape))
+        return real(self, dset, start, data)
+
+    monkeypatch.setattr(H5Core, "write", spy)
+    monkeypatch.setattr(contact_series, "ROUND_ROWS", 8)
+    lo, hi, vlo, vhi = write(f"{base}/s.h5", comm)
+    monkeypatch.setattr(H5Core, "write", real)
+    monkeypatch.setattr(contact_series, "ROUND_ROWS", 1 << 16)
+    assert 0 < hi - lo < n
+    for name, start, shape in writes:
+        if name.startswith("/blocks/") and len(shape) > 1 and shape[0] == 1:  # a series
+            assert start[1] == lo and shape[1] <= hi - lo, (name, start, shape, lo, hi)
+        if name == "/surface/points":
+            assert start[1] == vlo and start[1] + shape[1] <= vhi, (name, start, vlo, vhi)
+    mine = [(s[0], shape[0]) for name, s, shape in writes if name == "/contacts/block"]
+    all_mine = comm.allgather(mine)
+    ranges = comm.allgather((lo, hi))
+
+    def check():
+        write(f"{base}/s-ref.h5", MPI.COMM_SELF)
+        a, b = read_joints(f"{base}/s.h5"), read_joints(f"{base}/s-ref.h5")
+        bad = [k for k in a if a[k].shape != b[k].shape or not np.array_equal(a[k], b[k])]
+        with h5py.File(f"{base}/s.h5", "r") as f:
+            block_a = f["contacts/block"][:, 0]
+        outside = [(r, s, c) for r, rows in enumerate(all_mine) for s, c in rows
+                   if not ((block_a[s:s + c] >= ranges[r][0])
+                           & (block_a[s:s + c] < ranges[r][1])).all()]
+        return bad, outside
+
+    bad, outside = on_rank0(comm, check)
+    assert not bad, bad
+    assert not outside, f"contacts written by a rank whose range does not hold block A: {outside}"
+    # the contacts went out in rounds: more non-empty writes than snapshots with contacts
+    assert sum(len(m) for m in all_mine) > len(snaps), all_mine

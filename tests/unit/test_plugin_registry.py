@@ -38,7 +38,7 @@ def test_the_shipped_plugins_in_their_order():
     names = list(PLUGINS)
     order = sorted(names, key=lambda n: PLUGINS[n].order)
     assert order == ["stages", "excavations", "checkpoints", "snapshots", "load-report",
-                     "histories", "energy", "progress"]
+                     "histories", "energy", "no-progress", "progress"]
     sim = make_simulation(SCENE)  # no output, no stages, no excavation, no checkpoint
     assert [p.name for p in sim.runner.plugins] == ["energy", "progress"]
 

@@ -1,20 +1,27 @@
-"""Block shape kinds are registry entries (pdem.model.shapes.SHAPES): each owns its builder,
-member count, size estimate and whether it may be zoned; build and pre-flight look a kind up
-instead of naming it, so a kind registered from outside works in both without a KeyError."""
+"""Block shape kinds are registry entries (pdem.model.shapes.SHAPES): each owns its scene
+model, builder, member count, size estimate and whether it may be zoned; the scene grammar
+(``Block``'s fields, SHAPE_KEYS, ZONED_SHAPES) follows the registry, and build and pre-flight
+look a kind up instead of naming it.
+
+The recipe "a block shape" (docs/architecture.md) is done here from outside pdem's tree,
+touching no file of it: a ``tetra`` family (its own model, builder, member count and size
+estimate) is registered by the test, accepted by the scene grammar, built, pre-flighted and
+run, and unregistered (the grammar goes back)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
+from pydantic import PositiveInt
 
-from pdem.config import parse_scene
-from pdem.config.schema import SHAPE_KEYS, ZONED_SHAPES, Block
+from pdem.cases import make_simulation
+from pdem.config import ConfigError, parse_scene, schema
+from pdem.config.schema import SHAPE_KEYS, SHAPE_MODELS, ZONED_SHAPES, Block, Length
 from pdem.geometry import tetrahedron
 from pdem.model.build import expand_blocks
 from pdem.model.shapes import SHAPES, ShapeKind, family_size, shape_size
 from pdem.preflight import estimate, preflight
+from pdem.strict import Strict
 
 SCENE = """
 materials: {rock: {density: 2600}}
@@ -58,8 +65,14 @@ SAMPLES = [
 
 
 def test_every_schema_shape_kind_is_registered():
-    assert SHAPES.names() == SHAPE_KEYS
+    assert SHAPES.names() == SHAPE_KEYS == SHAPE_MODELS.names()
+    assert SHAPE_KEYS == ("box", "polyhedron", "prism", "planes", "array", "random", "mesh")
     assert tuple(k for k, s in SHAPES.items() if s.zoned) == ZONED_SHAPES
+    # the grammar follows the kinds: a Block field per kind, after ``name``, of its own model
+    assert list(Block.model_fields)[:8] == ["name", *SHAPE_KEYS]
+    for key, kind in SHAPES.items():
+        assert SHAPE_MODELS[key].model is kind.params
+        assert Block.model_fields[key].annotation == (kind.params | None)
 
 
 def test_every_kind_sampled():
@@ -82,24 +95,11 @@ def test_counts_and_sizes_are_the_old_ones(kind, params, expected):
 # a shape kind from outside the tree: a row of tetrahedra
 
 
-@dataclass(frozen=True)
-class TetraRow:
-    count: int
-    spacing: float = 2.0
+class TetraRow(Strict):
+    """``count`` unit tetrahedra in a row along x, ``spacing`` apart (the test's family)."""
 
-
-@dataclass
-class TetraBlock:
-    """A ``blocks:`` entry of the kind (the scene grammar's Block has a field per schema
-    kind; this stand-in has the attributes build and pre-flight read)."""
-
-    name: str
-    tetra: TetraRow
-    material: str = "rock"
-    group: str = "default"
-    mesh: None = None
-    zones: None = None
-    shape_kind: str = "tetra"
+    count: PositiveInt
+    spacing: Length = 2.0
 
 
 def _tetras(p: TetraRow):
@@ -108,31 +108,70 @@ def _tetras(p: TetraRow):
         yield k, tetrahedron([x, 0, 1], [x + 1, 0, 1], [x, 1, 1], [x, 0, 2])
 
 
+TETRA = ShapeKind(TetraRow, _tetras, lambda p: (4, 4, 6), members=lambda p: p.count)
+ROW = "  - {name: t, material: rock, tetra: {count: 3}}\n"
+WITH_ROW = SCENE.replace("solve:", ROW + "solve:")
+
+
 @pytest.fixture
-def tetra_kind(monkeypatch):
-    """Registers "tetra" for one test (the registry is restored after)."""
-    monkeypatch.setattr(SHAPES, "_entries", dict(SHAPES._entries))
-    return SHAPES.register("tetra", ShapeKind(_tetras, lambda p: (4, 4, 6),
-                                              members=lambda p: p.count))
+def tetra_kind():
+    """``tetra`` registered from here (no file of pdem changed), unregistered after."""
+    SHAPES.register("tetra", TETRA)
+    yield TETRA
+    SHAPES.unregister("tetra")
 
 
-def _scene_with(*blocks):
-    scene = parse_scene(SCENE)
-    return scene.model_copy(update={"blocks": [*scene.blocks, *blocks]})
+def test_before_it_is_registered_the_key_is_unknown():
+    with pytest.raises(ConfigError, match=r"blocks\[1\]\.tetra: unknown key"):
+        parse_scene(WITH_ROW)
+    with pytest.raises(KeyError, match="unknown block shape 'tetra'"):
+        SHAPES["tetra"]
+
+
+def test_registered_kind_extends_the_grammar_and_goes_back(tetra_kind):
+    assert list(Block.model_fields)[:9] == ["name", *SHAPE_KEYS, "tetra"]
+    assert schema.SHAPE_KEYS == (*SHAPE_KEYS, "tetra") and schema.ZONED_SHAPES == ZONED_SHAPES
+    scene = parse_scene(WITH_ROW)
+    assert scene.blocks[1].shape_kind == "tetra"
+    assert scene.blocks[1].tetra == TetraRow(count=3, spacing=2.0)
+    # its model's checks and the grammar's, named under its key path
+    with pytest.raises(ConfigError, match=r"blocks\[1\]\.tetra\.count: Input should be "
+                                          r"greater than 0"):
+        parse_scene(WITH_ROW.replace("count: 3", "count: 0"))
+    with pytest.raises(ConfigError, match=r"give exactly one shape of box, .*, mesh, tetra "
+                                          r"\(got \['box', 'tetra'\]\)"):
+        parse_scene(WITH_ROW.replace("tetra:", "box: {min: [0, 0, 0], max: [1, 1, 1]}, tetra:"))
+    with pytest.raises(ConfigError, match=r"zones: not yet supported on 'tetra' blocks"):
+        parse_scene(WITH_ROW.replace("material: rock, tetra", "material: rock, "
+                                     "zones: {size: 0.5}, tetra")
+                    .replace("{density: 2600}", "{density: 2600, young: 1.0e9, poisson: 0.2}"))
+    SHAPES.unregister("tetra")
+    try:
+        assert list(Block.model_fields)[:9] == ["name", *SHAPE_KEYS, "material"]
+        assert schema.SHAPE_KEYS == SHAPE_KEYS and "tetra" not in SHAPE_MODELS
+        with pytest.raises(ConfigError, match=r"blocks\[1\]\.tetra: unknown key"):
+            parse_scene(WITH_ROW)
+    finally:
+        SHAPES.register("tetra", TETRA)
 
 
 def test_registered_kind_counts_and_sizes(tetra_kind):
-    b = TetraBlock("t", TetraRow(3))
+    scene = parse_scene(WITH_ROW)
+    b = scene.blocks[1]
     assert family_size(b) == 3
     assert shape_size(b) == (3, 4, 4, 6)
-    scene = _scene_with(b)
     est, per_entry = estimate(scene, 1, memory=2.0**40)
     assert per_entry == [(0, 1), (1, 3)] and est.blocks == 4
     assert preflight(scene, 2, memory=2.0**40, warn=False).blocks == 4
+    # the pre-flight refuses a family too large, from its registered member count
+    big = parse_scene(WITH_ROW.replace("count: 3", "count: 1000").replace(
+        "solve:", "limits: {max_blocks: 100}\nsolve:"))
+    with pytest.raises(ConfigError, match=r"limits\.max_blocks: the scene makes 1001 blocks"):
+        preflight(big, 1, memory=2.0**40, warn=False)
 
 
-def test_registered_kind_builds(tetra_kind):
-    scene = _scene_with(TetraBlock("t", TetraRow(3)))
+def test_registered_kind_builds_and_runs(tetra_kind):
+    scene = parse_scene(WITH_ROW)
     specs = expand_blocks(scene)
     assert [s.name for s in specs] == ["floor", "t[0]", "t[1]", "t[2]"]
     assert all(s.pieces[0].n_vertices == 4 for s in specs[1:])
@@ -141,8 +180,14 @@ def test_registered_kind_builds(tetra_kind):
     seen = []
     shared = expand_blocks(scene, share=lambda n: (seen.append(n), (0, 2))[1])
     assert seen == [4] and len(shared) == 4
+    sim = make_simulation(WITH_ROW.replace("time: 0.01", "steps: 3"))
+    sim.run()
+    assert sim.state.step == 3 and sim.blocks.v[1:4, 2].max() < 0.0  # the row falls
 
 
-def test_unregistered_kind_is_named():
-    with pytest.raises(KeyError, match="unknown block shape 'tetra'"):
-        shape_size(TetraBlock("t", TetraRow(3)))
+def test_a_kind_whose_key_is_taken_is_refused():
+    with pytest.raises(ValueError, match="'material': already a key of Block"):
+        SHAPES.register("material", TETRA)
+    # refused, and undone: the registry and the grammar as they were
+    assert SHAPES.names() == SHAPE_MODELS.names() == SHAPE_KEYS
+    assert list(Block.model_fields)[:9] == ["name", *SHAPE_KEYS, "material"]
