@@ -28,11 +28,12 @@ import resource
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
-from pdem.memory import proportional_mb, resident_mb
+from setup import PeakSampler  # bench/setup.py (this folder is first on the path)
+
+from pdem.memory import resident_mb
 
 
 def _maxrss_mb() -> float:
@@ -57,29 +58,6 @@ def _reset_peak() -> bool:
         return True
     except OSError:
         return False
-
-
-class PeakSampler:
-    """The largest PSS seen, sampled by a thread every ``period`` seconds (bench/setup.py)."""
-
-    def __init__(self, period: float = 0.02):
-        self.peak = proportional_mb()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, args=(period,), daemon=True)
-        self._thread.start()
-
-    def _run(self, period: float) -> None:
-        wait = period
-        while not self._stop.wait(wait):
-            t0 = time.perf_counter()
-            self.peak = max(self.peak, proportional_mb())
-            wait = max(period, 4.0 * (time.perf_counter() - t0))
-
-    def stop(self) -> float:
-        self._stop.set()
-        self._thread.join()
-        self.peak = max(self.peak, proportional_mb())
-        return self.peak
 
 
 def child(n: int, steps: int, every: int, path: str, trace: bool) -> None:
