@@ -50,20 +50,26 @@ def last_contact(text: str, window: int) -> int:
     raise AssertionError("the slider never lost its contacts")
 
 
-def test_a_block_that_slides_off_its_base_and_falls_stops_the_stage(tmp_path):
-    window = 10_000
-    out = str(tmp_path / "off.h5")
-    # (max_steps: without the watch the stage would end there, without an error)
-    text = slide_off_scene(window, "ratio: 1.0e-5, max_steps: 60000", output=out)
-    lost = last_contact(text, window)
+def stop_message(text: str) -> tuple[str, int]:
+    """Run the scene in ``text`` until the no-progress watch stops it: (its one-line message,
+    the step it stopped after); the output is closed either way."""
     sim = Simulation(parse_scene(text), MPI.COMM_SELF)
     try:
         with pytest.raises(NoProgressError) as err:
             sim.run()
     finally:
         sim.close()
-    msg = str(err.value)
-    print(f"\nlast contact at step {lost}, stopped at step {sim.step}: {msg}")
+    return str(err.value), sim.step
+
+
+def test_a_block_that_slides_off_its_base_and_falls_stops_the_stage(tmp_path):
+    window = 10_000
+    out = str(tmp_path / "off.h5")
+    # (max_steps: without the watch the stage would end there, without an error)
+    text = slide_off_scene(window, "ratio: 1.0e-5, max_steps: 60000", output=out)
+    lost = last_contact(text, window)
+    msg, step = stop_message(text)
+    print(f"\nlast contact at step {lost}, stopped at step {step}: {msg}")
     assert "\n" not in msg
     assert msg.startswith("stages[0] 'equilibrium': the ratio cannot reach 1e-05: no progress "
                           "in 10000 steps (solve.no_progress_steps)")
@@ -71,10 +77,10 @@ def test_a_block_that_slides_off_its_base_and_falls_stops_the_stage(tmp_path):
     assert "a domain:" in msg
     # it slid and tipped first (the ratio rose as it went): not stopped while it still could
     # have come to rest, and stopped within the bound once it fell
-    assert lost < sim.step <= lost + window + 2 * (window // SAMPLES)
+    assert lost < step <= lost + window + 2 * (window // SAMPLES)
     # the output is flushed up to the stop; no stage checkpoint (the stage did not end)
     with h5py.File(out) as f:
-        assert int(f["step"][-1]) == sim.step
+        assert int(f["step"][-1]) == step
     assert not (tmp_path / "off-stage0-equilibrium.h5").exists()
 
 
@@ -121,16 +127,9 @@ def test_weak_cohesive_joints_need_strong_joints_for_the_equilibrium_stage(tmp_p
     # shear force while gravity comes on (about 1.33 x the static load under local damping)
     cohesion = 400.0
     exact = slab_fos(SLAB_FRICTION, cohesion)
-    sim = Simulation(parse_scene(cohesive_slab_scene(cohesion, False,
-                                                     output=str(tmp_path / "plain.h5"))),
-                     MPI.COMM_SELF)
-    try:
-        with pytest.raises(NoProgressError) as err:
-            sim.run()
-    finally:
-        sim.close()
-    msg = str(err.value)
-    print(f"\nFS {exact:.4f}, one equilibrium stage: stopped at step {sim.step}: {msg}")
+    msg, step = stop_message(cohesive_slab_scene(cohesion, False,
+                                                 output=str(tmp_path / "plain.h5")))
+    print(f"\nFS {exact:.4f}, one equilibrium stage: stopped at step {step}: {msg}")
     assert msg.startswith("stages[0] 'equilibrium': the ratio cannot reach 1e-06")
     assert "block 'slab' is sliding on block 'base'" in msg
     assert "stronger joints for the equilibrium stage" in msg
