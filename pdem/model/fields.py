@@ -18,6 +18,7 @@ reads and writes (pdem.jit.access).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -259,13 +260,22 @@ def kernel_columns(record, table: dict[str, str], own: tuple[str, ...] = ()) -> 
     return tuple(name if name in own else table[name] for name in record._fields)
 
 
+@functools.cache
+def _store_names(record) -> tuple[str, ...]:
+    """The block store's name of each of a kernel record's fields (:func:`kernel_record`)."""
+    return tuple(KERNEL_FIELDS[name] for name in record._fields)
+
+
 def kernel_record(record, store, n: int | None = None, **given):
     """A kernel record (a namedtuple type such as pdem.dynamics.motion.Motion) filled by field
     name from a block store: each of the record's fields is the declared block field of that
     name (or whose ``kernel`` name it is), its first ``n`` rows (all with None); ``given``
     overrides fields by record name (e.g. the still flags in place of ``fixed``)."""
-    values = []
-    for name in record._fields:
-        a = given[name] if name in given else getattr(store, KERNEL_FIELDS[name])
-        values.append(a if n is None else a[:n])
+    values = [getattr(store, name) for name in _store_names(record)]
+    if given:
+        for k, name in enumerate(record._fields):
+            if name in given:
+                values[k] = given[name]
+    if n is not None:
+        values = [a[:n] for a in values]
     return record(*values)

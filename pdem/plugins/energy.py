@@ -24,6 +24,10 @@ log = logging.getLogger("pdem")
 COLUMNS = ("kinetic", "strain", "gravity_work", "applied_work", "boundary_work",
            "joint_dissipation", "damping_dissipation", "contact_work", "joint_created",
            "geometry_created", "removed", "balance_error")
+# the accumulated works of COLUMNS[2:-1], as columns of the block field ``work``
+WORK_COLUMNS = np.array([motion.WORK_GRAVITY, motion.WORK_APPLIED, motion.WORK_BOUNDARY,
+                         motion.WORK_JOINT, motion.WORK_DAMPING, motion.WORK_CONTACT,
+                         motion.WORK_JOINT_MADE, motion.WORK_GEOMETRY, motion.WORK_REMOVED])
 
 
 def energy_totals(state) -> dict[str, float]:
@@ -34,21 +38,20 @@ def energy_totals(state) -> dict[str, float]:
     """
     b, n = state.blocks, state.n_owned
     free = (b.fixed[:n] == 0) & (b.vfix[:n] != motion.VFIX_ALL)
-    ke = np.where(free, kinetic_per_block(b, slice(0, n)), 0.0)
+    per_block = np.empty((n, len(COLUMNS) - 1))
+    per_block[:, 0] = np.where(free, kinetic_per_block(b, slice(0, n)), 0.0)
     part = np.nonzero(free & (b.vfix[:n] != 0))[0]
-    for k in range(3):  # prescribed components hold no kinetic energy (as integrated)
-        r = part[(b.vfix[part] & (motion.VFIX_X << k)) != 0]
-        ke[r] -= 0.5 * b.mass[r] * b.mscale[r] * b.v[r, k] ** 2
+    if part.size:
+        ke = per_block[:, 0]
+        for k in range(3):  # prescribed components hold no kinetic energy (as integrated)
+            r = part[(b.vfix[part] & (motion.VFIX_X << k)) != 0]
+            ke[r] -= 0.5 * b.mass[r] * b.mscale[r] * b.v[r, k] ** 2
     strain = np.zeros(b.n)
     c = state.contacts
-    bodies = kernel_record(Bodies, b)
-    stored_energy(bodies, c.pairs(), c.subs(), state.joints.kernel_args, strain)
-    w = b.work[:n]
-    per_block = np.column_stack([ke, strain[:n], w[:, motion.WORK_GRAVITY],
-                                 w[:, motion.WORK_APPLIED], w[:, motion.WORK_BOUNDARY],
-                                 w[:, motion.WORK_JOINT], w[:, motion.WORK_DAMPING],
-                                 w[:, motion.WORK_CONTACT], w[:, motion.WORK_JOINT_MADE],
-                                 w[:, motion.WORK_GEOMETRY], w[:, motion.WORK_REMOVED]])
+    stored_energy(kernel_record(Bodies, b), c.pairs(), c.subs(), state.joints.kernel_args,
+                  strain)
+    per_block[:, 1] = strain[:n]
+    per_block[:, 2:] = b.work[:n, WORK_COLUMNS]
     sums = exact_sum(state.comm, per_block)
     return dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
 
