@@ -30,6 +30,13 @@ def _parser() -> argparse.ArgumentParser:
     end.add_argument("--time", type=float, help="model time to run from the checkpoint")
     end.add_argument("--steps", type=int, help="steps to run from the checkpoint")
     rs.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
+    w = sub.add_parser("warmup", help="compile and cache the kernels some scenes use, so that "
+                       "their runs start in seconds (under mpiexec: also the parallel ones)")
+    w.add_argument("scenes", nargs="*", metavar="SCENE", help="scene files (default: a built-in "
+                   "two-block scene)")
+    w.add_argument("--steps", type=int, default=20, help="steps to run each scene (default 20)")
+    w.add_argument("--once", action="store_true", help="nothing to do if this cache was warmed "
+                   "with these scenes on this many ranks already")
     c = sub.add_parser("check", help="validate a scene file and report its blocks")
     c.add_argument("scene")
     i = sub.add_parser("info", help="summarise a pdem output file")
@@ -68,6 +75,10 @@ def main(argv: list[str] | None = None) -> int:
             return _check(args, comm, log)
         if args.command == "restart":
             return _restart(args, comm, log)
+        if args.command == "warmup":
+            from .warmup import main as warmup
+
+            return warmup(comm, args.scenes, args.steps, args.once, log)
         return _run(args, comm, log)
     except UserError as exc:
         # every rank validates the same input, so every rank reaches here: no hang
