@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
+from ..memory import return_freed_memory
 from .block_series import BlockSeries, quat_to_matrix
 from .contact_series import ContactSeries
 from .h5core import REOPEN_EVERY, H5Core
@@ -219,18 +220,24 @@ class OutputWriter:
         self._times.append(float(time))
         if core.io:
             self._blocks.write(i, mine, step, time, stage)
+            self._fields.write(i, mine)
+            if self.zone_layout is not None:
+                self._zones.write(i, zone_items)
+        # the block rows are written: not held while the contacts' rounds are made
+        del gids, rows, mine, zone_items
         if self.contacts:  # every rank: the contacts are streamed in rounds
             self._contacts.write(i, source)
             del source
         if core.io:
-            if self.zone_layout is not None:
-                self._zones.write(i, zone_items)
-            self._fields.write(i, mine)
             if self.parallel and (i + 1) % REOPEN_EVERY == 0:
                 core.reopen()
             core.f.flush()
         if self.xdmf_path is not None and self.comm.rank == 0:
             self._write_xdmf()
+        # the snapshot's rows, rounds and HDF5's buffers back to the system: glibc keeps freed
+        # blocks for reuse, and each snapshot's peak otherwise came on top of the last one's
+        # (64,000 cubes on 2 ranks: ~45 MB a rank a snapshot, bench/output_memory.py)
+        return_freed_memory()
 
     def _write_xdmf(self) -> None:
         c, lay = self._contacts, self.zone_layout
