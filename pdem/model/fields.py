@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -261,9 +262,13 @@ def kernel_columns(record, table: dict[str, str], own: tuple[str, ...] = ()) -> 
 
 
 @functools.cache
-def _store_names(record) -> tuple[str, ...]:
-    """The block store's name of each of a kernel record's fields (:func:`kernel_record`)."""
-    return tuple(KERNEL_FIELDS[name] for name in record._fields)
+def _store_getter(record):
+    """The block store's arrays of a kernel record's fields, in its order
+    (:func:`kernel_record`): one C call, the names looked up once per record type."""
+    names = [KERNEL_FIELDS[name] for name in record._fields]
+    if len(names) == 1:  # (attrgetter of one name gives the value, not a tuple)
+        return lambda store: (getattr(store, names[0]),)
+    return operator.attrgetter(*names)
 
 
 def kernel_record(record, store, n: int | None = None, **given):
@@ -271,11 +276,11 @@ def kernel_record(record, store, n: int | None = None, **given):
     name from a block store: each of the record's fields is the declared block field of that
     name (or whose ``kernel`` name it is), its first ``n`` rows (all with None); ``given``
     overrides fields by record name (e.g. the still flags in place of ``fixed``)."""
-    values = [getattr(store, name) for name in _store_names(record)]
-    if given:
-        for k, name in enumerate(record._fields):
-            if name in given:
-                values[k] = given[name]
+    values = _store_getter(record)(store)
     if n is not None:
         values = [a[:n] for a in values]
+    if given:
+        values = list(values)
+        for name, a in given.items():
+            values[record._fields.index(name)] = a if n is None else a[:n]
     return record(*values)
