@@ -297,10 +297,13 @@ class Block(Strict):
             if kind not in ZONED_SHAPES:
                 raise ValueError(f"zones: not yet supported on {kind!r} blocks (a zoned block is "
                                  f"one convex {', '.join(ZONED_SHAPES)} shape)")
-            for key, rigid in (("fixed", False), ("velocity_fixed", False),
-                               ("angular_velocity", (0.0, 0.0, 0.0)), ("force", (0.0, 0.0, 0.0))):
-                if getattr(self, key) != rigid:
-                    raise ValueError(f"{key}: not yet supported on a zoned block (rigid only)")
+            if self.velocity_fixed and any(self.angular_velocity):
+                # a zoned block's prescribed motion is its gridpoints' fixed velocities, which
+                # are constant: a rigid rotation would need them to turn with the block
+                raise ValueError("velocity_fixed with angular_velocity: a zoned block's "
+                                 "prescribed motion is a constant velocity of its gridpoints "
+                                 "(give angular_velocity [0, 0, 0], or leave velocity_fixed "
+                                 "off to start it spinning)")
         return self
 
     @model_serializer(mode="wrap")

@@ -55,6 +55,7 @@ class DeformableBody:
         self.fixed = np.zeros((n, 3), bool)
         self.fixed_vel = np.zeros((n, 3))
         self.applied = np.zeros((n, 3))
+        self.loaded = False  # applied holds a load (GridStore.step adds it)
         self.nmd = bool(nmd)
         self.damping = float(damping)
         self.mass_scaling = bool(mass_scaling)

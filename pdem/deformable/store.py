@@ -86,7 +86,7 @@ class GridStore:
             mesh, surf_nodes = s.zoning
             mat = scene.materials[s.material]
             body = DeformableBody(mesh, mat.zone_spec(), nmd=s.spec.zones.nmd)
-            body.vel[:] = np.asarray(s.spec.velocity, float)  # the block's start velocity
+            block_conditions(body, s.spec)
             gids.append(first_gid + i)
             grids.append(ZonedGrid(s.name, body, surf_nodes, np.zeros((len(body.nodes), 3))))
         return cls(scene.gravity, gids, grids)
@@ -280,6 +280,8 @@ class GridStore:
             b = self.bodies[d]
             a, e = self.node_start[d], self.node_start[d + 1]
             applied = self.force[a:e] + gravity_forces(b.gravity_mass, self.gravity)
+            if b.loaded:  # a block's `force`, spread over its gridpoints
+                applied += b.applied
             if _cycle(b, applied, dt) < 1:
                 return self.gids[d]
             big = max(big, float(b.unbalanced[0]))
@@ -287,6 +289,34 @@ class GridStore:
         return -1
 
     # ------------------------------------------------------------------ checkpoints
+
+
+def block_conditions(body: DeformableBody, spec) -> None:
+    """A zoned block's ``blocks[i]`` motion keys, at its gridpoints (3DEC's meaning):
+    ``velocity`` and ``angular_velocity`` start every gridpoint at ``v + w x (x - c)`` (``c``
+    the block's centre of mass); ``fixed`` holds every gridpoint (velocity 0),
+    ``velocity_fixed`` prescribes ``velocity`` on every gridpoint; ``force`` is spread over
+    the gridpoints by their mass, so it moves the block as it would a rigid one (no moment
+    about the centre of mass) and strains it only where the block resists."""
+    m = body.gravity_mass
+    centre = m @ body.nodes / m.sum()
+    v0 = np.asarray(spec.velocity, float)
+    if spec.fixed:
+        body.fix(slice(None))
+        body.vel[:] = 0.0
+    elif spec.velocity_fixed:  # (no angular velocity: the scene grammar refuses it)
+        for k in range(3):
+            body.fix(slice(None), (k,), float(v0[k]))
+        body.vel[:] = v0
+    else:
+        body.vel[:] = v0
+        w = np.asarray(spec.angular_velocity, float)
+        if w.any():
+            body.vel += np.cross(w, body.nodes - centre)
+    force = np.asarray(spec.force, float)
+    body.loaded = bool(force.any())
+    if body.loaded:
+        body.applied[:] = np.outer(m / m.sum(), force)
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:

@@ -64,9 +64,15 @@ def gridpoint_candidates(verts_d, face_d, fvert_d, face_verts, normals_d, nodes_
         if facing <= 0.0:
             continue
         share = facing * 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz) / 3.0
-        area[p] += share
-        area[q] += share
-        area[t] += share
+        eps = 1e-9 * (np.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+                      + np.sqrt(e2[0] ** 2 + e2[1] ** 2 + e2[2] ** 2))
+        for a, b, c in ((p, q, t), (q, t, p), (t, p, q)):
+            # the gridpoint's third of the triangle (its barycentric cell), cut to O's
+            # outline: a gridpoint on the rim of O's face bears only the part of its share
+            # that O covers (its whole share made a 1 m2 rigid face on a larger zoned one
+            # bear on 1.83 m2)
+            area[a] += _covered_share(verts_d[a], verts_d[b], verts_d[c], share, facing,
+                                      normals_o, offsets_o, ux, uy, uz, eps)
     sel = np.zeros(nv, np.int64)
     un = np.zeros(nv)
     m = 0
@@ -81,6 +87,68 @@ def gridpoint_candidates(verts_d, face_d, fvert_d, face_verts, normals_d, nodes_
             un[m] = -dn
             m += 1
     return sel[:m], area[sel[:m]], un[:m]
+
+
+@kernel
+def _plane_distance(p, n, o):
+    return n[0] * p[0] + n[1] * p[1] + n[2] * p[2] - o
+
+
+@kernel
+def _covered_share(a, b, c, share, facing, normals_o, offsets_o, ux, uy, uz, eps):
+    """Gridpoint ``a``'s area share of triangle ``abc`` (``share``: a third of its area times
+    ``facing``) that lies within O's outline: its barycentric cell (``a``, the midpoints of
+    ``ab`` and ``ac``, the centroid; a third of the triangle) clipped by O's face planes that
+    do not face D (normals not within 60 degrees of ``-u``, as :func:`_outside`). ``share``
+    itself, bitwise, when no such plane cuts the cell by more than ``eps``."""
+    m = normals_o.shape[0]
+    poly = np.empty((4 + m, 3))
+    poly[0] = a
+    poly[1] = 0.5 * (a + b)
+    poly[2] = (a + b + c) / 3.0
+    poly[3] = 0.5 * (a + c)
+    n = 4
+    cut = False
+    for f in range(m):
+        if normals_o[f, 0] * ux + normals_o[f, 1] * uy + normals_o[f, 2] * uz < -0.5:
+            continue  # a face facing D: what the overlap is measured across
+        for k in range(n):
+            if _plane_distance(poly[k], normals_o[f], offsets_o[f]) > eps:
+                cut = True
+                break
+    if not cut:
+        return share
+    buf = np.empty((4 + m, 3))
+    for f in range(m):
+        if n == 0:
+            break
+        nf = normals_o[f]
+        if nf[0] * ux + nf[1] * uy + nf[2] * uz < -0.5:
+            continue
+        # Sutherland-Hodgman: keep the part of the polygon with n . x <= o
+        k = 0
+        for i in range(n):
+            p, q = poly[i], poly[(i + 1) % n]
+            dp = _plane_distance(p, nf, offsets_o[f])
+            dq = _plane_distance(q, nf, offsets_o[f])
+            if dp <= 0.0:
+                buf[k] = p
+                k += 1
+            if (dp <= 0.0) != (dq <= 0.0):
+                buf[k] = p + (dp / (dp - dq)) * (q - p)
+                k += 1
+        n = k
+        poly[:n] = buf[:n]
+    if n < 3:
+        return 0.0
+    sx = sy = sz = 0.0
+    for i in range(1, n - 1):
+        e1 = poly[i] - poly[0]
+        e2 = poly[i + 1] - poly[0]
+        sx += e1[1] * e2[2] - e1[2] * e2[1]
+        sy += e1[2] * e2[0] - e1[0] * e2[2]
+        sz += e1[0] * e2[1] - e1[1] * e2[0]
+    return facing * 0.5 * np.sqrt(sx * sx + sy * sy + sz * sz)
 
 
 @kernel

@@ -18,7 +18,9 @@ pytestmark = [pytest.mark.mpi(min_size=2), pytest.mark.timeout(900, method="thre
 
 # a row of cubes on a fixed floor along x, zoned (soft) and rigid alternating, the zoned ones
 # thrown +x and the rigid ones -x: they collide across the cuts; the small margin makes the
-# blocks migrate and their ghosts be rebuilt several times
+# blocks migrate and their ghosts be rebuilt several times. z0 also spins (its gridpoints
+# start in rigid rotation) and z4 is pushed (`force` spread over its gridpoints): the
+# conditions travel with their grids
 SCENE = """
 name: zoned-row
 materials:
@@ -30,7 +32,7 @@ joints: {{default: {{kn: 5.0e8, ks: 2.0e8, friction: 20.0}}}}
 blocks:
   - {{name: floor, box: {{min: [-4, -1, -1], max: [4, 1, 0]}}, material: rock, fixed: true}}
   - {{name: z0, box: {{min: [-2.56, -0.5, 0], max: [-1.56, 0.5, 1]}}, material: soft,
-      zones: {{size: 0.5}}, velocity: [3, 0, 0]}}
+      zones: {{size: 0.5}}, velocity: [3, 0, 0], angular_velocity: [0, 0, 2]}}
   - {{name: r1, box: {{min: [-1.53, -0.5, 0], max: [-0.53, 0.5, 1]}}, material: rock,
       velocity: [-1, 0, 0]}}
   - {{name: z2, box: {{min: [-0.48, -0.5, 0], max: [0.52, 0.5, 1]}}, material: weak,
@@ -38,7 +40,7 @@ blocks:
   - {{name: r3, box: {{min: [0.55, -0.5, 0], max: [1.55, 0.5, 1]}}, material: rock,
       velocity: [-3, 0, 0]}}
   - {{name: z4, box: {{min: [1.58, -0.5, 0], max: [2.58, 0.5, 1]}}, material: soft,
-      zones: {{size: 0.5}}, velocity: [-3, 0, 0]}}
+      zones: {{size: 0.5}}, velocity: [-3, 0, 0], force: [-2.0e4, 0, 0]}}
 solve: {{steps: {steps}, damping: none}}
 parallel: {{margin: 0.01}}
 output: {{file: {out}, every_steps: {every}, contacts: false}}
