@@ -37,6 +37,13 @@ import numpy as np
 
 from .config import ConfigError
 from .config.schema import CONDITION_MODELS, BoundaryStress, BoundaryVelocity, Selection
+from .deformable.conditions import (
+    GridConditions,
+    gridpoints,
+    owned_count,
+    sync_fixed_rows,
+    zoned_mask,
+)
 from .dynamics import motion
 from .dynamics.rotation import quat_to_matrix
 from .registry import Registry
@@ -75,6 +82,8 @@ class Boundary:
         self.f_normal = np.zeros((0, 3))
         self.f_center = np.zeros((0, 3))
         self.f_sigma = np.zeros((0, 3, 3))
+        # the conditions on zoned blocks' gridpoints and surface faces
+        self.grid = GridConditions()
 
     @property
     def active(self) -> bool:
@@ -226,6 +235,15 @@ def _inside(p, vs, n, tol) -> bool:
 def exposed_faces(g, gids: np.ndarray, ctol: float):
     """(gid, area, normal, centroid) of the exposed faces of blocks ``gids`` of the global
     store ``g`` at its poses (body-frame normal and centroid); see the module docstring."""
+    gid, rows = exposed_face_rows(g, gids, ctol)
+    geo = [_face_geometry(g, f) for f in rows]
+    return (gid, np.array([a for a, _, _ in geo], float),
+            g.normals_local[rows].reshape(-1, 3),
+            np.array([c for _, c, _ in geo], float).reshape(-1, 3))
+
+
+def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.ndarray]:
+    """(gid, face row of ``g``) of the exposed faces of blocks ``gids`` (module docstring)."""
     R = _rotations(g.q)
     world = lambda b, p: g.x[b] + R[b] @ p  # noqa: E731
     n_pieces = len(g.piece_block)
@@ -235,7 +253,19 @@ def exposed_faces(g, gids: np.ndarray, ctol: float):
     vworld = g.x[vblock] + np.einsum("vij,vj->vi", R[vblock], g.verts_local)
     lo = np.minimum.reduceat(vworld, g.vert_start[:-1], axis=0)
     hi = np.maximum.reduceat(vworld, g.vert_start[:-1], axis=0)
-    out = ([], [], [], [])
+    out = ([], [])
+    pieces: dict[int, tuple] = {}  # a piece's faces in the world: normals, centroids, polygons
+
+    def faces_of(q):
+        if q not in pieces:
+            bq = g.piece_block[q]
+            fs = range(g.face_start[q], g.face_start[q + 1])
+            geo = [_face_geometry(g, h) for h in fs]
+            pieces[q] = (g.normals_local[g.face_start[q]:g.face_start[q + 1]] @ R[bq].T,
+                         np.array([world(bq, c) for _, c, _ in geo]).reshape(-1, 3),
+                         [g.x[bq] + vh @ R[bq].T for _, _, vh in geo])
+        return pieces[q]
+
     for b in gids:
         for p in range(g.piece_start[b], g.piece_start[b + 1]):
             for f in range(g.face_start[p], g.face_start[p + 1]):
@@ -252,43 +282,50 @@ def exposed_faces(g, gids: np.ndarray, ctol: float):
                 for q in near:
                     if q == p:
                         continue
-                    bq = g.piece_block[q]
-                    for h in range(g.face_start[q], g.face_start[q + 1]):
-                        m = R[bq] @ g.normals_local[h]
-                        if np.dot(m, n) >= -COVER_COS:
-                            continue
-                        ah, ch, vh = _face_geometry(g, h)
-                        chw = world(bq, ch)
-                        if abs(np.dot(chw - c, n)) > ctol:
-                            continue
-                        vhw = g.x[bq] + vh @ R[bq].T
-                        if _inside(c, vhw, m, ctol) or _inside(chw, vw, n, ctol):
+                    m, chw, vhw = faces_of(q)
+                    # antiparallel faces in the same plane, then the polygons
+                    cand = np.nonzero((m @ n < -COVER_COS)
+                                      & (np.abs((chw - c) @ n) <= ctol))[0]
+                    for h in cand:
+                        if _inside(c, vhw[h], m[h], ctol) or _inside(chw[h], vw, n, ctol):
                             covered = True
                             break
                     if covered:
                         break
                 if not covered:
                     out[0].append(b)
-                    out[1].append(area)
-                    out[2].append(nb)
-                    out[3].append(cb)
-    return (np.array(out[0], np.int64), np.array(out[1], float),
-            np.array(out[2], float).reshape(-1, 3), np.array(out[3], float).reshape(-1, 3))
+                    out[1].append(f)
+    return np.array(out[0], np.int64), np.array(out[1], np.int64)
 
 
 def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True) -> None:
     """Put the conditions of every kind that ``source`` (the scene's ``boundary:`` or a
     stage) lists on the blocks they select (every rank alike); ``where``: the key path of
-    ``source`` in the scene (for messages), ``t0``: when their histories start."""
+    ``source`` in the scene (for messages), ``t0``: when their histories start. Zoned
+    blocks take a condition at their gridpoints or faces (the kind's ``zoned``,
+    pdem.deformable.conditions); the rows of those left wholly fixed count as fixed."""
+    zoned = s.grids is not None
     for key, kind in BOUNDARY_KINDS.items():
         # a scene validated before its kind was registered has none of its conditions
         for j, cond in enumerate(getattr(source, key, ())):
+            at = s.scene.at(*where, key, j)
             gids = selected(s, cond)
-            if not len(gids):
-                raise ConfigError([f"{s.scene.at(*where, key, j)}: selects no block"])
-            problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
-            if problem:
-                raise ConfigError([f"{s.scene.at(*where, key, j)}: {problem}"])
+            hit = 0
+            if zoned:
+                gids = gids[~zoned_mask(s, gids)]
+                if kind.zoned is None:
+                    if owned_count(s, gridpoints(s, cond)):
+                        raise ConfigError([f"{at}: does not act on zoned blocks"])
+                else:
+                    hit = kind.zoned(s.boundary, s, cond, t0, motion_too, at)
+            if not len(gids) and not hit:
+                raise ConfigError([f"{at}: selects no block"])
+            if len(gids):
+                problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
+                if problem and not hit:
+                    raise ConfigError([f"{at}: {problem}"])
+    if zoned:
+        sync_fixed_rows(s)
 
 
 def apply_scene(s) -> None:
@@ -323,7 +360,10 @@ class BoundaryKind:
     the first step (None: nothing); ``whole_scene``: it looks for what it acts on among
     every block, so set-up keeps every block's geometry on every rank. A stage with an
     active condition steps in Python (the compiled loop runs none yet). A kind keeps its
-    own state on the :class:`Boundary` (an attribute it sets in ``add``)."""
+    own state on the :class:`Boundary` (an attribute it sets in ``add``). ``zoned(boundary,
+    s, cond, t0, motion_too, at)``: the condition on zoned blocks (their gridpoints or
+    faces, pdem.deformable.conditions; collective), the number of zoned blocks it took;
+    None: a kind that does not act on zoned blocks (a selection of one is refused)."""
 
     condition: type[Selection]
     add: Callable[..., str | None]
@@ -331,6 +371,7 @@ class BoundaryKind:
     before_step: Callable[[Boundary, object], None]
     at_start: Callable[[Boundary, object], None] | None = None
     whole_scene: bool = False
+    zoned: Callable[..., int] | None = None
 
     def __post_init__(self):
         if not (isinstance(self.condition, type) and issubclass(self.condition, Selection)):
@@ -342,18 +383,49 @@ def _add_velocity(boundary, s, cond, gids, t0, motion_too):
     boundary.add_velocity(s, cond, gids, t0, motion_too)
 
 
+def _zoned_velocity(boundary, s, cond, t0, motion_too, at) -> int:
+    """A velocity condition at the gridpoints it selects (the grids' count, collective)."""
+    hits = gridpoints(s, cond)
+    n = owned_count(s, hits)
+    if n and any(cond.angular_velocity):
+        raise ConfigError([f"{at}.angular_velocity: a zoned block's gridpoints take a "
+                           "constant velocity, not a rotation (prescribe velocity components)"])
+    v0 = history_velocity(cond.history, 0.0) if cond.history is not None \
+        else np.array(cond.velocity, float)
+    boundary.grid.fix(hits, ["xyz".index(c) for c in cond.components], v0, motion_too,
+                      cond.history, t0)
+    return n
+
+
 def _add_stress(boundary, s, cond, gids, t0, motion_too):
     if not boundary.add_stress(s, cond, gids):
         return "the selected blocks have no exposed face"
     return None
 
 
+def _zoned_stress(boundary, s, cond, t0, motion_too, at) -> int:
+    """A boundary stress on the exposed surface faces of the zoned blocks it selects."""
+    return boundary.grid.add_stress(s, cond, cond.sigma(),
+                                    lambda gids: exposed_face_rows(s.glob, gids, s.ctol))
+
+
+def _prescribe(boundary, s):
+    boundary.prescribe(s)
+    boundary.grid.prescribe(s, history_velocity)
+
+
+def _tractions(boundary, s):
+    boundary.tractions(s)
+    boundary.grid.tractions(s)
+
+
 BOUNDARY_KINDS: Registry[BoundaryKind] = Registry("boundary condition")
 # velocities first: their histories are written into v before the tractions are computed
 BOUNDARY_KINDS.register("velocity", BoundaryKind(
-    BoundaryVelocity, _add_velocity, lambda b: bool(b.histories), Boundary.prescribe))
+    BoundaryVelocity, _add_velocity, lambda b: bool(b.histories or b.grid.histories),
+    _prescribe, zoned=_zoned_velocity))
 BOUNDARY_KINDS.register("stress", BoundaryKind(
-    BoundaryStress, _add_stress, lambda b: len(b.f_gid) > 0, Boundary.tractions,
-    at_start=Boundary.tractions, whole_scene=True))
+    BoundaryStress, _add_stress, lambda b: len(b.f_gid) > 0 or len(b.grid.t_gid) > 0,
+    _tractions, at_start=_tractions, whole_scene=True, zoned=_zoned_stress))
 # the scene grammar's keys follow the kinds: one registration here, from anywhere, is a kind
 CONDITION_MODELS.follow(BOUNDARY_KINDS, lambda kind: kind.condition)

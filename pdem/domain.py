@@ -53,6 +53,8 @@ def remove_blocks(state, bodies, gids: np.ndarray, code: int, why: str) -> None:
     b.work[rows, motion.WORK_REMOVED] += kinetic_per_block(b, rows)
     # every rank's copy of every such block, owned or ghost
     set_block_fields(state, gids, fixed=1, out=code, v=0.0, w=0.0, L=0.0)
+    if state.grids is not None:  # a zoned block's grid stops where it is
+        state.grids.remove(gids)
     c = state.contacts
     if code == DELETED and c.n:
         gone = np.isin(c.ga, gids) | np.isin(c.gb, gids)

@@ -65,10 +65,23 @@ def _initialise(ia, normal, ctype, sc_start, x, R, pa, area, un, dil, fs, us, kn
                     us[s, i] = 0.0
 
 
+def zone_stresses(grids, ins) -> None:
+    """Every held grid's zone stresses from the in-situ field at the zone centroids (zone
+    stresses are tension positive, as the field)."""
+    s0, grad = np.asarray(ins.stress, float), np.asarray(ins.gradient, float)
+    for body in grids.bodies:
+        z = body.nodes[body.tets, 2].mean(axis=1)
+        body.stress[:] = s0[None] + np.outer(z - float(ins.reference_z), grad)
+
+
 def initialise(state) -> None:
     """Set every contact's sub-contact forces from the scene's in-situ stress (this rank's
-    contacts; collective only through nothing: each rank does its own)."""
+    contacts; collective only through nothing: each rank does its own), and the zoned
+    blocks' zone stresses (3DEC's ``zone initialize-stresses``): with boundary stresses
+    equal to the field on its exposed faces, a zoned rock mass starts in equilibrium."""
     ins = state.scene.insitu
+    if state.grids is not None:
+        zone_stresses(state.grids, ins)
     c = state.contacts
     b = state.blocks
     if c.n == 0:

@@ -123,6 +123,8 @@ def _restore_share(state, out, x, block_rows, contacts, path, read: bool = True,
     gone = out > 0  # blocks that left the model domain act as fixed ones
     state.glob.fixed[gone] = 1
     state.glob.out[gone] = out[gone]
+    if state.grids is not None:  # grids of blocks taken out are held still, not stepped
+        state.grids.remove(np.nonzero(gone)[0])
     if state.share is None:  # every rank has every block: it takes its own
         owned = np.nonzero(state.decomp.owner_of(x) == state.comm.rank)[0]
         source = state.scene_store()

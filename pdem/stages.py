@@ -20,6 +20,7 @@ from .boundary import apply_conditions
 from .config import ConfigError
 from .config.stages import stage_scene
 from .contact.laws import joint_table
+from .deformable.conditions import gridpoints, owned_count, spread_force, zoned_mask
 from .domain import DELETED, remove_blocks
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
@@ -38,21 +39,38 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
     st = s.scene.stages[k]
     staged = stage_scene(s.scene, k)
     s.joints = joint_table(staged, s.group_names)
+    zoned = s.grids is not None
     for key, sel, fixed in (("fix", st.fix, 1), ("free", st.free, 0)):
         if sel is None:
             continue
         gids = selected(s, sel)
-        if not len(gids):
+        hit = 0
+        if zoned:  # zoned blocks: their gridpoints (in range) held or released
+            gids = gids[~zoned_mask(s, gids)]
+            hits = gridpoints(s, sel)
+            hit = owned_count(s, hits)
+            if fixed:
+                s.boundary.grid.fix(hits, (0, 1, 2), np.zeros(3), motion)
+            else:
+                s.boundary.grid.free(hits)
+        if not len(gids) and not hit:
             raise ConfigError([f"{s.scene.at('stages', k, key)}: selects no block"])
         set_block_fields(s, gids, fixed=fixed, vfix=0)
         s.boundary.release(gids)
         if fixed and motion:
             set_block_fields(s, gids, v=0.0, w=0.0, L=0.0)
+    # (the zoned rows' fixed flags follow their grids at its end)
     apply_conditions(s, st, ("stages", k), s.stage_times.get(k, s.time), motion)
     for j, pf in enumerate(st.force):
         gids = selected(s, pf)
         if not len(gids):
             raise ConfigError([f"{s.scene.at('stages', k, 'force', j)}: selects no block"])
+        if zoned:  # spread over the gridpoints of each zoned block selected
+            on = zoned_mask(s, gids)
+            g = s.grids
+            spread_force([(d, g.bodies[d], None) for d in range(len(g))
+                          if g.gids[d] in set(gids[on].tolist())], pf.force)
+            gids = gids[~on]
         set_block_fields(s, gids, applied_force=pf.force)
     _solve_settings(s, staged, k, report=motion)
     s.stage = k
@@ -99,6 +117,8 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     alike; a restart replays this (:func:`replay_stages`), so they need no checkpoint."""
     rows, n = timestep_rows(s)
     rows.mscale[:] = 1.0
+    if s.grids is not None:  # a zoned block held at its gridpoints still steps its grid
+        rows.fixed = np.where(zoned_mask(s, rows.gid), 0, rows.fixed).astype(rows.fixed.dtype)
     stiffness = estimated_stiffness(s.specs, s.joints, rows.gid)
     names = s.specs.names  # read by index, in messages
     st = s.scene.stages[k].solve
@@ -112,6 +132,8 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     s.damping = DAMPING[d.mode]
     default = DAMPING[d.mode].default_alpha
     s.alpha = d.alpha if d.alpha is not None else (default if default is not None else s.alpha)
+    if s.grids is not None:  # the grids' damping, masses and step for the stage
+        s.dt = s.grids.restage(staged, s.dt, s.alpha, s.comm)
 
 
 def run_stages(run) -> list[dict]:

@@ -959,19 +959,22 @@ class Scene(Strict):
                                   "poisson (a zoned block needs its elasticity)")
         zoned = [b.name for b in self.blocks if b.zones is not None]
         if zoned:
-            for key in ("join", "excavate", "stages", "insitu"):
-                if getattr(self, key):
-                    errors.append(f"{key}: not yet supported with zoned blocks "
-                                  f"({', '.join(zoned)})")
+            if self.join:
+                errors.append(f"join: not yet supported with zoned blocks ({', '.join(zoned)})")
+            for k, st in enumerate(self.stages):
+                if st.factor_of_safety is not None:
+                    errors.append(f"stages[{k}].factor_of_safety: not yet supported with zoned "
+                                  f"blocks ({', '.join(zoned)})")
+                d = st.solve.damping if st.solve is not None else None
+                if d is not None and d.mode not in ("none", "local"):
+                    errors.append(f"stages[{k}].solve.damping.mode: not yet supported with "
+                                  f"zoned blocks ({', '.join(zoned)}); use none or local")
             sv = self.solve
             for key, bad in (("solve.inactive", sv.inactive is not None),
-                             ("solve.damping.mode", sv.damping.mode not in ("none", "local")),
-                             ("domain", self.domain is not None)):
+                             ("solve.damping.mode", sv.damping.mode not in ("none", "local"))):
                 if bad:
                     errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
                                   + ("; use none or local" if key == "solve.damping.mode" else ""))
-            if any(getattr(self.boundary, key) for key in CONDITION_MODELS):
-                errors.append(f"boundary: not yet supported with zoned blocks ({', '.join(zoned)})")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}

@@ -54,8 +54,11 @@ class DeformableBody:
         self.gravity = np.asarray(gravity, float)
         self.fixed = np.zeros((n, 3), bool)
         self.fixed_vel = np.zeros((n, 3))
+        # a prescribed velocity's history (pdem.deformable.conditions): its index, -1 none
+        self.vhist = np.full((n, 3), -1, np.int32)
         self.applied = np.zeros((n, 3))
         self.loaded = False  # applied holds a load (GridStore.step adds it)
+        self.active = True  # stepped (False: its block was taken out of the model)
         self.nmd = bool(nmd)
         self.damping = float(damping)
         self.mass_scaling = bool(mass_scaling)

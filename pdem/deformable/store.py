@@ -23,9 +23,9 @@ from ..parallel.halo import RowHalo
 from .body import DeformableBody
 from .columns import TRI, W
 from .contact import Grid, refresh_pieces
-from .motion import critical_timestep, cycle, scaled_masses
+from .motion import critical_timestep, cycle, nodal_stiffness, scaled_masses
 from .subcontacts import regrid
-from .zones import gravity_forces
+from .zones import gravity_forces, zone_geometry
 
 # margin under the grids' Gershgorin step (a guaranteed bound of the elastic grid with its
 # joint springs; the margin covers the coupling to rigid blocks through their contacts)
@@ -59,6 +59,9 @@ class GridStore:
         self.vel = np.zeros((n, 3))
         self.force = np.zeros((n, 3))  # contact forces on the gridpoints (F^c of eq. 54)
         self.gmass = np.empty(n)
+        # boundary stresses on the owned grids' faces this step (pdem.deformable.conditions)
+        self.bload = np.zeros((n, 3))
+        self.bloaded = False
         for d, (b, z) in enumerate(zip(self.bodies, grids, strict=True)):
             # the bodies' node arrays become views of the flat ones
             a, e = self.node_start[d], self.node_start[d + 1]
@@ -122,31 +125,51 @@ class GridStore:
     @staticmethod
     def _stiffness(b, kn: float) -> np.ndarray:
         """A grid's Gershgorin gridpoint stiffness with the joints' normal stiffness at its
-        surface gridpoints (eq. 85: ``k_i += kn A_i``, ``A_i`` a third of its surface
-        triangles' area)."""
-        k = b.stiffness()
-        tri = b.mesh.surface
-        x = b.nodes
-        area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]],
-                                             x[tri[:, 2]] - x[tri[:, 0]]), axis=1)
-        np.add.at(k, tri.ravel(), np.repeat(kn * area / 3.0, 3))
-        return k
+        surface gridpoints (eq. 85's ``kn A_i``, ``A_i`` a third of its surface triangles'
+        area, counted twice: on the diagonal and coupling), on its reference (build)
+        geometry: a stage's step and mass scaling are then the same whether the run went
+        straight or was restarted (the replay of the stages sees the built grid)."""
+        grad = np.empty_like(b.grad)
+        vol = np.empty_like(b.vol)
+        zone_geometry(b.nodes0, b.tets, grad, vol)
+        k = nodal_stiffness(b.tets, grad, vol, b.params.bulk, b.params.shear, len(b.nodes0))
+        # a joint spring couples the gridpoint to the other block: its Gershgorin row holds
+        # the spring on the diagonal and again off it (eq. 85's kn A_i alone bounds the step
+        # only against a fixed block)
+        return k + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
 
-    def timestep(self, kn: float) -> float:
+    def timestep(self, kn: float, owned: bool = False) -> float:
         """The zone term of eq. 88 (:meth:`_stiffness`, the inertial masses): the smallest
-        over the grids (inf without)."""
+        over the grids (``owned``: the owned ones; inf without)."""
         dt = np.inf
-        for b in self.bodies:
+        for b in self.bodies[:self.n_owned] if owned else self.bodies:
             dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.damping))
         return float(dt)
 
-    def scale_masses(self, kn: float, dt: float) -> None:
+    def scale_masses(self, kn: float, dt: float | None) -> None:
         """Mass scaling (``solve.mass_scaling``): each gridpoint's inertial mass raised, where
         it is too light, to make ``dt`` ``GRID_FRAC`` of its critical step (with the grid's
-        local damping); gravity keeps the true masses (``gravity_mass``)."""
+        local damping); gravity keeps the true masses (``gravity_mass``). ``dt`` None: the
+        true masses."""
         for b in self.bodies:
+            if dt is None:
+                b.mass = b.gravity_mass
+                continue
             need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.damping)
             b.mass = np.maximum(b.gravity_mass, need)
+
+    def restage(self, scene, dt: float, alpha: float, comm) -> float:
+        """A stage's settings on the grids (``scene``: the scene as the stage has it): its
+        damping, its mass scaling to the rigid step ``dt``, and the model step, as
+        :meth:`resolve` makes them at the start (collective). Returns the step."""
+        self.set_damping(alpha if scene.solve.damping.mode == "local" else 0.0)
+        kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.scale_masses(kn, dt if scene.solve.mass_scaling else None)
+        grid_dt = min(allgather(comm, GRID_FRAC * self.timestep(kn, owned=True)))
+        if scene.solve.mass_scaling and grid_dt >= dt * (1.0 - 1e-9):
+            grid_dt = dt
+        self.dt = grid_dt
+        return min(dt, grid_dt)
 
     def resolve(self, scene, resolved, comm):
         """The model step: the rigid one or the grids' (eq. 88, with the largest joint normal
@@ -163,9 +186,7 @@ class GridStore:
         self.dt = min(allgather(comm, GRID_FRAC * self.timestep(kn)))
         if scene.solve.mass_scaling and self.dt >= resolved.dt * (1.0 - 1e-9):
             self.dt = resolved.dt  # scaled for it (up to the round-off of the bound)
-        g = float(np.linalg.norm(self.gravity))
-        sums = np.sum(allgather(comm, (g * float(self.gmass.sum()), len(self.gmass))), axis=0)
-        self.ref_force = float(sums[0] / sums[1]) if sums[0] > 0 else 1.0
+        self.ref_force = self.force_scale(scene, comm)
         if self.dt < resolved.dt and comm.rank == 0:
             import logging
 
@@ -173,6 +194,24 @@ class GridStore:
                 "the zoned blocks' grids limit the step: %.3g s (%.2f of their Gershgorin "
                 "bound with kn %.3g; the rigid step %.3g s)", self.dt, GRID_FRAC, kn, resolved.dt)
         return dataclasses.replace(resolved, dt=min(resolved.dt, self.dt))
+
+    def force_scale(self, scene, comm) -> float:
+        """``solve.ratio``'s scale for the grids (collective): the larger of the mean
+        gridpoint weight and the force of the scene's largest stress (in-situ, boundary, a
+        stage's) on a zone face, ``sigma (mean zone volume)^(2/3)`` (FLAC's "average applied
+        force" where stresses, not weight, load the model); 1 N if neither."""
+        g = float(np.linalg.norm(self.gravity))
+        vol = sum(float(b.vol.sum()) for b in self.bodies)
+        zones = sum(len(b.vol) for b in self.bodies)
+        sums = np.sum(allgather(comm, (g * float(self.gmass.sum()), len(self.gmass), vol, zones)),
+                      axis=0)
+        weight = float(sums[0] / sums[1]) if sums[1] > 0 else 0.0
+        stress = [abs(v) for v in scene.insitu.stress] if scene.insitu is not None else []
+        for source in (scene.boundary, *scene.stages):
+            for cond in getattr(source, "stress", ()):
+                stress.extend(abs(v) for row in cond.sigma() for v in row)
+        face = (sums[2] / sums[3]) ** (2.0 / 3.0) if sums[3] > 0 else 0.0
+        return max(weight, max(stress, default=0.0) * face) or 1.0
 
     # ------------------------------------------------------------------ in a model state
     def bind(self, blocks) -> None:
@@ -270,6 +309,20 @@ class GridStore:
             out[blocks.vert_start[k]:blocks.vert_start[k + 1]] = self.node_start[d] + self.surf[d]
         return out
 
+    def remove(self, gids) -> None:
+        """Grids of blocks taken out of the model (excavated, deleted, frozen): held still
+        and no longer stepped (their zones keep their last stresses)."""
+        gone = {int(g) for g in gids}
+        for d, g in enumerate(self.gids):
+            if g in gone:
+                b = self.bodies[d]
+                b.active = False
+                b.fixed[:] = True
+                b.fixed_vel[:] = 0.0
+                b.vhist[:] = -1
+                b.vel[:] = 0.0
+                self.force[self.node_start[d]:self.node_start[d + 1]] = 0.0
+
     def step(self, dt: float) -> int:
         """One grid step of every owned zoned block: forces at t (contacts + gravity +
         zones). Returns the gid of the first block whose grid folded (a zone inverted),
@@ -278,10 +331,14 @@ class GridStore:
         big = 0.0
         for d in range(self.n_owned):
             b = self.bodies[d]
+            if not b.active:  # taken out of the model (:meth:`remove`)
+                continue
             a, e = self.node_start[d], self.node_start[d + 1]
             applied = self.force[a:e] + gravity_forces(b.gravity_mass, self.gravity)
             if b.loaded:  # a block's `force`, spread over its gridpoints
                 applied += b.applied
+            if self.bloaded:  # boundary stresses on its faces
+                applied += self.bload[a:e]
             if _cycle(b, applied, dt) < 1:
                 return self.gids[d]
             big = max(big, float(b.unbalanced[0]))
@@ -317,6 +374,15 @@ def block_conditions(body: DeformableBody, spec) -> None:
     body.loaded = bool(force.any())
     if body.loaded:
         body.applied[:] = np.outer(m / m.sum(), force)
+
+
+def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Each gridpoint's share of the surface: a third of its surface triangles' area."""
+    area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]],
+                                         x[tri[:, 2]] - x[tri[:, 0]]), axis=1)
+    share = np.zeros(len(x))
+    np.add.at(share, tri.ravel(), np.repeat(area / 3.0, 3))
+    return share
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float) -> int:

@@ -16,9 +16,11 @@ the surface area. That is done here, after the common-plane update:
   shares sum to its area; its overlap ``un`` minus the same maximum over ``O``'s faces that
   face ``D`` (normals within 60 degrees of ``-u``), so that a gridpoint on the rim of two
   flush faces (on ``O``'s side planes) has the overlap across them; its point the gridpoint;
-- its joint history (shear force and displacement, dilation, state bits, law columns) is the
-  previous sub-contact's at the same gridpoint of the same contact, if there was one: the
-  gridpoints are material points, so this transfer is exact.
+- its joint history (shear force and displacement, dilation, state bits, law columns) and its
+  normal displacement ``un`` are the previous sub-contact's at the same gridpoint of the same
+  contact, if there was one (:data:`CARRIED`): the gridpoints are material points, so this
+  transfer is exact, and ``un`` is integrated from the relative velocity as in 3DEC (the
+  overlap above is only a new sub-contact's start).
 
 When none of D's gridpoints meets O (a rigid corner or edge, or a zoned block's gridpoint,
 pressing into D's face between D's gridpoints), the sub-contacts are O's vertices within the
@@ -206,6 +208,14 @@ def _world_planes(b, k, r):
     return n, b.offsets_local[f0:f1] + n @ b.x[r]
 
 
+# what a sub-contact at the same gridpoint of the same contact keeps over an update: its joint
+# history and its normal displacement, integrated from the relative velocity since it was
+# made (3DEC's incremental form). Its overlap measured afresh would throw away a closure that
+# no geometry shows: the in-situ stress's (pdem.insitu), which the update after the first
+# motion then lost (a zoned rock mass cut into pieces jumped out of its in-situ equilibrium).
+CARRIED = ("sc_un", "sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist")
+
+
 def carry_grid_columns(old: np.ndarray, old_start: np.ndarray, start: np.ndarray,
                        todo: np.ndarray) -> np.ndarray:
     """The ``sc_grid`` columns after a contact update (``start``: the updated store's
@@ -278,7 +288,7 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
             for i, g in enumerate(nodes):
                 s = where.get(int(g))
                 if s is not None:
-                    for k in ("sc_fs", "sc_us", "sc_dil", "sc_state", "sc_hist"):
+                    for k in CARRIED:
                         sub[k][i] = old.sub[k][s]
         for k in parts:
             parts[k].append(sub[k])

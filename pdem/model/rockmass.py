@@ -174,7 +174,10 @@ def join_slivers(spread: Spread, fraction: float, same_parent: bool = True) -> S
     comm, local = spread.comm, spread.local
     count = spread.counts(lambda s: s.parent)
     vol = spread.gathered(np.array([s.volume for s in local], float))
-    is_cut = spread.gathered(np.array([count[s.parent] > 1 for s in local], bool))
+    # a zoned piece is never joined (a zoned block is one convex piece; its step is its
+    # zones', not its size's)
+    is_cut = spread.gathered(np.array([count[s.parent] > 1 and s.spec.zones is None
+                                       for s in local], bool))
     if not is_cut.any():
         return spread
     limit = fraction * float(np.median(vol[is_cut]))
@@ -185,7 +188,7 @@ def join_slivers(spread: Spread, fraction: float, same_parent: bool = True) -> S
 
     def kind(s):
         return (s.material, s.group, s.excavate_at, s.excavate_stage,
-                s.parent if same_parent else None)
+                s.parent if same_parent else None, s.spec.zones is not None)
 
     # every block's kind as a number, the same on every rank
     kinds: dict = {}
@@ -523,11 +526,14 @@ def _excavated(scene, s, exc, stage, later, normals, offsets):
                 inside.append(part)
     if not changed:
         return None
-    made = [dataclasses.replace(s, pieces=[outside[i] for i in g])
-            for g in components(outside)]
+    # a zoned block is one convex piece: its pieces stay apart, meeting at fictitious
+    # joints (docs/deformable.md, "Excavations"); a rigid block's go whole where they touch
+    groups = (lambda parts: [[i] for i in range(len(parts))]) if s.spec.zones is not None \
+        else components
+    made = [dataclasses.replace(s, pieces=[outside[i] for i in g]) for g in groups(outside)]
     made += [dataclasses.replace(s, pieces=[inside[i] for i in g],
                                  excavate_at=exc.time if stage is None else None,
-                                 excavate_stage=stage) for g in components(inside)]
+                                 excavate_stage=stage) for g in groups(inside)]
     if len(made) == 1:
         return [dataclasses.replace(made[0], name=s.name)]
     return [dataclasses.replace(m, name=f"{s.name}[{k}]") for k, m in enumerate(made)]

@@ -1,0 +1,221 @@
+"""Boundary conditions on zoned blocks, at their gridpoints and surface faces (3DEC's
+``zone gridpoint fix velocity`` and ``zone face apply stress``).
+
+A scene's selection (``boundary.velocity``, ``boundary.stress``, a stage's ``fix``, ``free``,
+``velocity``, ``stress``, ``force``) takes rigid blocks as blocks (by name, group, centroid
+in ``range``) and zoned blocks by their grids: ``names``/``groups`` choose the zoned blocks
+(all of them if neither is given), ``range`` the gridpoints (or surface faces, by centroid)
+inside its box, on the block's **reference** positions (those it was built with: a selection
+does not depend on the motion, so a restart's replay selects what the straight run did).
+
+What a condition sets lives on the :class:`~pdem.deformable.body.DeformableBody` and travels
+with it between ranks: ``fixed``/``fixed_vel`` per degree of freedom, ``vhist`` (the index of a
+velocity history in :attr:`GridConditions.histories`, -1 none), ``applied``/``loaded`` (a
+stage's ``force``). Boundary stresses are kept by the :class:`GridConditions` as surface
+triangles by block gid (every rank holds all; each rank loads the grids it owns every step,
+from the triangles' current positions: the traction deforms with the face).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..mpi import allgather
+from ..selection import set_block_fields
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def zoned_entries(scene) -> np.ndarray:
+    """Whether each scene block entry is zoned."""
+    return np.array([b.zones is not None for b in scene.blocks], bool)
+
+
+def zoned_mask(s, gids) -> np.ndarray:
+    """Which of ``gids`` are zoned blocks."""
+    gids = np.asarray(gids, np.int64)
+    if s.grids is None or not len(gids):
+        return np.zeros(len(gids), bool)
+    return zoned_entries(s.scene)[np.asarray(s.specs.entry[gids])]
+
+
+def zoned_gids(s) -> np.ndarray:
+    """The gids of every zoned block of the model."""
+    n = len(s.specs)
+    return np.nonzero(zoned_mask(s, np.arange(n)))[0].astype(np.int64)
+
+
+def _in_box(x: np.ndarray, sel) -> np.ndarray:
+    if sel.range is None:
+        return np.ones(len(x), bool)
+    box = sel.range.box
+    return np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
+
+
+def held_grids(s, sel):
+    """``(d, body)`` of the grids this rank holds (owned and ghost copies) whose block the
+    selection's names and groups take (every zoned block if it gives neither)."""
+    g = s.grids
+    if g is None or not len(g):
+        return []
+    gids = np.asarray(g.gids, np.int64)
+    keep = s.specs.matching(gids, sel.names, sel.groups)
+    out = s.glob.out[gids] if "out" in vars(s.glob) else np.zeros(len(gids))
+    return [(d, g.bodies[d]) for d in np.nonzero(keep & (out == 0))[0]]
+
+
+def gridpoints(s, sel) -> list:
+    """``(d, body, node ids)`` of the held grids' gridpoints a selection takes (reference
+    positions in ``range``); empty node lists left out."""
+    hits = []
+    for d, body in held_grids(s, sel):
+        idx = np.nonzero(_in_box(body.nodes0, sel))[0]
+        if len(idx):
+            hits.append((d, body, idx))
+    return hits
+
+
+def owned_count(s, hits) -> int:
+    """How many grids of the model the hits touch (each counted at its owner; collective)."""
+    n_owned = s.grids.n_owned if s.grids is not None else 0
+    return int(sum(allgather(s.comm, sum(1 for h in hits if h[0] < n_owned))))
+
+
+class GridConditions:
+    """The boundary conditions in force on zoned blocks (every rank alike): velocity
+    histories by index, and the surface triangles under stress."""
+
+    def __init__(self):
+        self.histories: list[tuple] = []  # (VelocityHistory, t0)
+        self.t_gid = np.zeros(0, np.int64)  # triangles under stress: block gid,
+        self.t_vert = np.zeros((0, 3), np.int64)  # its piece's vertices (outward order),
+        self.t_sigma = np.zeros((0, 3, 3))  # the stress (world, tension positive)
+        self._map = None  # (grid store, flat gridpoints of each owned triangle, rows)
+
+    # ---------------------------------------------------------------- velocities
+    def fix(self, hits, dofs, value, motion_too: bool, history=None, t0: float = 0.0) -> None:
+        """Prescribe ``value (3,)`` (or ``history``'s velocity from ``t0``) on ``dofs`` of the
+        gridpoints ``hits``; ``motion_too``: their velocities too (a restart has them)."""
+        code = -1
+        if history is not None:
+            self.histories.append((history, float(t0)))
+            code = len(self.histories) - 1
+        for _, body, idx in hits:
+            for k in dofs:
+                body.fixed[idx, k] = True
+                body.fixed_vel[idx, k] = value[k]
+                body.vhist[idx, k] = code
+                if motion_too:
+                    body.vel[idx, k] = value[k]
+
+    @staticmethod
+    def free(hits) -> None:
+        """Release every degree of freedom of the gridpoints ``hits``."""
+        for _, body, idx in hits:
+            body.fixed[idx] = False
+            body.fixed_vel[idx] = 0.0
+            body.vhist[idx] = -1
+
+    def prescribe(self, s, velocity_at) -> None:
+        """Before a step from t: the histories' velocities at ``t + dt/2`` on the gridpoints
+        of the owned grids that follow them (``velocity_at(history, t)``)."""
+        g = s.grids
+        if not self.histories or g is None:
+            return
+        t = s.time + 0.5 * s.dt
+        for d in range(g.n_owned):
+            body = g.bodies[d]
+            codes = np.unique(body.vhist)
+            for h in codes[codes >= 0]:
+                hist, t0 = self.histories[h]
+                v = velocity_at(hist, t - t0)
+                on = body.vhist == h
+                body.fixed_vel[on] = np.broadcast_to(v, body.vel.shape)[on]
+
+    # ---------------------------------------------------------------- stresses
+    def add_stress(self, s, sel, sigma, exposed) -> int:
+        """Put ``sigma`` on the exposed surface triangles of the zoned blocks the selection
+        takes (centroid in ``range``); ``exposed(gids)``: (gid, face rows) of the exposed
+        faces of blocks ``gids`` of the scene's store (pdem.boundary.exposed_face_rows).
+        Returns the triangles taken."""
+        g = s.glob
+        gids = zoned_gids(s)
+        gids = gids[s.specs.matching(gids, sel.names, sel.groups)]
+        gids = gids[g.out[gids] == 0]
+        gid, rows = exposed(gids)
+        verts, keep = [], []
+        for b, f in zip(gid, rows, strict=True):
+            p = g.piece_start[b]
+            v = g.face_verts[g.fvert_start[f]:g.fvert_start[f + 1]]
+            x = g.verts_local[v] + g.x[b]
+            if sel.range is not None and not _in_box(x.mean(axis=0)[None], sel)[0]:
+                keep.append(False)
+                verts.append((0, 0, 0))
+                continue
+            area = np.cross(x[1] - x[0], x[2] - x[0])
+            if np.dot(area, g.normals_local[f]) < 0.0:
+                v = v[[0, 2, 1]]
+            keep.append(True)
+            verts.append(tuple(v - g.vert_start[p]))
+        keep = np.array(keep, bool)
+        n = int(keep.sum())
+        self.t_gid = np.concatenate([self.t_gid, gid[keep]])
+        self.t_vert = np.concatenate([self.t_vert, np.array(verts, np.int64).reshape(-1, 3)[keep]])
+        self.t_sigma = np.concatenate([self.t_sigma,
+                                       np.repeat(np.asarray(sigma, float)[None], n, axis=0)])
+        self._map = None
+        return n
+
+    def tractions(self, s) -> None:
+        """The owned grids' boundary loads (``GridStore.bload``) from the triangles under
+        stress at their positions at t: ``sigma . (area vector)`` shared by its three
+        gridpoints."""
+        g = s.grids
+        if g is None:
+            return
+        g.bload[:] = 0.0
+        g.bloaded = bool(len(self.t_gid))
+        if not g.bloaded:
+            return
+        if self._map is None or self._map[0] is not g:
+            d_of = {gid: d for d, gid in enumerate(g.gids[:g.n_owned])}
+            rows = np.array([i for i, gid in enumerate(self.t_gid) if int(gid) in d_of], np.int64)
+            tri = np.zeros((len(rows), 3), np.int64)
+            for j, i in enumerate(rows):
+                d = d_of[int(self.t_gid[i])]
+                tri[j] = g.node_start[d] + g.surf[d][self.t_vert[i]]
+            self._map = (g, tri, rows)
+        _, tri, rows = self._map
+        if not len(rows):
+            return
+        x = g.nodes[tri]
+        area = 0.5 * np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+        f = np.einsum("tij,tj->ti", self.t_sigma[rows], area) / 3.0
+        for k in range(3):
+            np.add.at(g.bload, tri[:, k], f)
+
+
+def spread_force(hits, force) -> None:
+    """A stage's ``force`` on the zoned blocks ``hits`` (whole blocks): spread over their
+    gridpoints by mass, as ``blocks[i].force`` is."""
+    force = np.asarray(force, float)
+    for _, body, _idx in hits:
+        m = body.gravity_mass
+        body.applied[:] = np.outer(m / m.sum(), force)
+        body.loaded = bool(force.any())
+
+
+def sync_fixed_rows(s) -> None:
+    """Every zoned block's row ``fixed`` from its grid (gathered from the owners; collective,
+    every rank alike): fixed when every gridpoint is held at zero velocity in every direction
+    (the row then counts as a fixed block: no contacts with other fixed blocks), else free."""
+    g = s.grids
+    mine = [] if g is None else [
+        (g.gids[d], bool(g.bodies[d].fixed.all() and not g.bodies[d].fixed_vel.any()
+                         and (g.bodies[d].vhist < 0).all()))
+        for d in range(g.n_owned)]
+    rows = sorted({r for part in allgather(s.comm, mine) for r in part})
+    gids = np.array([r[0] for r in rows], np.int64)
+    fixed = np.array([r[1] for r in rows], bool)
+    set_block_fields(s, gids[fixed], fixed=1)
+    set_block_fields(s, gids[~fixed], fixed=0)
