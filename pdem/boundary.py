@@ -41,7 +41,7 @@ from .deformable.conditions import (
     GridConditions,
     gridpoints,
     owned_count,
-    sync_fixed_rows,
+    wholly_fixed,
     zoned_mask,
 )
 from .dynamics import motion
@@ -326,6 +326,15 @@ def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True
                     raise ConfigError([f"{at}: {problem}"])
     if zoned:
         sync_fixed_rows(s)
+
+
+def sync_fixed_rows(s) -> None:
+    """Every zoned block's row ``fixed`` from its grid (collective): fixed when every
+    gridpoint is held at zero velocity (the row then counts as a fixed block: no contacts with
+    other fixed blocks), else free."""
+    gids, fixed = wholly_fixed(s)
+    set_block_fields(s, gids[fixed], fixed=1)
+    set_block_fields(s, gids[~fixed], fixed=0)
 
 
 def apply_scene(s) -> None:

@@ -21,7 +21,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..mpi import allgather
-from ..selection import set_block_fields
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -195,6 +194,18 @@ class GridConditions:
             np.add.at(g.bload, tri[:, k], f)
 
 
+def wholly_fixed(s) -> tuple[np.ndarray, np.ndarray]:
+    """``(gids, fixed)`` of every zoned block, gathered from the owners (collective, every
+    rank alike): fixed when every gridpoint is held at zero velocity in every direction."""
+    g = s.grids
+    mine = [] if g is None else [
+        (g.gids[d], bool(g.bodies[d].fixed.all() and not g.bodies[d].fixed_vel.any()
+                         and (g.bodies[d].vhist < 0).all()))
+        for d in range(g.n_owned)]
+    rows = sorted({r for part in allgather(s.comm, mine) for r in part})
+    return (np.array([r[0] for r in rows], np.int64), np.array([r[1] for r in rows], bool))
+
+
 def spread_force(hits, force) -> None:
     """A stage's ``force`` on the zoned blocks ``hits`` (whole blocks): spread over their
     gridpoints by mass, as ``blocks[i].force`` is."""
@@ -203,19 +214,3 @@ def spread_force(hits, force) -> None:
         m = body.gravity_mass
         body.applied[:] = np.outer(m / m.sum(), force)
         body.loaded = bool(force.any())
-
-
-def sync_fixed_rows(s) -> None:
-    """Every zoned block's row ``fixed`` from its grid (gathered from the owners; collective,
-    every rank alike): fixed when every gridpoint is held at zero velocity in every direction
-    (the row then counts as a fixed block: no contacts with other fixed blocks), else free."""
-    g = s.grids
-    mine = [] if g is None else [
-        (g.gids[d], bool(g.bodies[d].fixed.all() and not g.bodies[d].fixed_vel.any()
-                         and (g.bodies[d].vhist < 0).all()))
-        for d in range(g.n_owned)]
-    rows = sorted({r for part in allgather(s.comm, mine) for r in part})
-    gids = np.array([r[0] for r in rows], np.int64)
-    fixed = np.array([r[1] for r in rows], bool)
-    set_block_fields(s, gids[fixed], fixed=1)
-    set_block_fields(s, gids[~fixed], fixed=0)

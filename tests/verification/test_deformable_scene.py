@@ -213,7 +213,7 @@ def test_column_solved_to_a_ratio_and_with_mass_scaling():
     their mean gridpoint weight): the run stops once the column has settled (the closed form
     to 1e-3, as above), not at the start. ``solve.mass_scaling: true`` (the grids' inertial
     masses raised to the rigid static step, gravity on the true masses): the same answer in
-    less than half the steps (measured 3913 against 11868 steps, both 1.7e-4 from the
+    less than half the steps (measured 2781 against 11797 steps, both 1.7e-4 from the
     closed form)."""
     s, err = column_to_ratio()
     assert s.ratio < 1e-5 and 200 < s.step, (s.ratio, s.step)
