@@ -133,6 +133,9 @@ def test_compiled_ranks_match_python_ranks_and_one_rank(monkeypatch):
     with the ranks' steps compiled, in Python, and on one rank. On the 2-rank tier the ranks
     step compiled and, at some step, one of them made the step's reduction in Python while the
     other made it in the loop."""
+    if MPI.COMM_WORLD.size > 3:  # ~10-35 s each on the oversubscribed 4-rank tier
+        pytest.skip("the compiled steps on the 2- and 3-rank tiers (the pile runs on 4 "
+                    "ranks in test_decomposition)")
     comm = MPI.COMM_WORLD
     steps = 600
     ends = []  # (step, why) of each compiled run of steps on this rank

@@ -265,6 +265,9 @@ def held_only_what_it_holds(solver, scene):
 
 
 def test_cli_run_matches_one_rank(tmp_path):
+    if MPI.COMM_WORLD.size > 3:  # ~10-35 s each on the oversubscribed 4-rank tier
+        pytest.skip("the CLI path on the 2- and 3-rank tiers (the pile runs on 4 ranks in "
+                    "test_pile_settling_matches_one_rank)")
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
     path = f"{base}/pile.yaml"

@@ -103,6 +103,8 @@ def mine(gids):
 
 
 def test_interleaved_ownership(tmp_path):
+    if MPI.COMM_WORLD.size > 3:  # ~10-35 s each on the oversubscribed 4-rank tier
+        pytest.skip("the writer's interleaving on the 2- and 3-rank tiers")
     # each rank's zoned blocks are not next to one another in gid order, and come reversed
     check(tmp_path, mine(range(N_BLOCKS))[::-1], mine(ZONED)[::-1])
 
