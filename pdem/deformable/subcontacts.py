@@ -84,6 +84,7 @@ def gridpoint_candidates(verts_d, face_d, fvert_d, face_verts, normals_d, nodes_
         d, dn = _outside(verts_d[i], normals_o, offsets_o, ux, uy, uz)
         if tris_o.shape[0]:  # a zoned O: across its nearest facing surface triangle
             dn = _triangle_outside(verts_d[i], tris_o, tri_normals, tri_offsets)
+            d = max(dn, _side_outside(verts_d[i], normals_o, offsets_o, ux, uy, uz))
         if d <= tol:
             sel[m] = i
             un[m] = -dn
@@ -168,6 +169,19 @@ def _triangle_outside(p, tris, normals, offsets):
             out = normals[t, 0] * p[0] + normals[t, 1] * p[1] + normals[t, 2] * p[2] \
                 - offsets[t]
     return out
+
+
+@kernel
+def _side_outside(p, normals, offsets, ux, uy, uz):
+    """How far ``p`` lies outside a piece's face planes that do not face ``p``'s side (as
+    :func:`_outside`): its sides and back, -inf if none."""
+    d = -np.inf
+    for f in range(normals.shape[0]):
+        if normals[f, 0] * ux + normals[f, 1] * uy + normals[f, 2] * uz < -0.5:
+            continue
+        d = max(d, normals[f, 0] * p[0] + normals[f, 1] * p[1] + normals[f, 2] * p[2]
+                - offsets[f])
+    return d
 
 
 def facing_triangles(b, k, r, u):
