@@ -10,7 +10,10 @@ the surface area. That is done here, after the common-plane update:
 - the zoned side ``D`` is A if A is zoned, else B; ``O`` the other block's piece;
 - a surface gridpoint ``g`` of ``D`` is a sub-contact if it faces ``O`` (its area share below
   is positive) and lies within the touch tolerance of ``O``: ``d(g) = max_f (n_f . g - o_f)``
-  over ``O``'s faces (the distance outside ``O``'s nearest face plane, negative inside);
+  over ``O``'s faces (the distance outside ``O``'s nearest face plane, negative inside); for
+  a zoned ``O`` its facing side counts by the plane of its nearest facing triangle only (the
+  planes of its other, tilted triangles, extended across the piece, switched gridpoints near
+  a junction in and out of contact: a zoned rock mass cut by a tunnel never settled);
 - its area is ``sum_t max(0, n_t . u) A_t / 3`` over its surface triangles ``t``, ``u`` the
   direction from ``D`` to ``O`` (``n`` for D = A, ``-n`` for D = B): a flat contact face's
   shares sum to its area; its overlap ``un`` minus the same maximum over ``O``'s faces that
