@@ -68,8 +68,9 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
         if zoned:  # spread over the gridpoints of each zoned block selected
             on = zoned_mask(s, gids)
             g = s.grids
-            spread_force([(d, g.bodies[d], None) for d in range(len(g))
-                          if g.gids[d] in set(gids[on].tolist())], pf.force)
+            pushed = set(gids[on].tolist())
+            spread_force([(d, g.bodies[d], None) for d in range(len(g)) if g.gids[d] in pushed],
+                         pf.force)
             gids = gids[~on]
         set_block_fields(s, gids, applied_force=pf.force)
     _solve_settings(s, staged, k, report=motion)

@@ -22,8 +22,6 @@ import numpy as np
 
 from ..mpi import allgather
 
-_AXIS = {"x": 0, "y": 1, "z": 2}
-
 
 def zoned_entries(scene) -> np.ndarray:
     """Whether each scene block entry is zoned."""
@@ -124,6 +122,8 @@ class GridConditions:
         t = s.time + 0.5 * s.dt
         for d in range(g.n_owned):
             body = g.bodies[d]
+            if body.vhist.max(initial=-1) < 0:  # (most grids follow no history)
+                continue
             codes = np.unique(body.vhist)
             for h in codes[codes >= 0]:
                 hist, t0 = self.histories[h]
