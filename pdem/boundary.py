@@ -223,13 +223,20 @@ def _face_geometry(g, f):
     return area, cen / area if area > 0 else vs.mean(axis=0), vs
 
 
-def _inside(p, vs, n, tol) -> bool:
-    """Whether point p (in the face plane) lies in the convex polygon vs (ccw about n)."""
-    for k in range(len(vs)):
-        e = vs[(k + 1) % len(vs)] - vs[k]
-        if np.dot(np.cross(e, p - vs[k]), n) < -tol * np.linalg.norm(e):
-            return False
-    return True
+def _inside(p, vs, n, tol) -> np.ndarray:
+    """Whether points ``p`` (k, 3; in the planes) lie in the convex polygons ``vs`` (k
+    polygons of 3-vectors, each ccw about its normal ``n`` (k, 3)): one vectorised test over
+    every edge of every polygon (a zoned face meets hundreds of coplanar triangles)."""
+    sizes = np.array([len(v) for v in vs], np.int64)
+    owner = np.repeat(np.arange(len(vs)), sizes)
+    start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    v = np.concatenate(vs).reshape(-1, 3)
+    nxt = np.arange(len(v)) + 1
+    nxt[start + sizes - 1] = start  # each polygon's last vertex closes on its first
+    e = v[nxt] - v
+    side = np.einsum("ij,ij->i", np.cross(e, p[owner] - v), n[owner])
+    bad = side < -tol * np.linalg.norm(e, axis=1)
+    return ~np.logical_or.reduceat(bad, start) if len(vs) else np.zeros(0, bool)
 
 
 def exposed_faces(g, gids: np.ndarray, ctol: float):
@@ -286,11 +293,12 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
                     # antiparallel faces in the same plane, then the polygons
                     cand = np.nonzero((m @ n < -COVER_COS)
                                       & (np.abs((chw - c) @ n) <= ctol))[0]
-                    for h in cand:
-                        if _inside(c, vhw[h], m[h], ctol) or _inside(chw[h], vw, n, ctol):
-                            covered = True
-                            break
-                    if covered:
+                    if len(cand) and (
+                            _inside(np.broadcast_to(c, (len(cand), 3)), [vhw[h] for h in cand],
+                                    m[cand], ctol).any()
+                            or _inside(chw[cand], [vw] * len(cand),
+                                       np.broadcast_to(n, (len(cand), 3)), ctol).any()):
+                        covered = True
                         break
                 if not covered:
                     out[0].append(b)

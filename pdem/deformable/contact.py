@@ -309,8 +309,9 @@ def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, 
                                 + ny * (verts_local[p, 1] + verts_local[q, 1] + verts_local[t, 1])
                                 + nz * (verts_local[p, 2] + verts_local[q, 2] + verts_local[t, 2])
                                 ) / 3.0
+        # the edge directions: of the piece's first edges (pdem.deformable.zoning)
         t0 = edir_start[k]
-        for i in range(edge_start[k + 1] - edge_start[k]):
+        for i in range(edir_start[k + 1] - t0):
             p, q = edges[edge_start[k] + i, 0], edges[edge_start[k] + i, 1]
             ux = verts_local[q, 0] - verts_local[p, 0]
             uy = verts_local[q, 1] - verts_local[p, 1]

@@ -418,8 +418,10 @@ def block_store(scene: Scene, specs: list[BlockSpec], lo: int = 0, hi: int | Non
     arr["x_stage"][:] = arr["x"]
     _frame_quaternions(frames, arr)
     _block_fields(scene, specs, arr, groups, radius)
-    geometry = _store_geometry(pieces, counts, starts, piece_start, first_piece, **body)
-    if any(s.zoning is not None for s in specs):
+    # a zoned piece's edge directions are all its edges (identity_frames): no merging
+    zoned = np.array([s.zoning is not None for s in specs for _ in s.pieces], bool)
+    geometry = _store_geometry(pieces, counts, starts, piece_start, first_piece, zoned, **body)
+    if zoned.any():
         identity_frames(geometry, arr, specs)
     return BlockStore(arr, geometry), groups
 
@@ -500,12 +502,13 @@ def _block_fields(scene: Scene, specs, arr, groups: list[str], radius: np.ndarra
 
 
 def _store_geometry(pieces, counts: np.ndarray, starts: np.ndarray, piece_start: np.ndarray,
-                    first_piece: int, verts_local, normals_local, offsets_local, centers
+                    first_piece: int, zoned: np.ndarray, verts_local, normals_local, offsets_local, centers
                     ) -> dict[str, np.ndarray]:
     """The store's geometry columns (pdem.model.blocks) of ``pieces`` (gid order; ``counts``:
     each one's vertices, faces, face vertices and edges, ``starts`` their running sums):
     the world pieces' topology (a rigid motion keeps it) with vertex ids made store rows,
-    and the body-frame geometry (:func:`_place_frames`)."""
+    and the body-frame geometry (:func:`_place_frames`); ``zoned``: by piece, its edge
+    directions are left unmerged."""
     n, n_pieces = len(piece_start) - 1, len(pieces)
     vert_start, face_start, edge_start = starts[:, 0], starts[:, 1], starts[:, 3]
     v0 = vert_start[:-1]
@@ -523,7 +526,8 @@ def _store_geometry(pieces, counts: np.ndarray, starts: np.ndarray, piece_start:
     for k, p in enumerate(pieces):
         if p.face_tag is not None:
             face_tag[face_start[k]:face_start[k + 1]] = p.face_tag
-    edirs, edir_start = _edge_directions(verts_local, edges.astype(np.int64), edge_start)
+    edirs, edir_start = _edge_directions(verts_local, edges.astype(np.int64), edge_start,
+                                       zoned)
     return dict(
         piece_start=piece_start,
         piece_block=np.repeat(np.arange(n), np.diff(piece_start)),
@@ -577,16 +581,21 @@ def _body_frames(specs: list[BlockSpec]):
     return out
 
 
-def _edge_directions(verts: np.ndarray, edges: np.ndarray, edge_start: np.ndarray):
+def _edge_directions(verts: np.ndarray, edges: np.ndarray, edge_start: np.ndarray,
+                     unmerged: np.ndarray):
     """:func:`unique_directions` of every piece's edges (body frame), batched over the pieces
     with the same edge count: (directions, their CSR starts by piece). Same arithmetic per
-    piece (the dot products are numpy's vector dot), so bitwise the same directions."""
+    piece (the dot products are numpy's vector dot), so bitwise the same directions. Pieces
+    ``unmerged`` keep every edge's direction (a zoned piece's surface grid: thousands of
+    edges, whose pairwise test here is quadratic; pdem.deformable.zoning sets them)."""
     vec = verts[edges[:, 1]] - verts[edges[:, 0]]
     d = vec / np.linalg.norm(vec, axis=1)[:, None]
     n_edges = np.diff(edge_start)
     keep = np.zeros(len(d), bool)
-    for m in np.unique(n_edges):
-        sel = np.nonzero(n_edges == m)[0]
+    for k in np.nonzero(unmerged)[0]:
+        keep[edge_start[k]:edge_start[k + 1]] = True
+    for m in np.unique(n_edges[~unmerged]):
+        sel = np.nonzero((n_edges == m) & ~unmerged)[0]
         D = d[edge_start[sel, None] + np.arange(m)]  # (pieces, m, 3)
         # pieces of one shape often have bitwise the same directions: decide each distinct
         # set once (the same operands give the same decisions)

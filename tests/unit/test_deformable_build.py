@@ -53,9 +53,16 @@ def test_zoned_row_is_its_surface_grid():
     n /= np.linalg.norm(n, axis=1)[:, None]
     assert np.allclose(n, store.normals_local[f0:f1], atol=1e-12)
     assert np.allclose(np.einsum("ij,ij->i", n, p[:, 0]), store.offsets_local[f0:f1], atol=1e-12)
-    # one edge direction per edge of the zoned piece
-    assert store.edir_start[k + 1] - store.edir_start[k] == \
-        store.edge_start[k + 1] - store.edge_start[k]
+    # its edge directions: one per set of parallel prism edges (3 of the base, 1 lateral),
+    # each along the piece's edge of the same rank (the first edges), on a prism edge
+    d = store.edirs_local[store.edir_start[k]:store.edir_start[k + 1]]
+    base = np.array([[1, 0, 0], [-0.5, 0.8, 0], [-0.5, -0.8, 0], [0.2, 0.1, 1.5]])
+    base /= np.linalg.norm(base, axis=1)[:, None]
+    assert len(d) == 4
+    assert np.allclose(np.sort(np.abs(d @ base.T).max(axis=1)), 1.0, atol=1e-12)
+    e = store.edges[store.edge_start[k]:store.edge_start[k] + 4]
+    chord = store.verts_local[e[:, 1]] - store.verts_local[e[:, 0]]
+    assert np.allclose(chord / np.linalg.norm(chord, axis=1)[:, None], d, atol=1e-14)
 
 
 def test_rigid_rows_as_without_zones():
