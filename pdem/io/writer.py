@@ -228,7 +228,7 @@ class OutputWriter:
         zoned_points = None
         if self.zone_layout is not None:
             owned, zone_items = zone_items, self._zones.gather(zone_items)
-            zoned_points = self._zone_surfaces.points(owned)
+            zoned_points = self._zone_surfaces.points(zones or [], owned)
             del owned
         i = self.n_snap
         self.n_snap += 1

@@ -44,7 +44,9 @@ class ZoneSurfaces:
     def __init__(self, core: H5Core, zones: Sequence[tuple[int, Any]] | None) -> None:
         self.core = core
         comm = core.comm
-        self._nodes: dict[int, np.ndarray] = {}  # this rank's zoned blocks' boundary gridpoints
+        # boundary gridpoints of the zoned blocks this rank owns or owned (a zoned block
+        # migrates with its grid: its new owner finds them at its first snapshot there)
+        self._nodes: dict[int, np.ndarray] = {}
         send: list[list] = [[] for _ in range(comm.size)]
         for gid, body in ([] if zones is None else zones):
             nodes, tris = boundary_of(body.tets)
@@ -99,10 +101,14 @@ class ZoneSurfaces:
         return BodyMesh(vert_start, verts, flen[order], fblock[order].astype(np.int64),
                         fverts), rows
 
-    def points(self, items: list) -> np.ndarray:
+    def points(self, zones: Sequence[tuple[int, Any]], items: list) -> np.ndarray:
         """The boundary gridpoints' positions of the zoned blocks of this rank's gid range,
-        blocks by gid, gridpoints ascending (collective): ``items`` are this rank's zoned
-        blocks' snapshot values ``(gid, values)`` (pdem.io.zones.zone_values)."""
+        blocks by gid, gridpoints ascending (collective): ``zones`` are the ``(gid, body)``
+        pairs this rank owns, ``items`` their snapshot values ``(gid, values)`` in the same
+        order (pdem.io.zones.zone_values)."""
+        for (_, body), (g, _) in zip(zones, items, strict=True):
+            if g not in self._nodes:  # a zoned block that came to this rank
+                self._nodes[g] = boundary_of(body.tets)[0]
         gids = [np.full(len(self._nodes[g]), g, np.int64) for g, _ in items]
         rows = [np.asarray(v["points"], np.float64)[self._nodes[g]] for g, v in items]
         gids = np.concatenate(gids) if gids else np.zeros(0, np.int64)
