@@ -817,10 +817,33 @@ class History(Strict):
     every: PositiveFloat | None = None
 
 
+# The zoned blocks' series a scene may choose (pdem.io.zones.ZONE_FIELDS, the same names in
+# the same order: tests/unit/test_zone_output.py); the gridpoint positions are always written.
+ZONE_FIELDS = ("displacement", "velocity", "stress", "plastic", "mean_stress", "von_mises",
+               "sigma1", "sigma2", "sigma3")
+ZoneField = Literal[ZONE_FIELDS]
+
+
+class ZoneOutput(Strict):
+    """``fields``: the zoned blocks' series each snapshot writes besides the gridpoint
+    positions (docs/output.md, Zoned blocks); default all of them."""
+
+    fields: list[ZoneField] = list(ZONE_FIELDS)
+
+    @field_validator("fields")
+    @classmethod
+    def _once(cls, v):
+        twice = sorted({f for f in v if v.count(f) > 1})
+        if twice:
+            raise ValueError(f"{', '.join(twice)} given more than once")
+        return v
+
+
 class Output(Strict):
     """``energy_every``: steps between energy-budget samples (``histories/energy``); default
     ten per snapshot interval. ``contacts``: store the joint state (every contact and
-    sub-contact, their forces and states) with each snapshot (docs/output.md, Contacts)."""
+    sub-contact, their forces and states) with each snapshot (docs/output.md, Contacts).
+    ``zones``: what the zoned blocks write (:class:`ZoneOutput`)."""
 
     file: str = "pdem-out.h5"
     contacts: bool = True
@@ -828,6 +851,16 @@ class Output(Strict):
     every_steps: PositiveInt | None = None
     energy_every: PositiveInt | None = None
     histories: list[History] = []
+    zones: ZoneOutput = ZoneOutput()
+
+    @model_serializer(mode="wrap")
+    def _drop_default_zones(self, handler):
+        # a scene that keeps the default dumps as before output.zones existed (outputs,
+        # checkpoints): the dump reads back the same
+        out = handler(self)
+        if out.get("zones") == {"fields": list(ZONE_FIELDS)}:
+            del out["zones"]
+        return out
 
     @model_validator(mode="after")
     def _one_interval(self):

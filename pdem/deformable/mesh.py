@@ -150,15 +150,24 @@ def _bisect(nodes: list, tets: list, size: float) -> None:
             add(len(tets) - 1)
 
 
-def _surface(nodes: np.ndarray, tets: np.ndarray, poly):
-    """Boundary triangles (tet faces used once), oriented outward, with their block face."""
+def boundary_triangles(tets: np.ndarray) -> np.ndarray:
+    """The tet faces used once (the grid's boundary), ``(k, 3)`` gridpoint ids, CCW seen from
+    outside for positively oriented tets, in tet order (deterministic: the same tets give the
+    same triangles). ``TetMesh.surface`` is these; the output's deformed surface too
+    (pdem.io.zone_surfaces)."""
+    tets = np.asarray(tets, np.int64).reshape(-1, 4)
     # face opposite vertex i, ordered so that it is CCW seen from outside the tet
     local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
     tri = tets[:, local].reshape(-1, 3)
     key = np.sort(tri, axis=1)
     _, first, count = np.unique(key, axis=0, return_index=True, return_counts=True)
     boundary = np.sort(first[count == 1])  # sorted: tet order, deterministic
-    surface = tri[boundary]
+    return tri[boundary]
+
+
+def _surface(nodes: np.ndarray, tets: np.ndarray, poly):
+    """Boundary triangles (tet faces used once), oriented outward, with their block face."""
+    surface = boundary_triangles(tets)
     centre = nodes[surface].mean(axis=1)
     dist = np.abs(centre @ np.asarray(poly.normals).T - np.asarray(poly.offsets)[None, :])
     surface_face = np.argmin(dist, axis=1).astype(np.int64)

@@ -111,13 +111,19 @@ class BlockSeries:
     points}``: the snapshot rows of this rank's gid range and its blocks' surfaces.
 
     Construction is collective (the vertex and triangle counts of the ranks before this one).
+    ``zoned``: the zoned blocks' surfaces (:class:`pdem.io.zone_surfaces.ZoneSurfaces`), whose
+    triangles replace their blocks' and whose vertices take the gridpoints' positions given
+    with each snapshot; None without zoned blocks.
     """
 
     def __init__(self, core: H5Core, n: int, body_vertices, body_faces,
-                 body_mesh: BodyMesh | None) -> None:
+                 body_mesh: BodyMesh | None, zoned=None) -> None:
         self.core = core
         lo, hi, comm = core.lo, core.hi, core.comm
         body_mesh = _local_mesh(n, lo, hi, body_vertices, body_faces, body_mesh)
+        self.zoned_rows = np.zeros(0, np.int64)  # my_verts rows that are zoned gridpoints
+        if zoned is not None:
+            body_mesh, self.zoned_rows = zoned.replace(body_mesh, lo)
         # this rank's vertices and triangles, and where they go in the whole surface: the
         # counts of the ranks before it (rank order = gid order)
         conn, tri_block = fan_triangulate(body_mesh)
@@ -199,8 +205,11 @@ class BlockSeries:
         out[rg - lo] = rr
         return out
 
-    def write(self, i: int, mine: np.ndarray, step: int, time: float, stage: int) -> None:
-        """Snapshot ``i`` of the series from this rank's assembled rows (IO ranks)."""
+    def write(self, i: int, mine: np.ndarray, step: int, time: float, stage: int,
+              zoned_points: np.ndarray | None = None) -> None:
+        """Snapshot ``i`` of the series from this rank's assembled rows (IO ranks);
+        ``zoned_points``: the positions of the vertices ``zoned_rows`` (the zoned blocks'
+        boundary gridpoints, :meth:`pdem.io.zone_surfaces.ZoneSurfaces.points`)."""
         core, f = self.core, self.core.f
         paths = ("time", "step", "stage", "surface/points", *(f"blocks/{n}" for n in COLS))
         for path in paths:
@@ -213,6 +222,8 @@ class BlockSeries:
             rows_out = mine[:, col : col + w].reshape(-1, *_SHAPES[name])
             core.write_row(f[f"blocks/{name}"], i, rows_out, core.lo)
         pts = self.world_points(cols(mine, "centroid"), cols(mine, "orientation"))
+        if len(self.zoned_rows):
+            pts[self.zoned_rows] = zoned_points
         core.write_row(f["surface/points"], i, pts, self.vlo)
 
     def world_points(self, centroid: np.ndarray, quat: np.ndarray) -> np.ndarray:

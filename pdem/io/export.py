@@ -80,15 +80,19 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike | None = No
             tets = [("tetra", z["connectivity"][()])]
             n = min(len(times), z["points"].shape[0])
 
+            cell_names = [k for k in _ZONE_CELL if k in z]  # output.zones.fields: those chosen
+            point_names = [k for k in _ZONE_POINT if k in z]
+
             def zones(i):
-                cell = {k: z[k][i] for k in _ZONE_CELL}
-                cell["plastic"] = cell["plastic"].astype(np.int32)  # meshio's xdmf: no uint8
-                if fmt == "gmsh":  # 1, 3 or 9 components: the full tensor, row by row
+                cell = {k: z[k][i] for k in cell_names}
+                if "plastic" in cell:  # meshio's xdmf: no uint8
+                    cell["plastic"] = cell["plastic"].astype(np.int32)
+                if fmt == "gmsh" and "stress" in cell:  # 1, 3 or 9 components: the full tensor, row by row
                     cell["stress"] = cell["stress"][:, [0, 3, 5, 3, 1, 4, 5, 4, 2]]
                 return meshio.Mesh(
                     z["points"][i], tets,
                     point_data={"block_id": z["point_block"][()],
-                                **{k: z[k][i] for k in _ZONE_POINT}},
+                                **{k: z[k][i] for k in point_names}},
                     cell_data={"block_id": [z["zone_block"][()]],
                                **{k: [v] for k, v in cell.items()}})
             written += _series(meshio, zones, directory, f"{stem}-zones", fmt,

@@ -134,15 +134,22 @@ def _zone_lines(f: h5py.File, names) -> list[str]:
     blocks = ", ".join(names[z["block"][:5]]) + (", ..." if len(z["block"]) > 5 else "")
     lines = [f"zones:       {len(z['block'])} zoned blocks ({blocks}): "
              f"{len(z['initial_points'])} gridpoints, {len(z['connectivity'])} zones"]
-    if z["stress"].shape[0] == 0:
+    if z["points"].shape[0] == 0:
         return lines
-    s1, s3 = z["sigma1"][-1], z["sigma3"][-1]
-    bits = z["plastic"][-1]
-    disp = np.linalg.norm(z["displacement"][-1], axis=1)
-    lines.append(f"  last snapshot: sigma1 {_g(s1.min())} .. {_g(s1.max())} Pa, sigma3 "
-                 f"{_g(s3.min())} .. {_g(s3.max())} Pa (tension +); yielding now "
-                 f"{int(((bits & 3) > 0).sum())} zones, ever {int((bits > 0).sum())}; "
-                 f"gridpoint displacement max {_g(disp.max())} m")
+    # each part from its series, if the scene wrote it (output.zones.fields)
+    parts = []
+    if "sigma1" in z and "sigma3" in z:
+        s1, s3 = z["sigma1"][-1], z["sigma3"][-1]
+        parts.append(f"sigma1 {_g(s1.min())} .. {_g(s1.max())} Pa, sigma3 {_g(s3.min())} .. "
+                     f"{_g(s3.max())} Pa (tension +)")
+    if "plastic" in z:
+        bits = z["plastic"][-1]
+        parts.append(f"yielding now {int(((bits & 3) > 0).sum())} zones, ever "
+                     f"{int((bits > 0).sum())}")
+    # from the positions (float64, always written): the displacement series is float32
+    disp = np.linalg.norm(z["points"][-1] - z["initial_points"][()], axis=1)
+    parts.append(f"gridpoint displacement max {_g(disp.max())} m")
+    lines.append("  last snapshot: " + "; ".join(parts))
     return lines
 
 

@@ -25,6 +25,7 @@ from .surfaces import BodyMesh
 from .viewer_fields import ViewerFields
 from .xdmf import write_xdmf
 from .zone_series import ZoneSeries
+from .zone_surfaces import ZoneSurfaces
 from .zones import ZoneLayout
 
 __all__ = ["OutputWriter", "FORMAT_VERSION", "quat_to_matrix"]
@@ -75,7 +76,12 @@ class OutputWriter:
         :class:`pdem.deformable.body.DeformableBody`, or anything with ``nodes0`` and ``tets``),
         possibly none; ``None`` on every rank for a scene without zoned blocks. Their tetrahedral
         grids go to ``zones/`` and the sidecar ``-zones.xdmf`` (:mod:`pdem.io.zones`); every
-        snapshot then takes the zoned blocks (see :meth:`write_snapshot`).
+        snapshot then takes the zoned blocks (see :meth:`write_snapshot`). Their triangles in
+        ``surface/`` (``run.xdmf``) are their grids' boundaries at the snapshot's gridpoint
+        positions (:mod:`pdem.io.zone_surfaces`), not their build-time polyhedra.
+    zone_fields
+        The zone series written besides the gridpoint positions (``output.zones.fields``,
+        names of :data:`pdem.io.zones.ZONE_FIELDS`); None: all of them.
 
     Notes
     -----
@@ -109,6 +115,7 @@ class OutputWriter:
         joint_names: Sequence[str] | None = None,
         zones: Sequence[tuple[int, Any]] | None = None,
         ranged: bool = False,
+        zone_fields: Sequence[str] | None = None,
     ) -> None:
 
         self._core = core = H5Core(path, comm, len(block_names), parallel)
@@ -116,7 +123,13 @@ class OutputWriter:
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
         self.comm = comm
         self.parallel = core.parallel
-        self._blocks = BlockSeries(core, len(block_names), body_vertices, body_faces, body_mesh)
+        # collective, before the file opens; first: the zoned blocks' surfaces replace their
+        # polyhedra's in the block surfaces
+        self._zones = ZoneSeries(core, len(block_names), zones, zone_fields)
+        self.zone_layout: ZoneLayout | None = self._zones.layout
+        self._zone_surfaces = None if self.zone_layout is None else ZoneSurfaces(core, zones)
+        self._blocks = BlockSeries(core, len(block_names), body_vertices, body_faces, body_mesh,
+                                   self._zone_surfaces)
         self.n_blocks, self.n_points = self._blocks.n_blocks, self._blocks.n_points
         self.n_tri = self._blocks.n_tri
         self.n_snap = 0
@@ -127,8 +140,6 @@ class OutputWriter:
                                     fixed, ranged)
         self.contacts = bool(contacts)
         self._contacts = ContactSeries(core, self.n_blocks) if self.contacts else None
-        self._zones = ZoneSeries(core, self.n_blocks, zones)  # collective: before the file opens
-        self.zone_layout: ZoneLayout | None = self._zones.layout
         self._closed = False
         if not core.io:
             return
@@ -194,7 +205,8 @@ class OutputWriter:
 
         ``zones`` (writers made with zoned blocks): the zoned blocks this rank owns, ``(gid,
         body)`` pairs as at construction (``body`` with ``nodes``, ``nodes0``, ``vel``, ``stress``
-        (m, 6) and ``plastic``), each zoned block passed by exactly one rank.
+        (m, 6) and ``plastic``), each zoned block passed by exactly one rank. Their boundary
+        gridpoints are also the vertices of their triangles in ``surface/points``.
         """
         core = self._core
         core.check_open()
@@ -213,18 +225,21 @@ class OutputWriter:
         mine = self._blocks.assemble(gids, rows)
         if "stage_origin" not in fields:
             self._fields.fill_origin(mine)
+        zoned_points = None
         if self.zone_layout is not None:
-            zone_items = self._zones.gather(zone_items)
+            owned, zone_items = zone_items, self._zones.gather(zone_items)
+            zoned_points = self._zone_surfaces.points(zones or [], owned)
+            del owned
         i = self.n_snap
         self.n_snap += 1
         self._times.append(float(time))
         if core.io:
-            self._blocks.write(i, mine, step, time, stage)
+            self._blocks.write(i, mine, step, time, stage, zoned_points)
             self._fields.write(i, mine)
             if self.zone_layout is not None:
                 self._zones.write(i, zone_items)
         # the block rows are written: not held while the contacts' rounds are made
-        del gids, rows, mine, zone_items
+        del gids, rows, mine, zone_items, zoned_points
         if self.contacts:  # every rank: the contacts are streamed in rounds
             self._contacts.write(i, source)
             del source
@@ -246,7 +261,7 @@ class OutputWriter:
             self.n_tri, self.n_points, self.n_blocks,
             contacts=(c.n_contacts, c.n_subs) if self.contacts else None,
             extra_cells=self._extra_cells,
-            zones=None if lay is None else (lay.n_points, lay.n_zones),
+            zones=None if lay is None else (lay.n_points, lay.n_zones, self._zones.names),
         )
 
     # ------------------------------------------------------------------ histories, results

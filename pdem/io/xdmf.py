@@ -154,8 +154,10 @@ def _point_grid(group: str, attrs, i: int, t: float, h5: str, n: int) -> list[st
     ]
 
 
-def _zones_grid(i: int, t: float, h5: str, n_points: int, n_zones: int) -> list[str]:
-    """Snapshot ``i`` of the zoned blocks: one tetrahedral grid of all their zones."""
+def _zones_grid(i: int, t: float, h5: str, n_points: int, n_zones: int,
+                names: Sequence[str] | None = None) -> list[str]:
+    """Snapshot ``i`` of the zoned blocks: one tetrahedral grid of all their zones, with the
+    attributes of the series ``names`` (None: all)."""
     static = [f'<Attribute Name="block_id" AttributeType="Scalar" Center="{center}">'
               f'{_hdf((n,), "Int", h5, f"/zones/{path}")}</Attribute>'
               for center, n, path in (("Node", n_points, "point_block"),
@@ -164,6 +166,8 @@ def _zones_grid(i: int, t: float, h5: str, n_points: int, n_zones: int) -> list[
     # one a Threshold on a block wants, the points' is there for point filters (Glyph)
     values = []
     for name, center, kind, w, number, prec in _ZONE_ATTRS:
+        if names is not None and name not in names:
+            continue
         n = n_points if center == "Node" else n_zones
         item = _hdf((n, w) if w > 1 else (n,), number, h5, view_path(f"/zones/{name}", i), prec)
         values.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="{center}">'
@@ -215,7 +219,7 @@ def write_xdmf(
     n_blocks: int,
     contacts: tuple[Sequence[int], Sequence[int]] | None = None,
     extra_cells: Sequence[tuple[str, str]] = (),
-    zones: tuple[int, int] | None = None,
+    zones: tuple[int, int] | tuple[int, int, Sequence[str]] | None = None,
 ) -> None:
     """Write the XDMF 3 description of a pdem output file (plain text, any one process).
 
@@ -235,11 +239,12 @@ def write_xdmf(
     common-plane points, with ``normal_force``, ``shear_force``, ``normal``, ``state``, ...)
     and :func:`subcontacts_path` ``subcontacts`` (sub-contact points and their forces).
 
-    ``zones``: ``(n_points, n_zones)`` of the zoned blocks' grid, for files with zoned blocks:
-    :func:`zones_path` then gets ``zones``, their tetrahedra (``Tetrahedron`` topology) with the
-    point arrays ``displacement``, ``velocity``, ``block_id`` and the cell arrays ``block_id``,
-    ``stress`` (6 components), ``plastic``, ``mean_stress``, ``von_mises``, ``sigma1`` ..
-    ``sigma3`` (:mod:`pdem.io.zones`).
+    ``zones``: ``(n_points, n_zones[, names])`` of the zoned blocks' grid, for files with zoned
+    blocks: :func:`zones_path` then gets ``zones``, their tetrahedra (``Tetrahedron`` topology)
+    with the point and cell arrays ``block_id`` and those of the series ``names`` the file has
+    (default all: the point arrays ``displacement``, ``velocity`` and the cell arrays ``stress``
+    (6 components), ``plastic``, ``mean_stress``, ``von_mises``, ``sigma1`` .. ``sigma3``,
+    :mod:`pdem.io.zones`). The zoned blocks' deformed surfaces are part of ``surface``.
     """
     times = [float(t) for t in times]
     if len(times) != n_snap:
@@ -259,8 +264,9 @@ def write_xdmf(
                      for line in _point_grid(group, attrs, i, t, h5, int(counts[i]))]
             _write_collection(path, group, grids)
     if zones is not None:
+        names = zones[2] if len(zones) > 2 else None
         grids = [line for i, t in enumerate(times)
-                 for line in _zones_grid(i, t, h5, int(zones[0]), int(zones[1]))]
+                 for line in _zones_grid(i, t, h5, int(zones[0]), int(zones[1]), names)]
         _write_collection(zones_path(xdmf_path), "zones", grids)
 
 

@@ -9,9 +9,15 @@ from typing import Any
 import numpy as np
 
 from .h5core import CHUNK_ROWS, H5Core, add_view
-from .zones import POINT_SERIES, ZONE_SERIES, ZONE_VIEWED, ZoneLayout, zone_layout, zone_values
+from .zones import ZoneLayout, zone_columns, zone_layout, zone_values
 
-__all__ = ["ZoneSeries"]
+__all__ = ["ZoneSeries", "COMPRESSION"]
+
+# The series' filter: deflate after byte shuffling (the float32 exponents and the uint8 bits
+# repeat from zone to zone). Parallel HDF5 (>= 1.10.2) writes filtered datasets with collective
+# I/O only, which is how every write here goes (pdem.io.h5core). bench/zone_output.py measures
+# what it saves and costs (docs/output.md, Zoned blocks); {} writes them unfiltered.
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 
 
 def _static_items(zones, n_blocks: int) -> list:
@@ -35,12 +41,17 @@ class ZoneSeries:
     """The zoned blocks' grids and series; ``layout`` is ``None`` without zoned blocks.
 
     Construction is collective: the layout from every rank's (gid, gridpoints, zones) of the
-    ``(gid, body)`` pairs ``zones`` (``ValueError`` on every rank if bad).
+    ``(gid, body)`` pairs ``zones`` (``ValueError`` on every rank if bad). ``fields``: the
+    series written besides the positions (pdem.io.zones.ZONE_FIELDS; None: all of them).
     """
 
     def __init__(self, core: H5Core, n_blocks: int,
-                 zones: Sequence[tuple[int, Any]] | None) -> None:
+                 zones: Sequence[tuple[int, Any]] | None,
+                 fields: Sequence[str] | None = None) -> None:
         self.core = core
+        self.columns = zone_columns(fields)  # the written series, gridpoints' then zones'
+        self.names = tuple(c.name for c in self.columns)
+        self.viewed = tuple(f"/zones/{name}" for name in self.names)
         msg, counts, static = None, np.zeros((0, 3), np.int64), []
         try:
             static = _static_items(zones, n_blocks)
@@ -72,8 +83,8 @@ class ZoneSeries:
                 k = int(np.searchsorted(lay.gid, int(gid)))
                 if k == len(lay.gid) or lay.gid[k] != int(gid):
                     raise ValueError(f"write_snapshot: block {gid} is not a zoned block")
-                v = zone_values(body)
-                for c in POINT_SERIES + ZONE_SERIES:
+                v = zone_values(body, self.names)
+                for c in self.columns:
                     start = lay.point_start if c.center == "Node" else lay.zone_start
                     n = start[k + 1] - start[k]
                     if v[c.name].size != n * c.width:
@@ -131,25 +142,25 @@ class ZoneSeries:
             d.attrs["doc"] = doc
             if units:
                 d.attrs["units"] = units
-        for series, n in ((POINT_SERIES, npt), (ZONE_SERIES, nz)):
-            for c in series:
-                tail = (n, c.width) if c.width > 1 else (n,)
-                d = f.create_dataset(f"zones/{c.name}", (0, *tail), maxshape=(None, *tail),
-                                     chunks=(1, min(max(n, 1), CHUNK_ROWS), *tail[1:]),
-                                     dtype=c.dtype)
-                d.attrs["units"] = c.units
-                d.attrs["doc"] = c.doc
+        for c in self.columns:
+            n = npt if c.center == "Node" else nz
+            tail = (n, c.width) if c.width > 1 else (n,)
+            d = f.create_dataset(f"zones/{c.name}", (0, *tail), maxshape=(None, *tail),
+                                 chunks=(1, min(max(n, 1), CHUNK_ROWS), *tail[1:]),
+                                 dtype=c.dtype, **COMPRESSION)
+            d.attrs["units"] = c.units
+            d.attrs["doc"] = c.doc
 
     def write(self, i: int, items: list) -> None:
         """Snapshot ``i`` of the zone series and its ``/xdmf`` views (IO ranks, collective)."""
         core, f = self.core, self.core.f
         gids = np.array([gid for gid, _ in items], np.int64)
         p0, pn, z0, zn = self.layout.runs(gids)
-        for series, starts, counts in ((POINT_SERIES, p0, pn), (ZONE_SERIES, z0, zn)):
-            for c in series:
-                d = f[f"zones/{c.name}"]
-                d.resize(i + 1, axis=0)
-                data = np.concatenate([v[c.name] for _, v in items]) if items else None
-                core.write_runs(d, (i,), starts, counts, data)
-        for path in ZONE_VIEWED:
+        for c in self.columns:
+            starts, counts = (p0, pn) if c.center == "Node" else (z0, zn)
+            d = f[f"zones/{c.name}"]
+            d.resize(i + 1, axis=0)
+            data = np.concatenate([v[c.name] for _, v in items]) if items else None
+            core.write_runs(d, (i,), starts, counts, data)
+        for path in self.viewed:
             add_view(f, path, i)

@@ -211,7 +211,7 @@ class Snapshots(Plugin):
             group_names=state.group_names,
             attrs=attrs,
             contacts=self.contacts, joint_names=state.joints.names,
-            zones=owned_zoned(state.grids))
+            zones=owned_zoned(state.grids), zone_fields=out.zones.fields)
 
     def write(self):
         s = self.state

@@ -155,6 +155,8 @@ def cached_reference(scene, path: str, steps: int | None = None) -> np.ndarray:
 def read_states(path: str) -> dict[str, np.ndarray]:
     with h5py.File(path, "r") as f:
         out = {k: f[k][()] for k in STATE + ZONE_STATE if k in STATE or k in f}
+        if "zones" in f:  # the zoned blocks' deformed surfaces in run.xdmf (boundary gridpoints)
+            out["surface/points"] = f["surface/points"][()]
         out["time"] = f["time"][()]
         out["step"] = f["step"][()] if "step" in f else None
         for name in f.get("histories", {}):

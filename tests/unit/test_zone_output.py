@@ -10,9 +10,11 @@ import pytest
 from mpi4py import MPI
 
 from pdem.io import OutputWriter, read_xdmf, xdmf, zones_path
+from pdem.io.block_series import quat_to_matrix
 from pdem.io.layout import h5py_has_mpi
 from pdem.io.xdmf import contacts_path
-from pdem.io.zones import ZONE_COLUMNS, ZONE_VIEWED, zone_layout, zone_values
+from pdem.io.zone_surfaces import boundary_of
+from pdem.io.zones import ZONE_COLUMNS, ZONE_FIELDS, ZONE_VIEWED, zone_layout, zone_values
 
 COMM = MPI.COMM_SELF
 
@@ -132,23 +134,28 @@ def test_series_are_the_state(out):
     path, states = out
     with h5py.File(path, "r") as f:
         z = f["zones"]
+        # the positions float64 (the geometry, the state displacements are measured on); the
+        # viewer's fields float32, deflated
         for name, shape, dtype in (("points", (3, 15, 3), np.float64),
-                                   ("displacement", (3, 15, 3), np.float64),
-                                   ("velocity", (3, 15, 3), np.float64),
-                                   ("stress", (3, 12, 6), np.float64),
+                                   ("displacement", (3, 15, 3), np.float32),
+                                   ("velocity", (3, 15, 3), np.float32),
+                                   ("stress", (3, 12, 6), np.float32),
                                    ("plastic", (3, 12), np.uint8),
                                    ("mean_stress", (3, 12), np.float32),
                                    ("von_mises", (3, 12), np.float32),
                                    ("sigma1", (3, 12), np.float32)):
             assert z[name].shape == shape and z[name].dtype == dtype, name
+            assert z[name].compression == "gzip" and z[name].shuffle, name
         for i, st in enumerate(states):
             def cat(k, st=st):
                 return np.concatenate([st[1][k], st[3][k]])
             assert np.array_equal(z["points"][i], cat("nodes"))
-            assert np.array_equal(z["displacement"][i], cat("nodes") - cat("nodes0"))
-            assert np.array_equal(z["velocity"][i], cat("vel"))
+            # float32: the float64 values rounded once (the nearest float32)
+            assert np.array_equal(z["displacement"][i],
+                                  (cat("nodes") - cat("nodes0")).astype(np.float32))
+            assert np.array_equal(z["velocity"][i], cat("vel").astype(np.float32))
             s = cat("stress")
-            assert np.array_equal(z["stress"][i], s)
+            assert np.array_equal(z["stress"][i], s.astype(np.float32))
             assert np.array_equal(z["plastic"][i], cat("plastic"))
             full = s[:, [0, 3, 5, 3, 1, 4, 5, 4, 2]].reshape(-1, 3, 3)
             lam = np.linalg.eigvalsh(full)
@@ -207,6 +214,98 @@ def test_the_zone_output_is_declared_once():
     for c in ZONE_COLUMNS:
         n = len(body.nodes0) if c.center == "Node" else len(body.tets)
         assert values[c.name].size == n * c.width, c.name
+
+
+# the datasets of zones/ that are not series
+STATIC = {"block", "point_start", "zone_start", "connectivity", "zone_block", "point_block",
+          "initial_points"}
+
+
+def test_zoned_surfaces_are_the_deformed_grids(out):
+    """In ``surface/`` (run.xdmf) a zoned block's triangles are its grid's boundary (the tet
+    faces used once, in tet order) and their vertices its boundary gridpoints at the snapshot's
+    positions, bitwise ``zones/points``; the rigid blocks keep their polyhedra at ``c + R v``."""
+    path, states = out
+    surface = read_xdmf(path.with_suffix(".xdmf"))["surface"]
+    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    with h5py.File(path, "r") as f:
+        conn, bid = f["surface/connectivity"][()], f["surface/block_id"][()]
+        assert np.bincount(bid).tolist() == [12, len(boundary_of(grid(*ZONED[1]).tets)[1]), 12,
+                                             len(boundary_of(grid(*ZONED[3]).tets)[1])]
+        for i, st in enumerate(states):
+            pts = f["surface/points"][i]
+            assert np.array_equal(surface[i]["geometry"], pts)
+            for g, args in ZONED.items():
+                nodes, tris = boundary_of(grid(*args).tets)
+                mine = conn[bid == g]
+                first = mine.min()
+                assert np.array_equal(mine - first, tris)
+                assert np.array_equal(pts[first:first + len(nodes)], st[g]["nodes"][nodes])
+            c, q = f["blocks/centroid"][i], f["blocks/orientation"][i]
+            for g in (0, 2):  # make_scene's cube g, half-width g + 1
+                rows = np.unique(conn[bid == g])
+                want = c[g] + (v * (g + 1)) @ quat_to_matrix(q[g:g + 1])[0].T
+                np.testing.assert_allclose(pts[rows], want, rtol=0, atol=1e-14)
+
+
+def test_chosen_zone_fields(tmp_path):
+    """``zone_fields`` (output.zones.fields): only those series and the positions are written;
+    the sidecar, ``pdem info`` and ``pdem export`` show what the file has; an unknown name is
+    refused with the valid ones."""
+    import meshio
+
+    from pdem.io import summarise
+    from pdem.io.export import export
+
+    path = tmp_path / "some.h5"
+    states = write(path, zone_fields=["von_mises", "displacement"])
+    with h5py.File(path, "r") as f:
+        assert set(f["zones"]) - STATIC == {"points", "displacement", "von_mises"}
+        assert sorted(f["xdmf/000002/zones"]) == ["displacement", "points", "von_mises"]
+        last = states[-1]
+        assert np.array_equal(f["zones/points"][2], np.concatenate([last[1]["nodes"],
+                                                                    last[3]["nodes"]]))
+    grids = read_xdmf(zones_path(path.with_suffix(".xdmf")))["zones"]
+    assert set(grids[-1]["attributes"]) == {"block_id", "displacement", "von_mises"}
+    text = summarise(path)
+    assert "gridpoint displacement max" in text and "sigma1" not in text
+    written = export(path, "vtu", out=tmp_path / "x")
+    m = meshio.read([w for w in written if "-zones-000002" in w][0])
+    assert set(m.cell_data) == {"block_id", "von_mises"}
+    assert set(m.point_data) == {"block_id", "displacement"}
+    with pytest.raises(ValueError, match="sigma4.*valid: displacement, velocity, stress"):
+        OutputWriter(tmp_path / "bad.h5", COMM, **make_scene(), zones=[(1, grid(*ZONED[1]))],
+                     zone_fields=["stress", "sigma4"])
+
+
+def test_scene_chooses_the_zone_fields():
+    """``output.zones.fields``: the writer's names, all by default (a scene that keeps the
+    default dumps as before the key existed); a bad name is refused at its key, with the valid
+    names; a name twice too."""
+    import yaml
+
+    from pdem.config import ConfigError, dump_scene, parse_scene
+    from pdem.config.schema import ZONE_FIELDS as SCENE_ZONE_FIELDS
+
+    assert SCENE_ZONE_FIELDS == ZONE_FIELDS
+    text = ZONED_SCENE.format(out="col.h5")
+    scene = parse_scene(text)
+    assert scene.output.zones.fields == list(ZONE_FIELDS)
+    assert "zones" not in yaml.safe_load(dump_scene(scene))["output"]
+    chosen = text.replace("every_steps: 20}",
+                          "every_steps: 20, zones: {fields: [sigma1, stress]}}")
+    scene = parse_scene(chosen)
+    assert scene.output.zones.fields == ["sigma1", "stress"]
+    assert parse_scene(dump_scene(scene)).output.zones.fields == ["sigma1", "stress"]
+    for fields, message in (("[stress, sigma4]", "output.zones.fields[1]: Input should be "
+                             "'displacement', 'velocity', 'stress', 'plastic', 'mean_stress', "
+                             "'von_mises', 'sigma1', 'sigma2' or 'sigma3' (got 'sigma4')"),
+                            ("[stress, stress]", "output.zones.fields: stress given more than "
+                             "once")):
+        with pytest.raises(ConfigError) as e:
+            parse_scene(text.replace("every_steps: 20}",
+                                     f"every_steps: 20, zones: {{fields: {fields}}}}}"))
+        assert message in str(e.value)
 
 
 def test_gather_fallback_writes_the_same_file(tmp_path, out):
@@ -346,9 +445,9 @@ def test_run_writes_the_grids(zoned_run):
         assert np.array_equal(z["connectivity"][()], body.tets)
         assert np.array_equal(z["initial_points"][()], body.nodes0)
         assert np.array_equal(z["points"][-1], body.nodes)
-        assert np.array_equal(z["displacement"][-1], body.nodes - body.nodes0)
-        assert np.array_equal(z["velocity"][-1], body.vel)
-        assert np.array_equal(z["stress"][-1], body.stress)
+        assert np.array_equal(z["displacement"][-1], (body.nodes - body.nodes0).astype(np.float32))
+        assert np.array_equal(z["velocity"][-1], body.vel.astype(np.float32))
+        assert np.array_equal(z["stress"][-1], body.stress.astype(np.float32))
         assert np.array_equal(z["plastic"][-1], body.plastic)
         assert np.array_equal(z["displacement"][0], np.zeros_like(body.nodes))
         # gravity has begun to load the column: compression (tension positive) below
@@ -374,5 +473,68 @@ def test_info_and_export_know_the_zones(zoned_run, tmp_path):
                           "x-zones.pvd"]
     m = meshio.read(written[-2])
     assert m.cells[0].type == "tetra" and np.array_equal(m.cells[0].data, body.tets)
-    assert np.array_equal(m.cell_data["stress"][0], body.stress)
-    assert np.array_equal(m.point_data["displacement"], body.nodes - body.nodes0)
+    assert np.array_equal(m.cell_data["stress"][0], body.stress.astype(np.float32))
+    assert np.array_equal(m.point_data["displacement"], (body.nodes - body.nodes0).astype(np.float32))
+
+
+def test_run_xdmf_shows_the_deformed_column(zoned_run):
+    """A run's ``run.xdmf``: the zoned column's triangles are its mesher's surface
+    (``TetMesh.surface``, in order) at the snapshot's gridpoint positions, the first snapshot's
+    at the scene's (``nodes0``), the last's at the final state's, bitwise."""
+    out, grids = zoned_run
+    (body,) = grids.bodies
+    assert not np.array_equal(body.nodes, body.nodes0)
+    steps = read_xdmf(out.with_suffix(".xdmf"))["surface"]
+    with h5py.File(out, "r") as f:
+        col = f["surface/block_id"][()] == 1
+        for step, x in ((steps[0], body.nodes0), (steps[-1], body.nodes)):
+            tri = step["topology"][col]
+            assert np.array_equal(step["geometry"][tri], x[body.mesh.surface])
+            assert np.array_equal(step["geometry"][np.unique(tri)],
+                                  f["zones/points"][0 if x is body.nodes0 else -1][
+                                      np.unique(body.mesh.surface)])
+
+
+def test_run_chooses_the_zone_fields(tmp_path):
+    """``output.zones.fields`` reaches the writer: a run writes only the chosen series."""
+    from pdem.config import parse_scene
+    from pdem.simulation import Simulation
+
+    out = tmp_path / "few.h5"
+    text = ZONED_SCENE.format(out=out).replace("steps: 40", "steps: 20").replace(
+        "every_steps: 20}", "every_steps: 20, zones: {fields: [stress, plastic]}}")
+    sim = Simulation(parse_scene(text), COMM)
+    sim.run()
+    sim.close()
+    (body,) = sim.state.grids.bodies
+    with h5py.File(out, "r") as f:
+        assert set(f["zones"]) - STATIC == {"points", "stress", "plastic"}
+        assert np.array_equal(f["zones/stress"][-1], body.stress.astype(np.float32))
+
+
+def test_paraview_shows_the_deformed_surface(zoned_run, tmp_path):
+    """All three ParaView readers open ``run.xdmf`` of a run with a zoned block: the surfaces'
+    points are ``surface/points`` (the column's its gridpoints), triangles only, silently; the
+    view renders coloured cells."""
+    from test_paraview import BAD_LOG, pvbatch_command, run_pvbatch
+
+    pvbatch_command()
+    out, _ = zoned_run
+    report = tmp_path / "report.json"
+    code, log = run_pvbatch([str(ZONES_PROBE), str(out.with_suffix(".xdmf")), str(report),
+                             str(tmp_path), "displacement_magnitude"], timeout=600)
+    assert code == 0, log[-4000:]
+    bad = [line for line in log.splitlines() if any(b in line for b in BAD_LOG)]
+    assert not bad, "\n".join(bad)
+    got = json.loads(report.read_text())
+    with h5py.File(out, "r") as f:
+        n_tri = len(f["surface/connectivity"])
+        for reader in ("S", "T", "legacy"):
+            r = got[reader]
+            for key, i in (("first", 0), ("last", -1)):
+                (grid,) = r[key]
+                assert grid["n_cells"] == n_tri and grid["cell_types"] == [5], reader  # triangles
+                assert np.array_equal(grid["points"], f["surface/points"][i]), reader
+                assert np.array_equal(grid["cell_arrays"]["block_id"]["values"],
+                                      f["surface/block_id"][()]), reader
+            assert r["render"]["drawn"] > 0.02 and r["render"]["coloured"] > 0.01, reader
