@@ -202,8 +202,8 @@ def test_zoned_conditions_and_stages_are_bitwise_on_any_rank_count_and_restart(t
 # a tunnel in jointed deformable rock: a zoned block cut by two joint sets, in-situ stress in
 # zones and joints and on the outer faces, rollers on the slice's faces; stage 2 excavates a
 # tunnel through the zoned pieces (fictitious joints kn = 1e10: with 1e11 a sliver piece's
-# gridpoints run away, docs/deformable.md "Not yet"). The 1-rank run's file, bitwise, and a checkpoint in stage 2
-# continues bitwise (issue 40's jointed tunnel on 1, 2 and 3 ranks)
+# gridpoints run away, docs/deformable.md "Not yet"). The 1-rank run's file, bitwise, and a
+# checkpoint in stage 2 continues bitwise (issue 40's jointed tunnel on 1, 2 and 3 ranks)
 JOINTED_TUNNEL = """
 name: jointed-tunnel
 gravity: [0, 0, 0]
