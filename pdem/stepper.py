@@ -276,10 +276,15 @@ class Stepper:
                 g.forward(b)
         with tm.phase("forces"):
             speed, sleep_steps, frac = inactive_args(s.scene)
+            m_true = None
+            if self.holds:
+                m_true = motion_record(b, n)
+                if g is not None:  # a zoned block is never held: its grid steps on
+                    m_true = m_true._replace(fixed=g.rigid_fixed(m_true.fixed))
             force_phase(s.dt, b.q, b.R, self.bodies(), s.contacts.pairs(), s.contacts.subs(),
                         s.joints.kernel_args, b.still,
                         g.record(b, s.contacts) if g is not None else None,
-                        motion_record(b, n) if self.holds else None, s.gravity, b.radius[:n],
+                        m_true, s.gravity, b.radius[:n],
                         b.calm[:n], speed, sleep_steps, frac, r.ref_force)
 
     def second_half(self, updated: bool = False, flags: np.ndarray | None = None) -> bool:

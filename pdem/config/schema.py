@@ -1002,12 +1002,9 @@ class Scene(Strict):
                 if d is not None and d.mode not in ("none", "local"):
                     errors.append(f"stages[{k}].solve.damping.mode: not yet supported with "
                                   f"zoned blocks ({', '.join(zoned)}); use none or local")
-            sv = self.solve
-            for key, bad in (("solve.inactive", sv.inactive is not None),
-                             ("solve.damping.mode", sv.damping.mode not in ("none", "local"))):
-                if bad:
-                    errors.append(f"{key}: not yet supported with zoned blocks ({', '.join(zoned)})"
-                                  + ("; use none or local" if key == "solve.damping.mode" else ""))
+            if self.solve.damping.mode not in ("none", "local"):
+                errors.append(f"solve.damping.mode: not yet supported with zoned blocks "
+                              f"({', '.join(zoned)}); use none or local")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}

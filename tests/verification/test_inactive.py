@@ -125,3 +125,32 @@ def test_bad_inactive_settings_are_refused_naming_the_key(bad):
     d["solve"]["inactive"] = bad
     with pytest.raises(ConfigError, match="solve.inactive"):
         parse_scene(yaml.safe_dump(d))
+
+
+def test_beside_a_zoned_block_rigid_blocks_are_held_and_the_grid_steps_on():
+    """``solve.inactive`` in a scene with a zoned block: a 2-cube rigid column settles and is
+    held at its closed-form rest heights; the zoned cube beside it is never held (its grid
+    keeps stepping) and carries its weight: its zones' mean vertical stress is its weight over
+    its base, to 1 %."""
+    text = f"""
+materials:
+  rock: {{density: {RHO}}}
+  soft: {{density: {RHO}, young: 1.0e8, poisson: 0.25}}
+joints: {{default: {{kn: {KN}, ks: {KN}, friction: 30.0}}}}
+blocks:
+  - {{name: floor, box: {{min: [-2, -2, -1], max: [4, 2, 0]}}, material: rock, fixed: true}}
+  - {{name: c0, box: {{min: [-0.5, -0.5, 0], max: [0.5, 0.5, 1]}}, material: rock}}
+  - {{name: c1, box: {{min: [-0.5, -0.5, 1], max: [0.5, 0.5, 2]}}, material: rock}}
+  - {{name: z, box: {{min: [2, -0.5, 0], max: [3, 0.5, 1]}}, material: soft, zones: {{size: 0.5}}}}
+solve: {{steps: 1, damping: local, inactive: {INACTIVE}}}
+"""
+    sim = make_simulation(text)
+    sim.run(steps=4000)
+    b = sim.blocks
+    assert b.calm[1] >= 100 and b.calm[2] >= 100 and (b.still[1:3] == 1).all()
+    assert b.calm[3] == 0  # the zoned block: never counted as at rest
+    err = np.abs(b.x[1:3, 2] - rest_heights(2)).max()
+    assert err < 0.01 * 3 * RHO * G / KN, err
+    body = sim.state.grids.bodies[0]
+    szz = float(np.sum(body.stress[:, 2] * body.vol) / body.vol.sum())
+    assert szz == pytest.approx(-0.5 * RHO * G, rel=1e-2)
