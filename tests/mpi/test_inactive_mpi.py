@@ -33,3 +33,25 @@ def test_held_stack_woken_across_the_split_matches_one_rank(tmp_path):
     scene = with_parallel(SCENE, [comm.size, 1, 1], path, every_steps=250)
     run(scene, comm)
     compare_on_rank0(comm, path, scene, f"{base}/held-ref.h5")
+
+
+# the same with a zoned cube in the stack's middle row: rigid blocks held and woken across the
+# split, the zoned one never held (its grid steps on), bitwise the 1-rank run
+ZONED = SCENE.replace(
+    "materials: {rock: {density: 2500.0}}",
+    "materials: {rock: {density: 2500.0}, soft: {density: 2500.0, young: 1.0e9, poisson: 0.25}}"
+).replace(
+    "  - {name: drop,",
+    "  - {name: z, box: {min: [1.5, 0.0, 2.0], max: [2.5, 1.0, 3.0]}, material: soft, "
+    "zones: {size: 0.5}}\n  - {name: drop,"
+).replace("min: [1.5, 0.0, 2.03], max: [2.5, 1.0, 3.03]", "min: [1.5, 0.0, 3.03], max: [2.5, 1.0, 4.03]"
+          ).replace("steps: 4000", "steps: 1500")
+
+
+def test_held_stack_beside_a_zoned_block_matches_one_rank(tmp_path):
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    path = f"{base}/zoned-held.h5"
+    scene = with_parallel(ZONED, [comm.size, 1, 1], path, every_steps=250)
+    run(scene, comm)
+    compare_on_rank0(comm, path, scene, f"{base}/zoned-held-ref.h5")
