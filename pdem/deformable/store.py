@@ -367,9 +367,10 @@ class GridStore:
         works since the start (``(k, N_GW)``, pdem.deformable.motion.GW_*), and the change
         that brings their contacts' spring energy from t back to the kinetic energy's time
         t - dt/2: ``dt/2 sum F_c . v`` over their gridpoints (the springs' energy falls at
-        the rate ``-F_c . v``). Without it the balance would swing by that term, the joints'
-        force times the gridpoints' motion in half a step: 1.3 % of the energy put in at a
-        zoned cube's bounce on a stiff floor (docs/deformable.md, "Energy")."""
+        the rate ``-F_c . v``; the budget adds the rigid blocks' alike). Without it the
+        balance would swing by that term, the joints' force times the gridpoints' motion in
+        half a step: 1.2 % of the energy put in at a zoned cube's bounce on a stiff floor
+        (docs/deformable.md, "Energy")."""
         own = range(self.n_owned)
         shift = np.empty(self.n_owned)
         for d in own:
