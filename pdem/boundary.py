@@ -409,8 +409,9 @@ def _zoned_velocity(boundary, s, cond, t0, motion_too, at) -> int:
                            "constant velocity, not a rotation (prescribe velocity components)"])
     v0 = history_velocity(cond.history, 0.0) if cond.history is not None \
         else np.array(cond.velocity, float)
+    # (a stage's, once the energy budget has started, books what it changes)
     boundary.grid.fix(hits, ["xyz".index(c) for c in cond.components], v0, motion_too,
-                      cond.history, t0)
+                      cond.history, t0, book=motion_too and s.energy_start is not None)
     return n
 
 

@@ -50,7 +50,10 @@ def remove_blocks(state, bodies, gids: np.ndarray, code: int, why: str) -> None:
     b, n = state.blocks, state.n_owned
     gids = np.asarray(gids, np.int64)
     rows = np.nonzero(np.isin(b.gid[:n], gids) & (b.out[:n] == 0))[0]
-    b.work[rows, motion.WORK_REMOVED] += kinetic_per_block(b, rows)
+    ke = kinetic_per_block(b, rows)
+    if state.grids is not None:  # a zoned block's is its grid's
+        ke = state.grids.kinetic_at(rows, ke)
+    b.work[rows, motion.WORK_REMOVED] += ke
     # every rank's copy of every such block, owned or ghost
     set_block_fields(state, gids, fixed=1, out=code, v=0.0, w=0.0, L=0.0)
     if state.grids is not None:  # a zoned block's grid stops where it is

@@ -49,10 +49,14 @@ def stage_changes(s, k: int, motion: bool = True) -> None:
             gids = gids[~zoned_mask(s, gids)]
             hits = gridpoints(s, sel)
             hit = owned_count(s, hits)
+            # (the energy budget books the kinetic energy this moves in or out of the
+            # prescribed components once it has started; a restart's replay is overwritten
+            # by the checkpoint's grids)
+            started = s.energy_start is not None
             if fixed:
-                s.boundary.grid.fix(hits, (0, 1, 2), np.zeros(3), motion)
+                s.boundary.grid.fix(hits, (0, 1, 2), np.zeros(3), motion, book=motion and started)
             else:
-                s.boundary.grid.free(hits)
+                s.boundary.grid.free(hits, book=started)
         if not len(gids) and not hit:
             raise ConfigError([f"{s.scene.at('stages', k, key)}: selects no block"])
         set_block_fields(s, gids, fixed=fixed, vfix=0)

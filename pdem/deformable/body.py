@@ -7,11 +7,13 @@ can read and write them directly.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .constitutive import material
 from .mesh import TetMesh, tetrahedralise
-from .motion import critical_timestep, cycle, nodal_stiffness, scaled_masses
+from .motion import N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
 from .zones import gravity_forces, lumped_mass, surface_load, zone_geometry
 
 
@@ -63,6 +65,9 @@ class DeformableBody:
         self.damping = float(damping)
         self.mass_scaling = bool(mass_scaling)
         self.unbalanced = np.zeros(1)  # the last step's largest unbalanced gridpoint force
+        # the energy accumulators since the start (pdem.deformable.motion.GW_*): they travel
+        # with the body between ranks and into checkpoints
+        self.work = np.zeros(N_GW)
         self.update_mass()
         self.time = 0.0
 
@@ -97,10 +102,13 @@ class DeformableBody:
     def step(self, n_steps: int, dt: float | None = None) -> int:
         """Advance ``n_steps`` steps of ``dt`` (default: :meth:`timestep` at the start)."""
         dt = self.timestep() if dt is None else dt
-        applied = self.applied + gravity_forces(self.gravity_mass, self.gravity)
+        gforce = gravity_forces(self.gravity_mass, self.gravity)
+        applied = self.applied + gforce
         done = cycle(n_steps, dt, self.nodes, self.vel, self.mass, applied, self.fixed,
                      self.fixed_vel, self.tets, self.grad, self.vol, self.stress, self.plastic,
-                     self.model, self.nmd, self.damping, self.unbalanced)
+                     self.model, self.nmd, self.damping, self.unbalanced, gforce,
+                     np.zeros_like(applied), self.applied, self.params.bulk, self.params.shear,
+                     self.work)
         self.time += done * dt
         if done < n_steps:
             raise FloatingPointError(f"a zone inverted after {done} of {n_steps} steps")
@@ -113,6 +121,13 @@ class DeformableBody:
 
     def kinetic_energy(self) -> float:
         return float(0.5 * np.sum(self.mass[:, None] * self.vel ** 2))
+
+    def kinetic_as_integrated(self) -> float:
+        """Kinetic energy at the last half step with the inertial masses, prescribed degrees
+        of freedom holding none (the energy budget's); correctly rounded, so the same bits
+        on any rank."""
+        e = np.where(self.fixed, 0.0, self.mass[:, None] * self.vel ** 2)
+        return 0.5 * math.fsum(e.ravel().tolist())
 
     def strain_energy(self) -> float:
         """Elastic energy ``sum V (p^2 / 2K + s:s / 4G)`` of the zone stresses."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mpi import allgather
+from .motion import GW_BOUNDARY
 
 
 def zoned_entries(scene) -> np.ndarray:
@@ -90,15 +91,21 @@ class GridConditions:
         self._map = None  # (grid store, flat gridpoints of each owned triangle, rows)
 
     # ---------------------------------------------------------------- velocities
-    def fix(self, hits, dofs, value, motion_too: bool, history=None, t0: float = 0.0) -> None:
+    def fix(self, hits, dofs, value, motion_too: bool, history=None, t0: float = 0.0,
+            book: bool = False) -> None:
         """Prescribe ``value (3,)`` (or ``history``'s velocity from ``t0``) on ``dofs`` of the
-        gridpoints ``hits``; ``motion_too``: their velocities too (a restart has them)."""
+        gridpoints ``hits``; ``motion_too``: their velocities too (a restart has them).
+        ``book``: the kinetic energy the newly held components had goes out through the
+        boundary (``GW_BOUNDARY``): a run's stage, not the set-up (before the budget's start)
+        nor a restart's replay."""
         code = -1
         if history is not None:
             self.histories.append((history, float(t0)))
             code = len(self.histories) - 1
         for _, body, idx in hits:
             for k in dofs:
+                if book:
+                    _book_switch(body, idx, k, -1.0)
                 body.fixed[idx, k] = True
                 body.fixed_vel[idx, k] = value[k]
                 body.vhist[idx, k] = code
@@ -106,9 +113,14 @@ class GridConditions:
                     body.vel[idx, k] = value[k]
 
     @staticmethod
-    def free(hits) -> None:
-        """Release every degree of freedom of the gridpoints ``hits``."""
+    def free(hits, book: bool = False) -> None:
+        """Release every degree of freedom of the gridpoints ``hits``; ``book``: the kinetic
+        energy their prescribed velocities leave them with was put in through the boundary
+        (as :meth:`fix`)."""
         for _, body, idx in hits:
+            if book:
+                for k in range(3):
+                    _book_switch(body, idx, k, 1.0)
             body.fixed[idx] = False
             body.fixed_vel[idx] = 0.0
             body.vhist[idx] = -1
@@ -192,6 +204,16 @@ class GridConditions:
         f = np.einsum("tij,tj->ti", self.t_sigma[rows], area) / 3.0
         for k in range(3):
             np.add.at(g.bload, tri[:, k], f)
+
+
+def _book_switch(body, idx, k: int, sign: float) -> None:
+    """The kinetic energy of component ``k`` of the gridpoints ``idx`` that change between
+    prescribed and free: what a held component takes out (``sign`` -1, of those free now) or
+    a freed one brings (+1, of those held now), on the body's ``GW_BOUNDARY`` (the budget
+    counts no kinetic energy in a prescribed component)."""
+    on = idx[body.fixed[idx, k] == (sign > 0.0)]
+    if len(on):
+        body.work[GW_BOUNDARY] += sign * 0.5 * float(np.sum(body.mass[on] * body.vel[on, k] ** 2))
 
 
 def wholly_fixed(s) -> tuple[np.ndarray, np.ndarray]:

@@ -7,6 +7,7 @@ import h5py
 import numpy as np
 
 from ..mpi import allgather, gather
+from .motion import N_GW
 from .zones import zone_geometry
 
 
@@ -17,7 +18,8 @@ def checkpoint_rows(grids, comm, parallel: bool):
     own = range(grids.n_owned)
     mine = {"gid": np.array([grids.gids[d] for d in own], np.int64),
             "n_nodes": np.array([len(grids.bodies[d].nodes) for d in own], np.int64),
-            "n_zones": np.array([len(grids.bodies[d].tets) for d in own], np.int64)}
+            "n_zones": np.array([len(grids.bodies[d].tets) for d in own], np.int64),
+            "work": np.array([grids.bodies[d].work for d in own]).reshape(-1, N_GW)}
     arrays = {k: [getattr(grids, k)[grids.node_start[d]:grids.node_start[d + 1]] for d in own]
               for k in ("nodes", "vel", "force")}
     arrays["stress"] = [grids.bodies[d].stress for d in own]
@@ -34,8 +36,9 @@ def checkpoint_rows(grids, comm, parallel: bool):
 def write(f, rows, rank: int) -> None:
     """The grids' state (:func:`checkpoint_rows`) into group ``grids`` of an open
     checkpoint file, in gid order over all ranks: gid, gridpoint and zone counts,
-    gridpoint positions, velocities and contact forces, zone stresses and plastic bits
-    (the sub-contacts' grid columns are in ``subcontacts/sc_grid``)."""
+    gridpoint positions, velocities and contact forces, zone stresses and plastic bits, the
+    grids' energy accumulators (``work``, pdem.deformable.motion.GW_*; the sub-contacts' grid
+    columns are in ``subcontacts/sc_grid``)."""
     table, mine, arrays = rows
     allt = {k: np.concatenate([t[k] for t in table]) for k in mine}
     order = np.argsort(allt["gid"], kind="stable")
@@ -49,6 +52,9 @@ def write(f, rows, rank: int) -> None:
         d = g.create_dataset(k, (len(order),), dtype=np.int64)
         if rank == 0:
             d[:] = allt[k][order]
+    d = g.create_dataset("work", (len(order), N_GW), dtype=np.float64)
+    if rank == 0:
+        d[:] = allt["work"][order]
     shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "stress": (6,), "plastic": ()}
     for k, shape in shapes.items():
         zones = k in ("stress", "plastic")
@@ -62,7 +68,7 @@ def write(f, rows, rank: int) -> None:
 def load(grids, path) -> None:
     """Continue the grids held here from a checkpoint written by :func:`write` (before
     the blocks are distributed): gridpoints, velocities, contact forces, stresses,
-    plastic bits, and the zones' geometry from the gridpoints. ValueError (agreed over
+    plastic bits, energy accumulators, and the zones' geometry from the gridpoints. ValueError (agreed over
     the ranks by the restore) if the file has no such grids."""
     with h5py.File(path, "r") as f:
         if "grids" not in f or "n_nodes" not in f["grids"]:
@@ -86,4 +92,6 @@ def load(grids, path) -> None:
                 getattr(grids, k)[a:e] = g[k][node_off[i]:node_off[i + 1]]
             b.stress[:] = g["stress"][zone_off[i]:zone_off[i + 1]]
             b.plastic[:] = g["plastic"][zone_off[i]:zone_off[i + 1]]
+            # (a checkpoint without them: the budget's grid works start over)
+            b.work[:] = g["work"][i] if "work" in g else 0.0
             zone_geometry(b.nodes, b.tets, b.grad, b.vol)

@@ -11,6 +11,18 @@ One step (the FLAC/3DEC sequence, reference eqs. 53-59 and 68-76):
 4. stresses: Jaumann rotation by the spin, then the constitutive model (eq. 59 / plasticity),
    then NMD on the plastic volumetric stress correction (eqs. 73-76).
 
+Energy (the run's budget, pdem.plugins.energy): each step books on the grid's ``work``
+(columns ``GW_*``) the work of the gridpoint forces over the step with the mean velocity
+``(v(t - dt/2) + v(t + dt/2)) / 2`` of every free degree of freedom, which makes the kinetic
+energy's change exact for the leap-frog (the rigid blocks' rule, pdem.dynamics.motion): of
+gravity, of the applied loads (a block's or a stage's ``force``, boundary stresses), of the
+contacts, what local damping took out, and the work done on the zones (minus the zone forces'
+work: the energy the zones hold and dissipated, booked rather than taken from the stresses,
+whose quadratic form is off by O(strain) at large strain). A prescribed degree of freedom
+holds no kinetic energy: its motion does the work of the zone and contact forces on it
+(``GW_BOUNDARY``, with the prescribed velocity). ``GW_PLASTIC``: the zones' plastic work
+``V sigma_mean : (de - C^-1 dsigma)``, booked in the steps a zone's model yields.
+
 Timestep (the zone term of eq. 88): eq. 84, ``dt_n = 2 min_i sqrt(m_i / k_i)``, with ``k_i``
 the largest Gershgorin row sum of the assembled elastic zone stiffness at gridpoint ``i``
 (sum over its zones and over the 3 x 4 columns of ``|K_e|``). Gershgorin bounds the largest
@@ -24,10 +36,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import kernel
+from ..jit import inline_kernel, kernel
 from .constitutive import SHEAR_NOW, SHEAR_PAST, TENSION_NOW, TENSION_PAST, update_stress
 from .nmd import nmd_strain, nmd_stress
 from .zones import add_zone_forces, rotate_stress, strain_rates, zone_geometry
+
+# columns of a grid's energy accumulators (DeformableBody.work), booked by :func:`cycle`
+GW_GRAVITY = 0  # work of gravity
+GW_APPLIED = 1  # work of applied loads (block and stage forces, boundary stresses)
+GW_BOUNDARY = 2  # put in by prescribed gridpoint velocities
+GW_DAMPING = 3  # dissipated by local damping
+GW_CONTACT = 4  # work of the contact forces (diagnostic: the joints book their side)
+GW_ZONE = 5  # work done on the zones (held and dissipated in them)
+GW_PLASTIC = 6  # of which dissipated by the zones' plastic flow
+N_GW = 7
 
 
 @kernel
@@ -107,7 +129,7 @@ def scaled_masses(stiffness: np.ndarray, dt: float = 1.0, frac: float = 0.9,
 
 @kernel
 def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
-          plastic, model, nmd, alpha, unbalanced):
+          plastic, model, nmd, alpha, unbalanced, gforce, contact, load, bulk, shear, work):
     """Advance ``n_steps`` steps in place (see module doc); return the steps done.
     ``unbalanced (1,)``: set to the largest unbalanced gridpoint force (the norm over its
     free degrees of freedom, before damping) of the last step, for ``solve.ratio``.
@@ -117,6 +139,10 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     ``plastic (m,) int32`` state bits; ``model`` a constitutive table; ``nmd`` bool;
     ``alpha`` the local damping coefficient (0: undamped). Stops early (returning fewer
     steps) if a zone inverts.
+
+    Energy (module doc): ``applied`` is the sum of ``gforce`` (gravity), ``contact`` and
+    ``load`` (each (n, 3)), which are read only to book their work; ``bulk``, ``shear`` the
+    elastic moduli of the plastic work; ``work (N_GW,)`` accumulates.
     """
     n_nodes = nodes.shape[0]
     n_zones = tets.shape[0]
@@ -129,26 +155,47 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
         force[:] = applied
         add_zone_forces(tets, grad, vol, stress, force)
         big = 0.0
+        wg = wa = wb = wd = wc = wz = 0.0
         for n in range(n_nodes):
             c = dt / mass[n]
             f2 = 0.0
             for i in range(3):
+                ft = force[n, i]
+                fz = ft - applied[n, i]  # the zone forces' part
                 if fixed[n, i]:
-                    vel[n, i] = fixed_vel[n, i]
+                    vp = fixed_vel[n, i]
+                    vel[n, i] = vp
+                    # the prescribed motion strains the zones and the joints: it puts in the
+                    # work of their forces on the gridpoint (their reactions)
+                    wz -= fz * vp
+                    wb -= (fz + contact[n, i]) * vp
                     continue
-                f = force[n, i]
+                f = ft
                 f2 += f * f
                 v = vel[n, i]
                 if v > 0.0:
                     f -= alpha * abs(f)
                 elif v < 0.0:
                     f += alpha * abs(f)
-                vel[n, i] = v + f * c
+                v1 = v + f * c
+                vel[n, i] = v1
+                vb = 0.5 * (v + v1)
+                wg += gforce[n, i] * vb
+                wa += load[n, i] * vb
+                wc += contact[n, i] * vb
+                wz -= fz * vb
+                wd += (ft - f) * vb
             big = max(big, f2)
             for i in range(3):
                 mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
                 nodes[n, i] += vel[n, i] * dt
         unbalanced[0] = np.sqrt(big)
+        work[GW_GRAVITY] += wg * dt
+        work[GW_APPLIED] += wa * dt
+        work[GW_BOUNDARY] += wb * dt
+        work[GW_DAMPING] += wd * dt
+        work[GW_CONTACT] += wc * dt
+        work[GW_ZONE] += wz * dt
         # strain rates on the mid-step geometry: for a rigid rotation over the step the
         # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
         if zone_geometry(mid, tets, grad, vol) <= 0.0:
@@ -159,16 +206,39 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
         if zone_geometry(nodes, tets, grad, vol) <= 0.0:  # forces of the next step at t + dt
             return step
         rotate_stress(stress, spin, dt)
+        wp = 0.0
         for z in range(n_zones):
             de = (rate[z, 0] * dt, rate[z, 1] * dt, rate[z, 2] * dt, rate[z, 3] * dt,
                   rate[z, 4] * dt, rate[z, 5] * dt)
+            s0 = (stress[z, 0], stress[z, 1], stress[z, 2], stress[z, 3], stress[z, 4],
+                  stress[z, 5])
             bits, sigma_p[z] = update_stress(model, stress[z], de)
+            if bits & (SHEAR_NOW | TENSION_NOW):
+                wp += vol[z] * plastic_increment(s0, stress[z], de, bulk, shear)
             past = plastic[z] & (SHEAR_PAST | TENSION_PAST)
             if plastic[z] & SHEAR_NOW:
                 past |= SHEAR_PAST
             if plastic[z] & TENSION_NOW:
                 past |= TENSION_PAST
             plastic[z] = past | bits
+        work[GW_PLASTIC] += wp
         if nmd:
             nmd_stress(tets, vol, sigma_p, stress, n_nodes)
     return n_steps
+
+
+@inline_kernel
+def plastic_increment(s0, s1, de, bulk, shear):
+    """Plastic work per volume of a zone's stress update from ``s0`` to ``s1`` under the
+    strain increment ``de`` (tensor shear components): the mean stress times the strain less
+    its elastic part, ``(s0 + s1)/2 : (de - C^-1 (s1 - s0))``."""
+    dp = (s1[0] - s0[0] + s1[1] - s0[1] + s1[2] - s0[2]) / 3.0
+    out = 0.0
+    for k in range(6):
+        ds = s1[k] - s0[k]
+        if k < 3:
+            el = (ds - dp) / (2.0 * shear) + dp / (3.0 * bulk)
+            out += 0.5 * (s0[k] + s1[k]) * (de[k] - el)
+        else:
+            out += (s0[k] + s1[k]) * (de[k] - ds / (2.0 * shear))
+    return out

@@ -218,8 +218,12 @@ def _energy_lines(f: h5py.File) -> list[str]:
     first = dict(zip(cols, g["value"][0], strict=False))
     put_in += first["kinetic"] + first["strain"]
     share = 100.0 * abs(row["balance_error"]) / max(abs(put_in), 1e-300)
+    zones = ""
+    if row.get("zone_strain", 0.0) or row.get("plastic_work", 0.0):  # zoned blocks
+        zones = f", in zones {_g(row['zone_strain'])}, plastic {_g(row['plastic_work'])}"
     return [
-        f"energy (J, t = {_g(t)} s): kinetic {_g(row['kinetic'])}, in joints {_g(row['strain'])};"
+        f"energy (J, t = {_g(t)} s): kinetic {_g(row['kinetic'])}, in joints {_g(row['strain'])}"
+        f"{zones};"
         f" work of gravity {_g(row['gravity_work'])}, applied {_g(row['applied_work'])}, "
         f"prescribed {_g(row['boundary_work'])}",
         f"             dissipated in joints {_g(row['joint_dissipation'])}, by damping "
