@@ -202,27 +202,40 @@ def staged_text(out, checkpoint=""):
     return STAGED.format(out=out, first=120, second=120, checkpoint=checkpoint)
 
 
-def test_zoned_conditions_and_stages_are_bitwise_on_any_rank_count_and_restart(tmp_path):
+def straight_run(tmp_path, text_of, stem: str, at: int, every: int):
+    """The scene ``text_of(out, checkpoint)`` run straight on the 2- and 3-rank tiers with a
+    checkpoint at step ``at``, its file compared with the 1-rank run's; (comm, dir, grids)."""
     comm = MPI.COMM_WORLD
     if comm.size > 3:
-        pytest.skip("the 2- and 3-rank tiers' (the middle rank on 3)")
+        pytest.skip("the 2- and 3-rank tiers'")
     d = shared_dir(comm, tmp_path)
     os.makedirs(d, exist_ok=True)
-    ck = f"checkpoint: {{every_steps: 180, keep: 3, file: {d}/ck}}"
-    scene = with_parallel(staged_text(f"{d}/st.h5", ck), "auto", f"{d}/st.h5", every_steps=60)
-    solver, _, straight, _ = run(scene, comm, probe=grids)
+    ck = f"checkpoint: {{every_steps: {at}, keep: 3, file: {d}/ck}}"
+    path = f"{d}/{stem}.h5"
+    scene = with_parallel(text_of(path, ck), "auto", path, every_steps=every)
+    straight = run(scene, comm, probe=grids)[2]
+    compare_on_rank0(comm, path, scene, f"{d}/{stem}-ref.h5")
+    return comm, d, straight
+
+
+def restarted(comm, text: str, checkpoint: str, at: int) -> dict:
+    """The grids at the end of ``text`` run from ``checkpoint`` (step ``at``)."""
+    s = Simulation(parse_scene(text), comm, checkpoint=open_checkpoint(checkpoint))
+    assert s.step == at
+    s.run()
+    got = grids(s)
+    s.close()
+    return got
+
+
+def test_zoned_conditions_and_stages_are_bitwise_on_any_rank_count_and_restart(tmp_path):
+    comm, d, straight = straight_run(tmp_path, lambda out, ck: staged_text(out, ck), "st", 180,
+                                     60)
     z0 = straight[1]  # gid 1: pushed, then driven down at its top
     assert np.abs(z0[2]).max() > 1e4
     # z3 was excavated: its grid stopped where stage 2 found it
     assert not straight[4][1].any()
-    compare_on_rank0(comm, f"{d}/st.h5", scene, f"{d}/st-ref.h5")
-
-    s = Simulation(parse_scene(staged_text(f"{d}/r.h5")), comm,
-                   checkpoint=open_checkpoint(f"{d}/ck-{180:09d}.h5"))
-    assert s.step == 180
-    s.run()
-    got = grids(s)
-    s.close()
+    got = restarted(comm, staged_text(f"{d}/r.h5"), f"{d}/ck-{180:09d}.h5", 180)
     assert not same_grids(got, straight), same_grids(got, straight)
     # the energy budget through the stages (a face released at its pushed speed, a history
     # driving gridpoints, an excavation) and across the restart
@@ -272,28 +285,15 @@ output: {{file: {out}, every_steps: 40, contacts: false}}
 
 
 def test_tunnel_in_jointed_zoned_rock_is_bitwise_on_any_rank_count_and_restart(tmp_path):
-    comm = MPI.COMM_WORLD
-    if comm.size > 3:
-        pytest.skip("the 2- and 3-rank tiers'")
-    d = shared_dir(comm, tmp_path)
-    os.makedirs(d, exist_ok=True)
-    ck = f"checkpoint: {{every_steps: 120, keep: 3, file: {d}/ck}}"
-    text = JOINTED_TUNNEL.format(out=f"{d}/jt.h5", checkpoint=ck)
-    scene = with_parallel(text, "auto", f"{d}/jt.h5", every_steps=40)
-    solver, _, straight, _ = run(scene, comm, probe=grids)
+    comm, d, straight = straight_run(
+        tmp_path, lambda out, ck: JOINTED_TUNNEL.format(out=out, checkpoint=ck), "jt", 120, 40)
     # the excavation set the zoned pieces around it moving (at rest before it: in-situ stress
     # in equilibrium with the boundary's)
     assert max(np.abs(g[1]).max() for g in straight.values()) > 1e-7
-    compare_on_rank0(comm, f"{d}/jt.h5", scene, f"{d}/jt-ref.h5")
-
     if comm.size == 3:
         # (on 3 ranks the restart differs from the straight run by ~1e-16 in gridpoint
         # velocities: an open defect, docs/deformable.md "Not yet")
         return
-    s = Simulation(parse_scene(JOINTED_TUNNEL.format(out=f"{d}/jr.h5", checkpoint="")), comm,
-                   checkpoint=open_checkpoint(f"{d}/ck-{120:09d}.h5"))
-    assert s.step == 120
-    s.run()
-    got = grids(s)
-    s.close()
+    got = restarted(comm, JOINTED_TUNNEL.format(out=f"{d}/jr.h5", checkpoint=""),
+                    f"{d}/ck-{120:09d}.h5", 120)
     assert not same_grids(got, straight), same_grids(got, straight)
