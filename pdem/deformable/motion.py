@@ -141,10 +141,12 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     steps) if a zone inverts.
 
     Energy (module doc): ``applied`` is the sum of ``gforce`` (gravity), ``contact`` and
-    ``load`` (each (n, 3)), which are read only to book their work; ``bulk``, ``shear`` the
-    elastic moduli of the plastic work; ``work (N_GW,)`` accumulates.
+    ``load`` (each (n, 3); ``load`` may have no rows: no load), which are read only to book
+    their work; ``bulk``, ``shear`` the elastic moduli of the plastic work; ``work (N_GW,)``
+    accumulates.
     """
     n_nodes = nodes.shape[0]
+    loaded = load.shape[0] > 0
     n_zones = tets.shape[0]
     force = np.empty((n_nodes, 3))
     mid = np.empty((n_nodes, 3))
@@ -181,7 +183,8 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
                 vel[n, i] = v1
                 vb = 0.5 * (v + v1)
                 wg += gforce[n, i] * vb
-                wa += load[n, i] * vb
+                if loaded:
+                    wa += load[n, i] * vb
                 wc += contact[n, i] * vb
                 wz -= fz * vb
                 wd += (ft - f) * vb

@@ -337,14 +337,16 @@ class GridStore:
                 continue
             a, e = self.node_start[d], self.node_start[d + 1]
             gforce = gravity_forces(b.gravity_mass, self.gravity)
+            # the loads (a block's `force` spread over its gridpoints, boundary stresses on its
+            # faces), whose work is booked apart
             applied = self.force[a:e] + gforce
-            load = np.zeros_like(applied)  # (the loads' work is booked apart)
-            if b.loaded:  # a block's `force`, spread over its gridpoints
+            load = _NO_LOAD  # (its work is nil: the cycle skips it)
+            if b.loaded:
                 applied += b.applied
-                load += b.applied
-            if self.bloaded:  # boundary stresses on its faces
+                load = b.applied
+            if self.bloaded:
                 applied += self.bload[a:e]
-                load += self.bload[a:e]
+                load = self.bload[a:e] + b.applied if b.loaded else self.bload[a:e]
             if _cycle(b, applied, dt, gforce, self.force[a:e], load) < 1:
                 return self.gids[d]
             big = max(big, float(b.unbalanced[0]))
@@ -380,6 +382,9 @@ class GridStore:
                 np.array([self.bodies[d].kinetic_as_integrated() for d in own]),
                 np.array([self.bodies[d].work for d in own]).reshape(len(own), N_GW), shift)
 
+
+
+_NO_LOAD = np.zeros((0, 3))  # a grid step without loads (GridStore.step)
 
 
 def block_conditions(body: DeformableBody, spec) -> None:

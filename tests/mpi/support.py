@@ -196,6 +196,17 @@ def compare_on_rank0(comm, path: str, ref_scene, ref_path: str, steps: int | Non
     assert not bad, f"{comm.size}-rank output differs from the 1-rank run:\n" + "\n".join(bad)
 
 
+def slabs_match_one_rank(tmp_path, text: str, stem: str, every_steps: int) -> None:
+    """``text`` run on one slab per rank along x (output every ``every_steps``), its file
+    compared with the 1-rank run's."""
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    path = f"{base}/{stem}.h5"
+    scene = with_parallel(text, [comm.size, 1, 1], path, every_steps=every_steps)
+    run(scene, comm)
+    compare_on_rank0(comm, path, scene, f"{base}/{stem}-ref.h5")
+
+
 def child_env() -> dict[str, str]:
     """This environment without the launcher's variables: a child mpiexec starts its own job."""
     env = {k: v for k, v in os.environ.items()

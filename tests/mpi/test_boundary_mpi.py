@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 from mpi4py import MPI
-from support import TWO_RANKS_ONLY, compare_on_rank0, run, shared_dir, with_parallel
+from support import TWO_RANKS_ONLY, shared_dir, slabs_match_one_rank
 
 pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
 
@@ -33,12 +33,7 @@ solve: {time: 0.25, damping: none}
 
 
 def test_shaken_row_matches_one_rank(tmp_path):
-    comm = MPI.COMM_WORLD
-    base = shared_dir(comm, tmp_path)
-    path = f"{base}/shake.h5"
-    scene = with_parallel(SCENE, [comm.size, 1, 1], path, every_steps=100)
-    run(scene, comm)
-    compare_on_rank0(comm, path, scene, f"{base}/shake-ref.h5")
+    slabs_match_one_rank(tmp_path, SCENE, "shake", 100)
 
 
 def test_shaken_row_restarts_bitwise(tmp_path):
