@@ -63,6 +63,11 @@ COLLAPSE_BELOW = 15.0
 # edges shorter than this fraction of the smallest spacing are collapsed where that keeps
 # the zones around at COLLAPSE_BELOW or better
 SHORT = 0.35
+# nodes closer than this fraction of a short edge merge as one cluster
+TINY = 0.05
+# a collapse keeps the volume of the zones it changes to this fraction (twin zones it removes
+# held a sliver's volume; a fold would change it by a zone's)
+VOLUME_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -222,10 +227,10 @@ class _Clipper:
         got = self.key_id.get(key)
         if got is not None:
             return got
-        di, dj = self.node_d[i, g], self.node_d[j, g]
-        if not di * dj < 0.0:
+        di, dj = self.node_d[i], self.node_d[j]
+        if not di[g] * dj[g] < 0.0:
             raise _Fail("edge does not cross")
-        t = di / (di - dj)
+        t = di[g] / (di[g] - dj[g])
         p = self.nodes[i] + t * (self.nodes[j] - self.nodes[i])
         return self._add(key, p, (g,))
 
@@ -465,7 +470,8 @@ def _attempt(poly, size, snap):
     # no edge longer than a lattice box's diagonal (the longest edge of its Kuhn tets) with
     # both ends snapped the most (2 reach each: the longest edge the clipped lattice can have)
     longest = (float(np.sqrt(h @ h)) + 4.0 * reach) * (1 + 1e-12)
-    tmp = _collapse(pos, tmp, clip.on, fixed, SHORT * h.min(), COLLAPSE_BELOW, longest)
+    tmp = _collapse(pos, tmp, clip.on, fixed, normals, offsets, SHORT * h.min(),
+                    COLLAPSE_BELOW, longest)
     _smooth(pos, tmp, clip.on, fixed, normals, offsets, COLLAPSE_BELOW, longest)
     # renumber: block vertices first, then the rest by first use
     used, first = np.unique(tmp.reshape(-1), return_index=True)
@@ -483,6 +489,12 @@ def _attempt(poly, size, snap):
     v = signed_volumes(out_nodes, out_tets)
     if not v.min() > 0.0:
         raise _Fail("a zone is not positive")
+    # the checks above are local (each collapse, each cell): the whole must be a partition,
+    # every tet face shared by at most two zones and the volumes adding up to the block's
+    _, count = np.unique(np.sort(out_tets[:, _LOCAL_FACES].reshape(-1, 3), axis=1), axis=0,
+                         return_counts=True)
+    if count.max() > 2 or abs(v.sum() - poly.volume) > 1e-11 * poly.volume:
+        raise _Fail("not a partition")
     return out_nodes, out_tets
 
 
@@ -498,11 +510,27 @@ def _tet_quality(x: np.ndarray) -> float:
     return float(_min_dihedral(x).min())
 
 
-def _collapse(nodes, tets, on, fixed, short: float, worst: float, longest: float):
+def _twins(rows) -> set[int]:
+    """Positions of the pairs of rows with the same four nodes: the two thin zones either side
+    of a face whose apexes a collapse merges, which then cancel (both go)."""
+    seen: dict[tuple, int] = {}
+    out: set[int] = set()
+    for k, r in enumerate(rows):
+        key = tuple(sorted(r))
+        if len(set(key)) == 4 and key in seen:
+            out.update((seen.pop(key), k))
+        else:
+            seen[key] = k
+    return out
+
+
+def _collapse(nodes, tets, on, fixed, normals, offsets, short: float, worst: float,
+              longest: float):
     """Edge collapse (a node ``b`` merges into a neighbour ``a``; one node id replaces another
     everywhere, so conformity is kept) of the edges shorter than ``short`` and of the zones
     whose smallest dihedral angle is under ``worst``. Allowed when ``b`` is not a block vertex,
-    ``a`` lies on every block plane ``b`` lies on (the surface stays on the faces), the zones
+    ``a`` lies on every block plane ``b`` lies on (the surface stays on the faces; else ``a``
+    moves onto the edge of its plane and ``b``'s, when that is within ``short``), the zones
     around ``b`` that survive are positive, fill the same volume and have no edge longer
     than ``longest``, and their worst angle is at least ``worst`` or better than before.
     Short edges go first (shortest first), then the bad zones (worst first). Returns the
@@ -517,41 +545,115 @@ def _collapse(nodes, tets, on, fixed, short: float, worst: float, longest: float
             star[q].append(k)
 
     def attempt(a: int, b: int, improve_only: bool) -> bool:
-        if fixed[b] or not on[b] <= on[a]:
+        if fixed[b]:
             return False
+        planes = on[a] | on[b]
+        p = nodes[a]
+        if planes != on[a]:
+            # b on a plane a is not on (two cut points either side of a block edge): a moves
+            # onto the planes of both, when they meet in an edge near it
+            if fixed[a] or len(planes) > 2:
+                return False
+            m = normals[sorted(planes)]
+            gram = m @ m.T
+            if np.linalg.det(gram) < 1e-6:
+                return False
+            p = p - m.T @ np.linalg.solve(gram, m @ p - offsets[sorted(planes)])
+            if np.linalg.norm(p - nodes[a]) > short:
+                return False
         around = [m for m in star[b] if alive[m]]
         keep = [m for m in around if a not in tets[m]]
         if not keep or len(keep) == len(around):  # b alone, or a is not b's neighbour
             return False
-        new = np.array([[a if q == b else q for q in tets[m]] for m in keep])
-        reach = nodes[new.reshape(-1)] - nodes[a]
-        if (reach * reach).sum(axis=1).max() > longest * longest:
+        moved = [m for m in star[a] if alive[m] and b not in tets[m]] \
+            if planes != on[a] else []
+        rows = [[a if q == b else q for q in tets[m]] for m in keep + moved]
+        drop = _twins(rows)
+        ms = [m for k, m in enumerate(keep + moved) if k not in drop]
+        if not ms:
             return False
-        v_new = signed_volumes(nodes, new)
-        if not v_new.min() > 0.0:
-            return False
-        v_old = sum(vol[m] for m in around)
-        if abs(v_new.sum() - v_old) > 1e-12 * v_old:
-            return False
-        q_old = min(qual[m] for m in around)
-        q_each = _min_dihedral(nodes[new])
-        q_new = float(q_each.min())
-        if not (q_new > q_old or (not improve_only and q_new >= worst)):
-            return False
-        for m in around:
-            if m not in keep:
-                alive[m] = False
-        for m, t_new, v, q in zip(keep, new.tolist(), v_new.tolist(), q_each.tolist(),
-                                      strict=True):
-            tets[m], vol[m], qual[m] = t_new, v, q
-            star[a].append(m)
+        new = np.array([r for k, r in enumerate(rows) if k not in drop])
+        keep_a, nodes[a] = nodes[a].copy(), p
+        try:
+            reach = nodes[new.reshape(-1)] - p
+            if (reach * reach).sum(axis=1).max() > longest * longest:
+                return False
+            v_new = signed_volumes(nodes, new)
+            if not v_new.min() > 0.0:
+                return False
+            v_old = sum(vol[m] for m in around + moved)
+            if abs(v_new.sum() - v_old) > VOLUME_TOL * v_old:
+                return False
+            q_old = min(qual[m] for m in around + moved)
+            q_each = _min_dihedral(nodes[new])
+            q_new = float(q_each.min())
+            if not (q_new > q_old or (not improve_only and q_new >= worst)):
+                return False
+        finally:
+            nodes[a] = keep_a
+        nodes[a], on[a] = p, planes
+        for m in around + moved:
+            alive[m] = False
+        for m, t_new, v, q in zip(ms, new.tolist(), v_new.tolist(), q_each.tolist(), strict=True):
+            alive[m], tets[m], vol[m], qual[m] = True, t_new, v, q
+        star[a].extend(keep)
         star[b] = []
+        return True
+
+    def merge(rep: int, others: list[int]) -> bool:
+        """``others`` merge into ``rep`` where the zones left are positive and keep their
+        volume."""
+        gone = set(others)
+        around = sorted({m for q in [rep, *others] for m in star[q] if alive[m]})
+        new_t = [[rep if q in gone else q for q in tets[m]] for m in around]
+        drop = _twins(new_t)
+        keep = [k for k, t in enumerate(new_t) if len(set(t)) == 4 and k not in drop]
+        if not keep:
+            return False
+        new = np.array([new_t[k] for k in keep])
+        v_new = signed_volumes(nodes, new)
+        v_old = sum(vol[m] for m in around)
+        if not v_new.min() > 0.0 or abs(v_new.sum() - v_old) > VOLUME_TOL * v_old:
+            return False
+        q_each = _min_dihedral(nodes[new])
+        for m in around:
+            alive[m] = False
+        for k, v, q in zip(keep, v_new.tolist(), q_each.tolist(), strict=True):
+            m = around[k]
+            alive[m], tets[m], vol[m], qual[m] = True, new_t[k], v, q
+            if m not in star[rep]:
+                star[rep].append(m)
+        for q in others:
+            star[q] = []
         return True
 
     arr = np.array(tets, np.int64)
     e = np.sort(arr[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]].reshape(-1, 2), axis=1)
     e = np.unique(e, axis=0)
     length = np.linalg.norm(nodes[e[:, 0]] - nodes[e[:, 1]], axis=1)
+    # clusters of nodes much closer than the short edges (cut points where a block edge
+    # passes next to a lattice edge, one per lattice triangle around it) merge at once:
+    # merging them two by two flattens the zones between the others
+    parent = {}
+
+    def root(q):
+        while parent.get(q, q) != q:
+            q = parent[q]
+        return q
+
+    for k in np.nonzero(length < TINY * short)[0]:
+        a, b = root(int(e[k, 0])), root(int(e[k, 1]))
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    groups: dict[int, list[int]] = {}
+    for q in sorted(parent):
+        groups.setdefault(root(q), [root(q)]).append(q)
+    for members in groups.values():
+        rep = max(members, key=lambda q: (bool(fixed[q]), len(on[q]), -q))
+        if any(fixed[q] for q in members if q != rep) or \
+                any(not on[q] <= on[rep] for q in members):
+            continue
+        merge(rep, [q for q in members if q != rep])
     for k in np.argsort(length, kind="stable"):
         if length[k] >= short:
             break

@@ -1,13 +1,21 @@
 """Zoning of convex blocks (pdem.deformable.mesh): exact partition, orientation, conformity,
-determinism, the size bound and a shape-quality floor, on a box, a prism and a hull."""
+determinism, the edge bound, a zone-count bound and a shape-quality floor, on boxes, a bar, a
+thin slab, prisms, a hull and pieces cut by tunnel and joint planes.
+
+The zone counts and floors are the clipped lattice's (measured values in the comments; the
+cone + bisection mesher it replaced gave the counts and angles in brackets, which fail the
+bounds on the elongated, thin and cut blocks)."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
-from pdem.deformable.mesh import min_dihedral_angles, signed_volumes, tetrahedralise
+from pdem.deformable.mesh import SNAP, min_dihedral_angles, signed_volumes, tetrahedralise
 from pdem.geometry import box, from_vertices, prism
+from pdem.geometry.cutting import clip_below
 
 
 def _hull():
@@ -19,20 +27,45 @@ def _hull():
 
 _HEX = [[np.cos(a), np.sin(a), 0.0] for a in np.linspace(0.0, 2 * np.pi, 7)[:-1]]
 
-# (block, zone size, measured minimum dihedral angle floor in degrees)
+
+def _ring_piece():
+    """A piece of the quarter-Kirsch model (tests/verification/test_deformable_kirsch.py): the
+    0.3 m slice of the quarter disc R = 3 (16-sided arc) beyond one face of the tunnel."""
+    arc = [[3 * math.cos(t), 0.0, 3 * math.sin(t)] for t in np.linspace(0, math.pi / 2, 17)]
+    n = np.array([math.cos(math.pi / 5), 0.0, math.sin(math.pi / 5)])
+    return clip_below(prism([[0.0, 0.0, 0.0], *arc], [0.0, 0.3, 0.0]), -n, -1.0)
+
+
+def _jointed_piece():
+    """A 3 x 2 x 2.5 box cut by one plane of each of two joint sets (dip/dip direction 35/70
+    and 80/200, tests/verification/test_rock_mass.py): an oblique wedge."""
+    def normal(dip, dd):
+        dip, dd = math.radians(dip), math.radians(dd)
+        return np.array([math.sin(dip) * math.sin(dd), math.sin(dip) * math.cos(dd),
+                         math.cos(dip)])
+    p = clip_below(box([0, 0, 0], [3, 2, 2.5]), normal(35, 70), normal(35, 70) @ [1.1, 0.9, 1.3])
+    return clip_below(p, -normal(80, 200), -normal(80, 200) @ [1.6, 1.2, 0.4])
+
+
+# (block, zone size, minimum dihedral angle floor in degrees, most zones)
 CASES = {
-    "box": (lambda: box([0, 0, 0], [1, 1, 1]), 0.25, 40.0),       # measured 45.0
-    "column": (lambda: box([0, 0, 0], [0.5, 0.5, 1.5]), 0.25, 12.0),  # measured 14.8
-    "prism": (lambda: prism(_HEX, [0.2, 0.1, 1.0]), 0.3, 15.0),  # measured 20.2
-    "hull": (_hull, 0.3, 1.5),  # measured 2.0 (thin cones under small hull faces)
+    "box": (lambda: box([0, 0, 0], [1, 1, 1]), 0.25, 40.0, 400),  # 45.0, 384 [45.0, 1536]
+    "column": (lambda: box([0, 0, 0], [0.5, 0.5, 1.5]), 0.25, 40.0, 150),  # 45.0, 144 [14.8, 1560]
+    "bar": (lambda: box([0, 0, 0], [0.1, 0.1, 2.0]), 0.1, 40.0, 150),  # 45.0, 120 [2.6, 13648]
+    "column10": (lambda: box([0, 0, 0], [1, 1, 10]), 0.25, 40.0, 4000),  # 45.0, 3840 [5.7, 72944]
+    "slab": (lambda: box([0, 0, 0], [2, 2, 0.05]), 0.5, 18.0, 1300),  # 19.3, 1176 [1.4, 1232]
+    "prism": (lambda: prism(_HEX, [0.2, 0.1, 1.0]), 0.3, 7.0, 2500),  # 8.5, 2035 [20.2, 4166]
+    "hull": (_hull, 0.3, 2.0, 2000),  # 2.4, 1484 [2.0, 2748] (small hull faces)
+    "ring": (_ring_piece, 0.3, 3.0, 1200),  # 3.6, 880 [1.35, 10784]
+    "jointed": (_jointed_piece, 0.3, 10.0, 4000),  # 11.4, 3142 [0.65, 9623]
 }
 
 
 @pytest.fixture(scope="module", params=list(CASES))
 def case(request):
-    make, size, floor = CASES[request.param]
+    make, size, floor, most = CASES[request.param]
     poly = make()
-    return request.param, poly, size, floor, tetrahedralise(poly, size)
+    return request.param, poly, size, (floor, most), tetrahedralise(poly, size)
 
 
 def test_volumes_partition_the_block(case):
@@ -43,11 +76,22 @@ def test_volumes_partition_the_block(case):
 
 
 def test_edges_respect_size(case):
-    _, _, size, _, m = case
+    """No edge is longer than a lattice box's diagonal with both ends snapped the most
+    (``sqrt(3) size + 4 SNAP size``); blocks that lie on the lattice (boxes) keep the Kuhn
+    tets' own edges, at most the box diagonal ``sqrt(3) size``."""
+    name, poly, size, _, m = case
     x = m.nodes[m.tets]
-    for a in range(4):
-        for b in range(a + 1, 4):
-            assert np.linalg.norm(x[:, a] - x[:, b], axis=1).max() <= size * (1 + 1e-12)
+    longest = max(np.linalg.norm(x[:, a] - x[:, b], axis=1).max()
+                  for a in range(4) for b in range(a + 1, 4))
+    print(f"longest edge {longest / size:.3f} size")
+    on_lattice = name in ("box", "column", "bar", "column10", "slab")
+    bound = math.sqrt(3) if on_lattice else math.sqrt(3) + 4 * SNAP
+    assert longest <= bound * size * (1 + 1e-12)
+
+
+def test_block_vertices_come_first_and_exact(case):
+    _, poly, _, _, m = case
+    assert np.array_equal(m.nodes[:poly.n_vertices], poly.vertices)
 
 
 def test_nodes_are_unique_and_all_used(case):
@@ -86,15 +130,18 @@ def test_conforming_closed_surface(case):
 def test_deterministic(case):
     name, _, size, _, m = case
     again = tetrahedralise(CASES[name][0](), size)
+    assert again.surface_face.tobytes() == m.surface_face.tobytes()
     for a, b in ((m.nodes, again.nodes), (m.tets, again.tets), (m.surface, again.surface)):
         assert a.tobytes() == b.tobytes()
 
 
-def test_quality_floor(case):
-    _, _, _, floor, m = case
+def test_quality_floor_and_zone_count(case):
+    _, _, _, (floor, most), m = case
     angles = min_dihedral_angles(m.nodes, m.tets)
-    print(f"min dihedral {angles.min():.2f} deg, 5th percentile {np.percentile(angles, 5):.2f}")
+    print(f"{len(m.tets)} zones, min dihedral {angles.min():.2f} deg, "
+          f"5th percentile {np.percentile(angles, 5):.2f}")
     assert angles.min() >= floor
+    assert len(m.tets) <= most
 
 
 def test_dihedral_of_regular_tet():
