@@ -1,49 +1,59 @@
 """Tetrahedral zoning of one convex block: nodes, positively oriented tets, surface triangles.
 
 Method (pure numpy, no external mesher): a structured lattice in the block's own frame,
-clipped by the block's faces.
+clipped by the block's faces, then cleaned.
 
 1. **Frame and lattice.** The third axis is the normal of the block's largest face; the first
-   is the projected block edge that gives the smallest bounding rectangle in the plane across
-   it (rotating calipers over the edges). Along each axis the block's extent ``L_i`` is cut
-   into ``n_i = ceil(L_i / size)`` equal spacings ``h_i = L_i / n_i``, then any spacing more
-   than :data:`ASPECT` times the smallest is cut down to it (a thin slab gets cells at most
-   3:1, not 10:1 slivers). Every lattice box is split into the 6 Kuhn (Freudenthal) tets
-   along its main diagonal; all boxes are split the same way, so the lattice is conforming.
-   A box, a bar or a slab lies on lattice planes and is meshed by these tets alone; a prism
-   whose end faces are the largest is cut in its cross-section only.
-2. **Snap.** A lattice node within ``SNAP * min(h)`` of a face plane is moved onto it (within
-   that distance of two planes: onto their edge; of three planes through a block vertex: onto
-   the vertex), so no cut leaves a piece thinner than that fraction of a cell. A move that
-   would flip a lattice tet that reaches into the block is refused by retrying with half the
-   snap distance (and none at last).
+   is the projected block edge that gives the smallest bounding rectangle across it. Along
+   each axis the block's extent ``L_i`` is cut into ``n_i = ceil(L_i / (size / sqrt 2))``
+   equal spacings ``h_i = L_i / n_i``, then any spacing more than :data:`ASPECT` times the
+   smallest is cut down to that (a thin slab gets boxes at most 3:1, not 10:1 slivers). Every
+   lattice box is split into the 6 Kuhn (Freudenthal) tets around its main diagonal; all
+   boxes alike, so the lattice is conforming. A box, bar or slab lies on lattice planes and
+   is meshed by these tets alone; a prism whose end faces are the largest is cut in its
+   cross-section only.
+2. **Snap.** A lattice node within ``SNAP * min(h)`` of a face plane moves onto it (within
+   that distance of two planes: onto their edge; of three planes of a block vertex: onto the
+   vertex; no move longer than twice that distance), so no cut leaves a piece thinner than
+   that. The moved nodes of any lattice tet reaching into the block that the moves flatten
+   go back. The lattice is padded by a box on every side and its outer nodes never move, so
+   it still covers the block.
 3. **Clip.** A lattice tet inside the block is a zone. A tet cut by face planes is clipped to
-   the block (a convex polytope) and coned from its vertex mean, every face of the clipped
-   cell with more than three corners fanned from the mean of its corners. A cut point is
-   named by what it is, never by its coordinates: (lattice edge, plane), (lattice triangle,
-   two planes) or a block vertex, and its position is computed from that name alone, so the
-   two tets sharing a lattice triangle clip it to the same polygon, fan it from the same
-   centre, and the mesh is conforming. The cells are convex and their cone points strictly
-   inside, so the tets are positive and partition the block exactly (volumes sum to the
-   block's to round-off); the block's vertices are nodes at their exact coordinates.
+   the block (a convex cell) and coned from its vertex mean, every face of the cell with more
+   than three corners fanned from the mean of its corners. A cut point is named by what it
+   is, never by its coordinates: (lattice edge, plane), (lattice triangle, two planes) or a
+   block vertex, and its position is computed from that name alone, so the two tets on a
+   lattice triangle clip it to the same polygon and fan it from the same centre: the mesh is
+   conforming. The cells are convex and their cone points inside, so the tets are positive
+   and partition the block exactly; the block's vertices are nodes at their exact
+   coordinates.
+4. **Clean.** Clusters of cut points much closer than a short edge merge; edges shorter than
+   ``SHORT * min(h)`` collapse (a node merges into a neighbour that lies on all its block
+   planes, so the surface stays on the faces; block vertices stay) where the zones around
+   stay positive, keep their volume, and stay at ``COLLAPSE_BELOW`` degrees or better (or
+   improve); zones still under that get a collapse or a move of their nodes towards their
+   neighbours' mean (within their block planes) where that improves them. Every step is
+   checked locally, and the result as a whole (positive, no face in three zones, volumes
+   adding up); a failure retries without the snap.
 
-The size rule: the uncut zones are the Kuhn tets of boxes whose sides are at most ``size``
-(a box's diagonal edge is up to ``sqrt(3) size``); cut zones are parts of those boxes. Edges are
-therefore at most ``sqrt(3) size``, and no edge is cut shorter than ``SNAP * min(h)`` by the
-lattice alone (block edges shorter than that, and block edges passing close to lattice edges,
-still make small zones: the block's own shape bounds the quality near its corners).
+The size rule: every zone lies in one lattice box of sides at most ``size / sqrt 2``. Uncut
+zones have the box's sides, face diagonals (at most ``size``) and main diagonal (at most
+``sqrt(3/2) size``) as edges; no edge is longer than a box diagonal with both ends snapped the
+most (``sqrt(3/2) size + 4 SNAP min(h)``, at most ``2.07 size``; the collapse and the moves
+keep that bound).
 
 Why not cone + longest-edge bisection (the earlier method): its cone tets from the centroid
 are as elongated as the block, and bisection keeps their shape and refines them until their
-long edges meet the size: a 0.1 x 0.1 x 2 bar at 0.1 took 13,648 zones at 2.6 degrees where
-this lattice takes 120 at 45. Why not Delaunay (scipy's Qhull): a Delaunay tetrahedralisation
-of lattice plus boundary points has slivers (near-zero-volume tets of cospherical points: the
-lattice is all cospherical) that need a cleaning pass, and does not keep the faces unless the
-boundary points are dense; the clipped lattice is conforming and exact by construction.
+long edges meet the size: a 0.1 x 0.1 x 2 bar at 0.1 took 13,648 zones at 2.6 degrees (here
+696 at 35.9). Why not Delaunay (scipy's Qhull, not a dependency): the lattice's points are
+cospherical in every box, so a Delaunay tetrahedralisation of lattice plus boundary points
+has slivers that need the same cleaning, and it keeps the block's faces only if the boundary
+points are dense; the clipped lattice is conforming and exact by construction.
 
-Determinism: lattice tets are clipped in lattice order, block planes in index order; cut points
-and fan centres are keyed by integer tuples (insertion-ordered dicts), and fan centres and cone
-points are means over corners sorted by key, so the same input gives a bitwise identical mesh.
+Determinism: lattice tets are clipped in lattice order, planes in index order; cut points
+and centres are keyed by integer tuples (insertion-ordered dicts), means are over corners
+sorted by key, and the cleaning visits edges and zones in stable sorted order, so the same
+input gives a bitwise identical mesh.
 """
 
 from __future__ import annotations
@@ -157,8 +167,10 @@ def _frame(poly) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _spacings(lo, hi, size: float) -> np.ndarray:
+    """Lattice boxes per axis: spacings at most ``size / sqrt(2)`` (the Kuhn tets' face
+    diagonals at most ``size``), at most ASPECT times the smallest."""
     ext = hi - lo
-    n = np.maximum(1, np.ceil(ext / size - 1e-9)).astype(np.int64)
+    n = np.maximum(1, np.ceil(ext / (size / np.sqrt(2.0)) - 1e-9)).astype(np.int64)
     h = ext / n
     cap = ASPECT * h.min()
     n = np.where(h > cap * (1 + 1e-9), np.ceil(ext / cap - 1e-9), n).astype(np.int64)
@@ -693,22 +705,34 @@ def _smooth(nodes, tets, on, fixed, normals, offsets, worst: float, longest: flo
                 continue
             around = tets[star[q]]
             ring = np.unique(around)
-            target = (nodes[ring].sum(axis=0) - nodes[q]) / (len(ring) - 1)
-            if planes:  # onto the node's planes (its face or edge)
-                m = normals[planes]
-                target = target - m.T @ np.linalg.solve(m @ m.T, m @ target - offsets[planes])
+            # candidates: the neighbours' mean, and away from the face opposite q in each of
+            # its bad zones (a sliver's four nodes are nearly in one plane)
+            targets = [(nodes[ring].sum(axis=0) - nodes[q]) / (len(ring) - 1)]
+            for t in tets[bad]:
+                if q in t:
+                    a, b, c = (nodes[r] for r in t if r != q)
+                    n = np.cross(b - a, c - a)
+                    n *= np.sign(n @ (nodes[q] - a)) / np.linalg.norm(n)
+                    targets.append(nodes[q] + 0.3 * np.linalg.norm(b - a) * n)
             q_old = _tet_quality(nodes[around])
             v_old = signed_volumes(nodes, around).sum()
             keep = nodes[q].copy()
-            for w in (1.0, 0.5, 0.25):
-                nodes[q] = keep + w * (target - keep)
-                reach = nodes[ring] - nodes[q]
-                if (reach * reach).sum(axis=1).max() <= longest * longest and \
-                        _tet_quality(nodes[around]) > q_old and \
-                        abs(signed_volumes(nodes, around).sum() - v_old) <= 1e-12 * v_old:
-                    moved = True
+            done = False
+            for target in targets:
+                if planes:  # onto the node's planes (its face or edge)
+                    m = normals[planes]
+                    target = target - m.T @ np.linalg.solve(m @ m.T, m @ target - offsets[planes])
+                for w in (1.0, 0.5, 0.25):
+                    nodes[q] = keep + w * (target - keep)
+                    reach = nodes[ring] - nodes[q]
+                    if (reach * reach).sum(axis=1).max() <= longest * longest and \
+                            _tet_quality(nodes[around]) > q_old and \
+                            abs(signed_volumes(nodes, around).sum() - v_old) <= 1e-12 * v_old:
+                        done = moved = True
+                        break
+                if done:
                     break
-            else:
+            if not done:
                 nodes[q] = keep
         if not moved:
             break
@@ -740,7 +764,7 @@ def _surface(nodes: np.ndarray, tets: np.ndarray, poly):
 
 def tetrahedralise(poly, size: float) -> TetMesh:
     """Zone a convex polyhedron into the clipped Kuhn tets of a lattice of spacing at most
-    ``size`` in the block's frame (see the module doc for the exact rule)."""
+    ``size / sqrt 2`` in the block's frame (see the module doc for the exact rule)."""
     if not size > 0.0:
         raise ValueError(f"zone size must be positive, got {size}")
     err = None

@@ -49,15 +49,15 @@ def _jointed_piece():
 
 # (block, zone size, minimum dihedral angle floor in degrees, most zones)
 CASES = {
-    "box": (lambda: box([0, 0, 0], [1, 1, 1]), 0.25, 40.0, 400),  # 45.0, 384 [45.0, 1536]
-    "column": (lambda: box([0, 0, 0], [0.5, 0.5, 1.5]), 0.25, 40.0, 150),  # 45.0, 144 [14.8, 1560]
-    "bar": (lambda: box([0, 0, 0], [0.1, 0.1, 2.0]), 0.1, 40.0, 150),  # 45.0, 120 [2.6, 13648]
-    "column10": (lambda: box([0, 0, 0], [1, 1, 10]), 0.25, 40.0, 4000),  # 45.0, 3840 [5.7, 72944]
+    "box": (lambda: box([0, 0, 0], [1, 1, 1]), 0.25, 40.0, 1400),  # 45.0, 1296 [45.0, 1536]
+    "column": (lambda: box([0, 0, 0], [0.5, 0.5, 1.5]), 0.25, 40.0, 550),  # 45.0, 486 [14.8, 1560]
+    "bar": (lambda: box([0, 0, 0], [0.1, 0.1, 2.0]), 0.1, 33.0, 800),  # 35.9, 696 [2.6, 13648]
+    "column10": (lambda: box([0, 0, 0], [1, 1, 10]), 0.25, 40.0, 13000),  # 43.5, 12312 [5.7, 72944]
     "slab": (lambda: box([0, 0, 0], [2, 2, 0.05]), 0.5, 18.0, 1300),  # 19.3, 1176 [1.4, 1232]
-    "prism": (lambda: prism(_HEX, [0.2, 0.1, 1.0]), 0.3, 7.0, 2500),  # 8.5, 2035 [20.2, 4166]
-    "hull": (_hull, 0.3, 2.0, 2000),  # 2.4, 1484 [2.0, 2748] (small hull faces)
-    "ring": (_ring_piece, 0.3, 3.0, 1200),  # 3.6, 880 [1.35, 10784]
-    "jointed": (_jointed_piece, 0.3, 10.0, 4000),  # 11.4, 3142 [0.65, 9623]
+    "prism": (lambda: prism(_HEX, [0.2, 0.1, 1.0]), 0.3, 13.0, 4000),  # 15.0, 3592 [20.2, 4166]
+    "hull": (_hull, 0.3, 2.0, 2900),  # 2.6, 2609 [2.0, 2748] (small hull faces)
+    "ring": (_ring_piece, 0.3, 8.0, 3400),  # 8.9, 3083 [1.35, 10784]
+    "jointed": (_jointed_piece, 0.3, 13.0, 6500),  # 15.0, 5920 [0.65, 9623]
 }
 
 
@@ -76,16 +76,17 @@ def test_volumes_partition_the_block(case):
 
 
 def test_edges_respect_size(case):
-    """No edge is longer than a lattice box's diagonal with both ends snapped the most
-    (``sqrt(3) size + 4 SNAP size``); blocks that lie on the lattice (boxes) keep the Kuhn
-    tets' own edges, at most the box diagonal ``sqrt(3) size``."""
+    """The lattice spacing is at most ``size / sqrt(2)``: blocks that lie on the lattice
+    (boxes) keep the Kuhn tets' edges, at most a box diagonal ``sqrt(3 / 2) size``; no edge
+    is longer than a box diagonal with both ends snapped the most (``+ 4 SNAP size /
+    sqrt(2)``)."""
     name, poly, size, _, m = case
     x = m.nodes[m.tets]
     longest = max(np.linalg.norm(x[:, a] - x[:, b], axis=1).max()
                   for a in range(4) for b in range(a + 1, 4))
     print(f"longest edge {longest / size:.3f} size")
     on_lattice = name in ("box", "column", "bar", "column10", "slab")
-    bound = math.sqrt(3) if on_lattice else math.sqrt(3) + 4 * SNAP
+    bound = math.sqrt(1.5) + (0.0 if on_lattice else 4 * SNAP / math.sqrt(2))
     assert longest <= bound * size * (1 + 1e-12)
 
 

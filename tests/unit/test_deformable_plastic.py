@@ -210,7 +210,8 @@ def test_tension_cut_off():
 
 
 def test_tension_yield_books_plastic_and_elastic_work():
-    """A Mohr-Coulomb cube (nu = 0, 192 zones) stretched by its top gridpoints at 0.01 m/s to
+    """A Mohr-Coulomb cube (nu = 0, 750 zones; at size 0.5, 162 zones, the elastic + kinetic
+    energy is 1.0 % short of the closed form, over the bound) stretched by its top gridpoints at 0.01 m/s to
     5 times its tension limit's strain T/E: the grid's accumulators (the energy budget's
     columns) against the closed forms of a uniaxial bar at the cut-off T. Put in by the
     prescribed velocity ``T (d - d_y/2)``; held elastically ``T^2 V / 2E`` (with the little
@@ -218,7 +219,7 @@ def test_tension_yield_books_plastic_and_elastic_work():
     E, T, V = 1.0e8, 1.0e4, 0.01
     b = DeformableBody(box([0, 0, 0], [1, 1, 1]), dict(
         model="mohr_coulomb", density=2000.0, young=E, poisson=0.0, cohesion=1.0e7,
-        friction=30.0, tension=T, dilation=0.0), size=0.5)
+        friction=30.0, tension=T, dilation=0.0), size=0.35)
     z = b.nodes0[:, 2]
     b.fix(z < 1e-9, (2,), 0.0)
     b.fix(z > 1 - 1e-9, (2,), V)
@@ -230,10 +231,10 @@ def test_tension_yield_books_plastic_and_elastic_work():
     w = b.work
     kinetic = b.kinetic_as_integrated()
     elastic = w[GW_ZONE] - w[GW_PLASTIC]
-    # measured: boundary +7.4e-4, plastic +8.9e-4, elastic + kinetic -4.9e-4
+    # measured: boundary +6.0e-4, plastic +3.5e-4, elastic + kinetic +2.7e-3
     assert w[GW_BOUNDARY] == pytest.approx(T * (d - 0.5 * T / E), rel=3e-3)
     assert w[GW_PLASTIC] == pytest.approx(T * (d - T / E), rel=3e-3)
     assert elastic + kinetic == pytest.approx(T * T / (2.0 * E), rel=3e-3)
-    assert elastic == pytest.approx(b.strain_energy(), rel=0.03)  # less the kinetic: -2.3 %
+    assert elastic == pytest.approx(b.strain_energy(), rel=0.03)  # less the kinetic: -2.0 %
     # no contacts: the grid's balance is the leap-frog's, to round-off
     assert abs(kinetic + w[GW_ZONE] - w[GW_BOUNDARY]) < 1e-12 * w[GW_BOUNDARY]

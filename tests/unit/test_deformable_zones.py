@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pdem.deformable.mesh import tetrahedralise
+from pdem.deformable.mesh import min_dihedral_angles, tetrahedralise
 from pdem.deformable.nmd import nmd_strain, nmd_stress
 from pdem.deformable.zones import (
     add_zone_forces,
@@ -50,9 +50,13 @@ def test_patch_linear_velocity_gives_exact_strain_rate(grid):
     D = 0.5 * (L + L.T)
     W = 0.5 * (L - L.T)
     want = np.array([D[i, j] for i, j in VOIGT])
-    err = np.abs(rate - want).max() / np.abs(D).max()
-    print(f"patch test: max relative strain-rate error {err:.1e}")
-    assert err < 1e-12
+    err = np.abs(rate - want).max(axis=1) / np.abs(D).max()
+    # round-off grows as a zone flattens: this hull has two faces 0.0024 deg from coplanar,
+    # and the zone with a gridpoint on each next to their edge is that flat
+    angle = np.radians(min_dihedral_angles(m.nodes, m.tets))
+    print(f"patch test: max relative strain-rate error {err.max():.1e}, "
+          f"{(err * np.sin(angle)).max():.1e} times the sine of the zone's angle")
+    assert np.all(err * np.sin(angle) < 1e-13)
     assert np.abs(spin - [W[0, 1], W[1, 2], W[2, 0]]).max() < 1e-12 * np.abs(W).max()
     # NMD changes nothing in a uniform field (the patch test survives it)
     before = rate.copy()
