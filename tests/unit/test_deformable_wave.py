@@ -33,9 +33,8 @@ H_CELL = 0.05  # structured grid: cubes of this side, 6 tets each
 
 def structured_bar() -> TetMesh:
     """The bar as 2 x 2 x 40 cubes, each split into the 6 tets around its main diagonal (Kuhn's
-    triangulation: conforming between cubes). Not the block mesher: on this 1:20 bar it cones
-    every face to the centroid and bisects to 13648 zones at size 0.1, min dihedral 2.6 deg
-    (a 1 x 1 x 1 box at 0.25: 1536 zones, 45 deg)."""
+    triangulation: conforming between cubes), the lattice pdem.deformable.mesh makes for a box
+    with these spacings, built here so that the test owns its grid."""
     n = (round(W / H_CELL), round(W / H_CELL), round(L / H_CELL))
     idx = np.arange((n[0] + 1) * (n[1] + 1) * (n[2] + 1)).reshape(n[0] + 1, n[1] + 1, n[2] + 1)
     ijk = np.stack(np.meshgrid(*[np.arange(k + 1) for k in n], indexing="ij"), -1)
