@@ -102,7 +102,7 @@ def cases():
         ("kirsch pieces", kirsch, 0.3),
         ("kirsch pieces", kirsch, 0.2),
         ("jointed box pieces", jointed, 0.3),
-        ("column 1x1x4 (speed)", [box([0, 0, 0], [1, 1, 4])], 0.07),
+        ("column 1x1x4 (speed)", [box([0, 0, 0], [1, 1, 4])], 0.1),
     ]
 
 
