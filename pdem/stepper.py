@@ -215,6 +215,7 @@ class Stepper:
                            b.still)
             return
         g.force[:] = 0.0
+        g.kc[:] = 0.0
         contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                             g.record(b, c))
 

@@ -69,6 +69,7 @@ class DeformableBody:
         # with the body between ranks and into checkpoints
         self.work = np.zeros(N_GW)
         self.update_mass()
+        self.zone_stiffness = None  # of the built geometry (GridStore._zone_stiffness)
         self.time = 0.0
 
     # --- setup -----------------------------------------------------------------------------
@@ -80,6 +81,7 @@ class DeformableBody:
         """Inertial masses: true lumped masses, or scaled for ``dt = 1`` (static mode)."""
         self.mass = (scaled_masses(self.stiffness(), alpha=self.damping) if self.mass_scaling
                      else self.gravity_mass)
+        self.emass = self.mass  # the masses of the last grid step (GridStore.step)
 
     def timestep(self) -> float:
         """The zone term of eq. 88 for the current geometry and inertial masses."""
@@ -126,7 +128,7 @@ class DeformableBody:
         """Kinetic energy at the last half step with the inertial masses, prescribed degrees
         of freedom holding none (the energy budget's); correctly rounded, so the same bits
         on any rank."""
-        e = np.where(self.fixed, 0.0, self.mass[:, None] * self.vel ** 2)
+        e = np.where(self.fixed, 0.0, self.emass[:, None] * self.vel ** 2)
         return 0.5 * math.fsum(e.ravel().tolist())
 
     def strain_energy(self) -> float:

@@ -37,10 +37,12 @@ GRID_FRAC = 0.9
 class ZonedGrid:
     """One zoned block's grid as it travels between ranks (pickled by the rebuild's
     messages): its name, body (zones, gridpoints, stresses), surface gridpoints and the
-    contact forces on its gridpoints (the next step's load)."""
+    contact forces on its gridpoints (the next step's load) and their contact stiffness
+    (the next step's masses; None: none yet)."""
 
-    def __init__(self, name: str, body: DeformableBody, surf: np.ndarray, force: np.ndarray):
-        self.name, self.body, self.surf, self.force = name, body, surf, force
+    def __init__(self, name: str, body: DeformableBody, surf: np.ndarray, force: np.ndarray,
+                 kc: np.ndarray | None = None):
+        self.name, self.body, self.surf, self.force, self.kc = name, body, surf, force, kc
 
 
 class GridStore:
@@ -60,6 +62,11 @@ class GridStore:
         self.nodes = np.empty((n, 3))
         self.vel = np.zeros((n, 3))
         self.force = np.zeros((n, 3))  # contact forces on the gridpoints (F^c of eq. 54)
+        # the contact springs' Gershgorin stiffness at each gridpoint, from the last force
+        # pass's sub-contacts (pdem.deformable.contact._grid_force), and the joint stiffness
+        # they count (:meth:`restage`)
+        self.kc = np.zeros(n)
+        self.kjoint = 0.0
         self.gmass = np.empty(n)
         # boundary stresses on the owned grids' faces this step (pdem.deformable.conditions)
         self.bload = np.zeros((n, 3))
@@ -70,6 +77,8 @@ class GridStore:
             self.nodes[a:e] = b.nodes
             self.vel[a:e] = b.vel
             self.force[a:e] = z.force
+            if z.kc is not None:
+                self.kc[a:e] = z.kc
             self.gmass[a:e] = b.gravity_mass
             b.nodes, b.vel = self.nodes[a:e], self.vel[a:e]
         self.gravity = np.asarray(gravity, float)
@@ -103,7 +112,8 @@ class GridStore:
         """Each grid by gid, for :func:`pdem.parallel.migrate.rebuild` to send with its
         block (owned grids only: a ghost's owner sends it)."""
         return {g: ZonedGrid(self.names[d], self.bodies[d], self.surf[d],
-                             self.force[self.node_start[d]:self.node_start[d + 1]])
+                             self.force[self.node_start[d]:self.node_start[d + 1]],
+                             self.kc[self.node_start[d]:self.node_start[d + 1]])
                 for d, g in enumerate(self.gids[:self.n_owned])}
 
     @classmethod
@@ -115,9 +125,15 @@ class GridStore:
         gids = sorted(grids, key=lambda g: row_of[int(g)])
         new = cls(old.gravity, gids, [grids[g] for g in gids],
                   sum(row_of[int(g)] < n_owned for g in gids))
-        new.dt, new.ref_force = old.dt, old.ref_force
+        new.dt, new.ref_force, new.kjoint = old.dt, old.ref_force, old.kjoint
         new.bind(blocks)
         return new
+
+    def zones_at(self, gids: np.ndarray) -> np.ndarray:
+        """The zone count of each block of ``gids`` whose grid is held here (0 for the others:
+        rigid blocks, or grids held elsewhere): RCB's work weights."""
+        count = dict(zip(self.gids, (len(b.tets) for b in self.bodies), strict=True))
+        return np.array([count.get(int(g), 0) for g in gids], np.int64)
 
     def set_damping(self, alpha: float) -> None:
         """The grids' local damping coefficient (``solve.damping``: local, or none)."""
@@ -125,20 +141,28 @@ class GridStore:
             b.damping = float(alpha)
 
     @staticmethod
-    def _stiffness(b, kn: float) -> np.ndarray:
-        """A grid's Gershgorin gridpoint stiffness with the joints' normal stiffness at its
-        surface gridpoints (eq. 85's ``kn A_i``, ``A_i`` a third of its surface triangles'
-        area, counted twice: on the diagonal and coupling), on its reference (build)
-        geometry: a stage's step and mass scaling are then the same whether the run went
-        straight or was restarted (the replay of the stages sees the built grid)."""
-        grad = np.empty_like(b.grad)
-        vol = np.empty_like(b.vol)
-        zone_geometry(b.nodes0, b.tets, grad, vol)
-        k = nodal_stiffness(b.tets, grad, vol, b.params.bulk, b.params.shear, len(b.nodes0))
-        # a joint spring couples the gridpoint to the other block: its Gershgorin row holds
-        # the spring on the diagonal and again off it (eq. 85's kn A_i alone bounds the step
-        # only against a fixed block)
-        return k + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
+    def _zone_stiffness(b) -> np.ndarray:
+        """A grid's Gershgorin gridpoint stiffness of its zones (eq. 84), on its reference
+        (build) geometry: a stage's step and mass scaling are then the same whether the run
+        went straight or was restarted (the replay of the stages sees the built grid)."""
+        if b.zone_stiffness is None:
+            grad = np.empty_like(b.grad)
+            vol = np.empty_like(b.vol)
+            zone_geometry(b.nodes0, b.tets, grad, vol)
+            b.zone_stiffness = nodal_stiffness(b.tets, grad, vol, b.params.bulk,
+                                               b.params.shear, len(b.nodes0))
+        return b.zone_stiffness
+
+    @classmethod
+    def _stiffness(cls, b, kn: float) -> np.ndarray:
+        """:meth:`_zone_stiffness` with the joints' normal stiffness at its surface gridpoints
+        (eq. 85's ``kn A_i``, ``A_i`` a third of its surface triangles' area, counted twice:
+        on the diagonal and coupling). A joint spring couples the gridpoint to the other
+        block: its Gershgorin row holds the spring on the diagonal and again off it (eq. 85's
+        kn A_i alone bounds the step only against a fixed block). The other block's
+        sub-contacts landing on the grid's triangles can load a gridpoint more than its own
+        share: :meth:`step` raises its mass then (from the contacts of the step)."""
+        return cls._zone_stiffness(b) + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
 
     def timestep(self, kn: float, owned: bool = False) -> float:
         """The zone term of eq. 88 (:meth:`_stiffness`, the inertial masses): the smallest
@@ -155,10 +179,10 @@ class GridStore:
         true masses."""
         for b in self.bodies:
             if dt is None:
-                b.mass = b.gravity_mass
+                b.mass = b.emass = b.gravity_mass
                 continue
             need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.damping)
-            b.mass = np.maximum(b.gravity_mass, need)
+            b.mass = b.emass = np.maximum(b.gravity_mass, need)
 
     def restage(self, scene, dt: float, alpha: float, comm) -> float:
         """A stage's settings on the grids (``scene``: the scene as the stage has it): its
@@ -166,6 +190,7 @@ class GridStore:
         :meth:`resolve` makes them at the start (collective). Returns the step."""
         self.set_damping(alpha if scene.solve.damping.mode == "local" else 0.0)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.kjoint = joint_stiffness(scene)
         self.scale_masses(kn, dt if scene.solve.mass_scaling else None)
         grid_dt = min(allgather(comm, GRID_FRAC * self.timestep(kn, owned=True)))
         if scene.solve.mass_scaling and grid_dt >= dt * (1.0 - 1e-9):
@@ -183,6 +208,7 @@ class GridStore:
 
         self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.kjoint = joint_stiffness(scene)
         if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
             self.scale_masses(kn, resolved.dt)
         self.dt = min(allgather(comm, GRID_FRAC * self.timestep(kn)))
@@ -301,7 +327,8 @@ class GridStore:
                                                  + base[:, None], 0)
                 self.sc_w[:, side] = np.where(zoned[:, None], g[:, W[side]], 0.0)
             self.located = contacts
-        return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w)
+        return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w, self.kc,
+                    self.kjoint)
 
     def vnode(self, blocks) -> np.ndarray:
         """The gridpoint (flat index) of every vertex row of ``blocks``; -1 for rigid pieces."""
@@ -347,6 +374,8 @@ class GridStore:
             if self.bloaded:
                 applied += self.bload[a:e]
                 load = self.bload[a:e] + b.applied if b.loaded else self.bload[a:e]
+            b.emass = inertial_masses(b.mass, self._zone_stiffness(b), self.kc[a:e], dt,
+                                      b.damping)
             if _cycle(b, applied, dt, gforce, self.force[a:e], load) < 1:
                 return self.gids[d]
             big = max(big, float(b.unbalanced[0]))
@@ -415,6 +444,26 @@ def block_conditions(body: DeformableBody, spec) -> None:
         body.applied[:] = np.outer(m / m.sum(), force)
 
 
+def joint_stiffness(scene) -> float:
+    """The stiffest joint's ``max(kn, ks)`` (Pa/m): the spring per area every sub-contact's
+    Gershgorin row counts (the 3 x 3 spring ``kn nn + ks (I - nn)`` is bounded by it)."""
+    return max(max(float(getattr(j, "kn", 0.0)), float(getattr(j, "ks", 0.0)))
+               for j in scene.joints.values())
+
+
+def inertial_masses(mass: np.ndarray, zone_stiffness: np.ndarray, kc: np.ndarray, dt: float,
+                    alpha: float) -> np.ndarray:
+    """The masses a grid steps with: ``mass`` (true or scaled at the stage's start), raised
+    where the step's contact springs (``kc``, pdem.deformable.contact._grid_force) with the
+    zones' stiffness make ``dt`` more than ``GRID_FRAC`` of the gridpoint's critical step
+    (partial density scaling). The stage's estimate counts a surface gridpoint's own area
+    share, which bounds the springs at its own sub-contacts but not those of a neighbour
+    landing on its triangles: found on a sliver piece between stiff fictitious joints
+    (kn = 1e11), whose gridpoints ran away at step 5. Where the estimate holds, the masses
+    are ``mass``'s bits."""
+    return np.maximum(mass, scaled_masses(zone_stiffness + kc, dt, GRID_FRAC, alpha))
+
+
 def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Each gridpoint's share of the surface: a third of its surface triangles' area."""
     area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]],
@@ -425,6 +474,6 @@ def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float, gforce, contact, load) -> int:
-    return cycle(1, dt, b.nodes, b.vel, b.mass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
+    return cycle(1, dt, b.nodes, b.vel, b.emass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
                  b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping, b.unbalanced, gforce,
                  contact, load, b.params.bulk, b.params.shear, b.work)
