@@ -247,6 +247,33 @@ def test_zoned_conditions_and_stages_are_bitwise_on_any_rank_count_and_restart(t
     assert np.abs(a["balance_error"]).max() < 1e-2 * np.abs(put_in).max()
 
 
+def damped_text(out, checkpoint=""):
+    """The staged scene with viscous damping in its first stage and combined (the scene's) in
+    its second, where the checkpoint falls: combined damping reads each gridpoint's force of
+    the step before, which the checkpoint carries."""
+    text = staged_text(out, checkpoint)
+    for old, new in (("{name: load, solve: {steps: 120}}",
+                      "{name: load, solve: {steps: 120, damping: {mode: viscous, alpha: 30}}}"),
+                     ("solve: {damping: none}", "solve: {damping: combined}")):
+        assert old in text
+        text = text.replace(old, new)
+    return text
+
+
+def test_zoned_damping_modes_are_bitwise_on_any_rank_count_and_restart(tmp_path):
+    comm, d, straight = straight_run(tmp_path, damped_text, "dm", 180, 60)
+    got = restarted(comm, damped_text(f"{d}/r.h5"), f"{d}/ck-{180:09d}.h5", 180)
+    assert not same_grids(got, straight), same_grids(got, straight)
+    a, b = on_rank0(comm, lambda: (energy_history(f"{d}/dm.h5"), energy_history(f"{d}/r.h5")))
+    bad = [k for k in a if a[k][-1] != b[k][-1]]
+    assert not bad, [(k, a[k][-1], b[k][-1]) for k in bad]
+    # the damping took energy out, and the budget books it
+    put_in = a["kinetic"][0] + a["strain"][0] + a["gravity_work"] + a["applied_work"] \
+        + a["boundary_work"]
+    assert a["damping_dissipation"][-1] > 0.0, a["damping_dissipation"]
+    assert np.abs(a["balance_error"]).max() < 1e-2 * np.abs(put_in).max()
+
+
 # a tunnel in jointed deformable rock: a zoned block cut by two joint sets, in-situ stress in
 # zones and joints and on the outer faces, rollers on the slice's faces; stage 2 excavates a
 # tunnel through the zoned pieces (fictitious joints kn = 1e10: with 1e11 a sliver piece's
