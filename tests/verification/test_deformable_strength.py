@@ -1,6 +1,7 @@
 """Factor of safety by strength reduction with zoned blocks (pdem.strength, docs/deformable.md):
 
-(a) a rigid block on a zoned elastic base on an incline, the joint between them deciding:
+(a) a rigid block on a zoned base on an incline (pdem.cases.staged.zoned_fos_scene), the
+    joint between them deciding:
     ``FS = tan(phi) / tan(psi)`` (Hoek-Bray's planar slide) within the search's tolerance, and
     the grids are restored between the trials: after the search the model is, bitwise, the
     equilibrium it started from (gridpoints, velocities, zone stresses);
@@ -17,53 +18,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from pdem.cases import vec
+from pdem.cases.staged import RHO, zoned_fos, zoned_fos_scene
 from pdem.config import parse_scene
 from pdem.deformable.constitutive import material, reduced_table
 from pdem.deformable.store import GridStore
 from pdem.simulation import Simulation
-
-G = 9.81
-PSI = 20.0  # the incline
-PHI = 30.0  # the sliding joint's friction
-RHO = 2000.0
-KN = 1.0e9
-
-
-def scene(output: str, checkpoint: str, tolerance: float) -> str:
-    psi = math.radians(PSI)
-    g = (G * math.sin(psi), 0.0, -G * math.cos(psi))
-    # the base sits on the floor through a joint too strong to slide in the search's range
-    # (tan 60 / tan 20 = 4.8 > high), the block on the base through the default joint; the
-    # base's zones are Mohr-Coulomb, weakened in the trials but strong enough to stay elastic
-    # (cohesion / 4 = 250 kPa against stresses of 20 kPa)
-    return f"""
-name: zoned-fos
-gravity: {vec(g)}
-materials:
-  rock: {{density: {RHO}}}
-  soft: {{density: {RHO}, young: 1.0e9, poisson: 0.25, model: mohr_coulomb, cohesion: 1.0e6,
-          friction: 40, tension: 1.0e5}}
-joints:
-  default: {{kn: {KN}, ks: {KN}, friction: {PHI}}}
-  strong: {{kn: {KN}, ks: {KN}, friction: 60.0}}
-joint_pairs: [{{groups: [floor, base], joint: strong}}]
-blocks:
-  - {{name: floor, box: {{min: [-3, -2, -1], max: [3, 2, 0]}}, material: rock, fixed: true,
-     group: floor}}
-  - {{name: base, box: {{min: [-2, -1.5, 0], max: [2, 1.5, 0.5]}}, material: soft,
-     zones: {{size: 0.5}}, group: base}}
-  - {{name: slab, box: {{min: [-0.5, -0.5, 0.5], max: [0.5, 0.5, 0.8]}}, material: rock,
-     group: top}}
-solve: {{damping: local}}
-output: {{file: {output}}}
-checkpoint: {{every_steps: 1000000, file: {checkpoint}}}
-stages:
-  - {{name: settle, solve: {{ratio: 1.0e-6, max_steps: 30000}}}}
-  - name: strength
-    factor_of_safety: {{tolerance: {tolerance!r}, ratio: 1.0e-5, max_steps: 4000,
-                        max_displacement: 0.02}}
-"""
 
 
 def test_block_on_a_zoned_base_slides_at_the_planar_factor(tmp_path, monkeypatch):
@@ -73,7 +32,7 @@ def test_block_on_a_zoned_base_slides_at_the_planar_factor(tmp_path, monkeypatch
     monkeypatch.setattr(GridStore, "weaken",
                         lambda self, f: (weakened.append(f), own_weaken(self, f))[1])
     out, ck = str(tmp_path / "fos.h5"), str(tmp_path / "ck")
-    sim = Simulation(parse_scene(scene(out, ck, tol)), MPI.COMM_SELF)
+    sim = Simulation(parse_scene(zoned_fos_scene(out, ck, tol)), MPI.COMM_SELF)
     try:
         summary = sim.run()
         g = sim.state.grids
@@ -83,7 +42,7 @@ def test_block_on_a_zoned_base_slides_at_the_planar_factor(tmp_path, monkeypatch
         own = g.bodies[0].params
     finally:
         sim.close()
-    exact = math.tan(math.radians(PHI)) / math.tan(math.radians(PSI))
+    exact = zoned_fos()
     got = summary["factor"]
     print(f"\nzoned base: FS {got:.4f}, closed form {exact:.4f}, error {got / exact - 1:+.2%}, "
           f"{len(summary['trials'])} trials")
