@@ -994,17 +994,6 @@ class Scene(Strict):
         if zoned:
             if self.join:
                 errors.append(f"join: not yet supported with zoned blocks ({', '.join(zoned)})")
-            for k, st in enumerate(self.stages):
-                if st.factor_of_safety is not None:
-                    errors.append(f"stages[{k}].factor_of_safety: not yet supported with zoned "
-                                  f"blocks ({', '.join(zoned)})")
-                d = st.solve.damping if st.solve is not None else None
-                if d is not None and d.mode not in ("none", "local"):
-                    errors.append(f"stages[{k}].solve.damping.mode: not yet supported with "
-                                  f"zoned blocks ({', '.join(zoned)}); use none or local")
-            if self.solve.damping.mode not in ("none", "local"):
-                errors.append(f"solve.damping.mode: not yet supported with zoned blocks "
-                              f"({', '.join(zoned)}); use none or local")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}

@@ -16,6 +16,7 @@ ghost copies; docs/deformable.md "On several ranks"), the node arrays of all of 
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -24,8 +25,9 @@ from ..mpi import allgather
 from ..parallel.halo import RowHalo
 from .body import DeformableBody
 from .columns import TRI, W
+from .constitutive import reduced_table
 from .contact import Grid, refresh_pieces
-from .motion import N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
+from .motion import GRID_DAMPING, N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
 from .subcontacts import regrid
 from .zones import gravity_forces, zone_geometry
 
@@ -89,6 +91,8 @@ class GridStore:
         # (set by resolve), and the last step's largest unbalanced gridpoint force over it
         self.ref_force = 1.0
         self.ratio = 0.0
+        # adaptive damping: the grids take the servo's alpha every step (:meth:`step`)
+        self.adaptive = False
 
     @classmethod
     def build(cls, scene, specs, first_gid: int) -> GridStore:
@@ -125,7 +129,8 @@ class GridStore:
         gids = sorted(grids, key=lambda g: row_of[int(g)])
         new = cls(old.gravity, gids, [grids[g] for g in gids],
                   sum(row_of[int(g)] < n_owned for g in gids))
-        new.dt, new.ref_force, new.kjoint = old.dt, old.ref_force, old.kjoint
+        new.dt, new.ref_force, new.adaptive = old.dt, old.ref_force, old.adaptive
+        new.kjoint = old.kjoint
         new.bind(blocks)
         return new
 
@@ -135,10 +140,37 @@ class GridStore:
         count = dict(zip(self.gids, (len(b.tets) for b in self.bodies), strict=True))
         return np.array([count.get(int(g), 0) for g in gids], np.int64)
 
-    def set_damping(self, alpha: float) -> None:
-        """The grids' local damping coefficient (``solve.damping``: local, or none)."""
+    def saved(self) -> dict:
+        """Copies of the owned grids by gid (gridpoints, velocities, contact forces, zone
+        stresses and plastic state, conditions, energy accumulators): the state a factor of
+        safety's trials start from (:meth:`restored`)."""
+        return copy.deepcopy(self.payload())
+
+    def restored(self, saved: dict) -> GridStore:
+        """A store owning fresh copies of the grids ``saved`` (:meth:`saved`), with this
+        one's step and settings: the grids a distribution of the saved blocks sends on."""
+        gids = sorted(saved)
+        new = GridStore(self.gravity, gids, [copy.deepcopy(saved[g]) for g in gids])
+        new.dt, new.ref_force, new.adaptive = self.dt, self.ref_force, self.adaptive
+        new.kjoint = self.kjoint
+        return new
+
+    def weaken(self, factor: float) -> None:
+        """The zones' strength divided by ``factor`` (a factor of safety's trial; 1: the
+        material's own): each grid's constitutive table from its material's parameters
+        (:func:`~pdem.deformable.constitutive.reduced_table`; elastic zones unchanged)."""
         for b in self.bodies:
-            b.damping = float(alpha)
+            b.model = reduced_table(b.params, factor)
+
+    def set_damping(self, mode: str, alpha: float) -> None:
+        """The grids' damping: ``solve.damping.mode`` at the gridpoints (its form,
+        pdem.deformable.motion's module doc) with coefficient ``alpha`` (none: 0; adaptive:
+        the servo's, followed every step)."""
+        form, keep = GRID_DAMPING[mode]
+        self.adaptive = mode == "adaptive"
+        for b in self.bodies:
+            b.damping_mode = form
+            b.damping = float(alpha) if keep else 0.0
 
     @staticmethod
     def _zone_stiffness(b) -> np.ndarray:
@@ -169,26 +201,27 @@ class GridStore:
         over the grids (``owned``: the owned ones; inf without)."""
         dt = np.inf
         for b in self.bodies[:self.n_owned] if owned else self.bodies:
-            dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.damping))
+            dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.stability_alpha()))
         return float(dt)
 
     def scale_masses(self, kn: float, dt: float | None) -> None:
         """Mass scaling (``solve.mass_scaling``): each gridpoint's inertial mass raised, where
         it is too light, to make ``dt`` ``GRID_FRAC`` of its critical step (with the grid's
-        local damping); gravity keeps the true masses (``gravity_mass``). ``dt`` None: the
+        damping's :func:`~pdem.deformable.motion.stability_alpha`); gravity keeps the true
+        masses (``gravity_mass``). ``dt`` None: the
         true masses."""
         for b in self.bodies:
             if dt is None:
                 b.mass = b.emass = b.gravity_mass
                 continue
-            need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.damping)
+            need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.stability_alpha())
             b.mass = b.emass = np.maximum(b.gravity_mass, need)
 
     def restage(self, scene, dt: float, alpha: float, comm) -> float:
         """A stage's settings on the grids (``scene``: the scene as the stage has it): its
         damping, its mass scaling to the rigid step ``dt``, and the model step, as
         :meth:`resolve` makes them at the start (collective). Returns the step."""
-        self.set_damping(alpha if scene.solve.damping.mode == "local" else 0.0)
+        self.set_damping(scene.solve.damping.mode, alpha)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
         self.kjoint = joint_stiffness(scene)
         self.scale_masses(kn, dt if scene.solve.mass_scaling else None)
@@ -201,12 +234,12 @@ class GridStore:
     def resolve(self, scene, resolved, comm):
         """The model step: the rigid one or the grids' (eq. 88, with the largest joint normal
         stiffness at the surface gridpoints, times ``GRID_FRAC``; the smallest over the ranks'
-        build shares), the smaller; the grids' local damping from ``solve.damping``. Not the
+        build shares), the smaller; the grids' damping from ``solve.damping``. Not the
         scene's ``timestep.frac`` (0.1 by default): that is the rigid estimate's margin, the
         Gershgorin step is a bound."""
         import dataclasses
 
-        self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
+        self.set_damping(scene.solve.damping.mode, resolved.alpha)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
         self.kjoint = joint_stiffness(scene)
         if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
@@ -352,16 +385,20 @@ class GridStore:
                 b.vel[:] = 0.0
                 self.force[self.node_start[d]:self.node_start[d + 1]] = 0.0
 
-    def step(self, dt: float) -> int:
+    def step(self, dt: float, alpha: float = 0.0) -> int:
         """One grid step of every owned zoned block: forces at t (contacts + gravity +
         zones). Returns the gid of the first block whose grid folded (a zone inverted),
         -1 if none: the stepper's reduction makes every rank raise alike. ``ratio``: the
-        largest unbalanced gridpoint force over the mean gridpoint weight (``solve.ratio``)."""
+        largest unbalanced gridpoint force over the mean gridpoint weight (``solve.ratio``).
+        ``alpha``: the model's damping constant now, taken under adaptive damping (the
+        servo's, eq. 77: rigid blocks and grids damped by one constant)."""
         big = 0.0
         for d in range(self.n_owned):
             b = self.bodies[d]
             if not b.active:  # taken out of the model (:meth:`remove`)
                 continue
+            if self.adaptive:
+                b.damping = float(alpha)
             a, e = self.node_start[d], self.node_start[d + 1]
             gforce = gravity_forces(b.gravity_mass, self.gravity)
             # the loads (a block's `force` spread over its gridpoints, boundary stresses on its
@@ -375,12 +412,21 @@ class GridStore:
                 applied += self.bload[a:e]
                 load = self.bload[a:e] + b.applied if b.loaded else self.bload[a:e]
             b.emass = inertial_masses(b.mass, self._zone_stiffness(b), self.kc[a:e], dt,
-                                      b.damping)
+                                      b.stability_alpha())
             if _cycle(b, applied, dt, gforce, self.force[a:e], load) < 1:
                 return self.gids[d]
             big = max(big, float(b.unbalanced[0]))
         self.ratio = big / self.ref_force
         return -1
+
+    def servo_sums(self) -> np.ndarray:
+        """The owned grids' share of the adaptive servo's sums of the last step (eq. 77):
+        damping power and sum over the gridpoints of ``|dEk/dt|``."""
+        out = np.zeros(2)
+        for d in range(self.n_owned):
+            if self.bodies[d].active:
+                out += self.bodies[d].servo
+        return out
 
     def kinetic_at(self, rows, ke: np.ndarray) -> np.ndarray:
         """``ke`` (the kinetic energies of the owned block ``rows``) with those of zoned rows
@@ -475,5 +521,6 @@ def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float, gforce, contact, load) -> int:
     return cycle(1, dt, b.nodes, b.vel, b.emass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
-                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping, b.unbalanced, gforce,
-                 contact, load, b.params.bulk, b.params.shear, b.work)
+                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping_mode, b.damping,
+                 b.prev_force, b.unbalanced, b.servo, gforce, contact, load, b.params.bulk,
+                 b.params.shear, b.work)

@@ -65,8 +65,6 @@ def test_contract_scene_parses_with_defaults():
      "blocks[1]: velocity_fixed with angular_velocity: a zoned block's prescribed motion"),
     ("solve: {steps: 10}", "solve: {steps: 10}\njoin: [[pillar, roof]]",
      "join: not yet supported with zoned blocks (pillar)"),
-    ("solve: {steps: 10}", "solve: {steps: 10, damping: combined}",
-     "solve.damping.mode: not yet supported with zoned blocks (pillar); use none or local"),
 ])
 def test_bad_input_one_line_naming_the_key(old, new, expect):
     assert old in SCENE
