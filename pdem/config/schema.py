@@ -230,10 +230,11 @@ class RandomPolyhedra(Strict):
 
 
 class Zones(Strict):
-    """A deformable block: zoned into tetrahedra no longer than ``size`` (m) on any edge;
-    ``nmd``: nodal mixed discretization (3DEC's default; off only to compare)."""
+    """A deformable block: zoned into tetrahedra no longer than ``size`` (m) on any edge (a
+    ``mesh`` block: its tetrahedral cells are the zones, no ``size``); ``nmd``: nodal mixed
+    discretization (3DEC's default; off only to compare)."""
 
-    size: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)]
+    size: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)] | None = None
     nmd: bool = True
 
 
@@ -255,7 +256,7 @@ SHAPE_MODELS: Registry[ShapeModel] = Registry("block shape")
 for _key, _model, _zoned in (
     ("box", BoxShape, True), ("polyhedron", PolyhedronShape, True), ("prism", PrismShape, True),
     ("planes", PlanesShape, True), ("array", ArrayOf, True), ("random", RandomPolyhedra, True),
-    ("mesh", MeshShape, False),
+    ("mesh", MeshShape, True),
 ):
     SHAPE_MODELS.register(_key, ShapeModel(_model, _zoned))
 SHAPE_KEYS = SHAPE_MODELS.names()
@@ -297,6 +298,11 @@ class Block(Strict):
             if kind not in ZONED_SHAPES:
                 raise ValueError(f"zones: not yet supported on {kind!r} blocks (a zoned block is "
                                  f"one convex {', '.join(ZONED_SHAPES)} shape)")
+            if kind == "mesh" and self.zones.size is not None:
+                raise ValueError("zones.size: a mesh block's zones are its tetrahedral cells as "
+                                 "the mesh has them (remove size, or mesh it finer)")
+            if kind != "mesh" and self.zones.size is None:
+                raise ValueError("zones.size: Field required (the longest zone edge, m)")
             if self.velocity_fixed and any(self.angular_velocity):
                 # a zoned block's prescribed motion is its gridpoints' fixed velocities, which
                 # are constant: a rigid rotation would need them to turn with the block

@@ -4,6 +4,7 @@ run — block states, every gridpoint and every zone stress — through collisio
 subdomain cuts and migrations; a checkpoint written on 2 ranks continues bitwise on any."""
 
 import os
+import sys
 
 import h5py
 import numpy as np
@@ -348,4 +349,27 @@ def test_tunnel_in_jointed_zoned_rock_is_bitwise_on_any_rank_count_and_restart(t
     # straight run's: every rank counted every block in the exact mean, pdem.selection)
     got = restarted(comm, JOINTED_TUNNEL.format(out=f"{d}/jr.h5", checkpoint=""),
                     f"{d}/ck-{120:09d}.h5", 120)
+    assert not same_grids(got, straight), same_grids(got, straight)
+
+
+def test_zoned_mesh_columns_are_bitwise_on_any_rank_count_and_restart(tmp_path):
+    # two columns of a user's tetrahedral mesh, their cells the zones (tests/verification/
+    # test_deformable_mesh_zones.py), pressed at the top on rollers, 160 steps
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "verification"))
+    from test_deformable_mesh_zones import scene_text, write_columns
+
+    comm = MPI.COMM_WORLD
+    mesh = os.path.join(shared_dir(comm, tmp_path), "cols.vtu")
+    if comm.rank == 0:
+        os.makedirs(os.path.dirname(mesh), exist_ok=True)
+        write_columns(mesh)
+    comm.Barrier()
+
+    def text_of(out, ck):
+        return scene_text(mesh).replace("solve: {ratio: 1.0e-6,", "solve: {steps: 160,") + \
+            f"output: {{file: {out}, every_steps: 40, contacts: false}}\n{ck}\n"
+
+    comm, d, straight = straight_run(tmp_path, text_of, "mz", 80, 40)
+    assert max(np.abs(g[1]).max() for g in straight.values()) > 1e-6  # pressed, moving
+    got = restarted(comm, text_of(f"{d}/mzr.h5", ""), f"{d}/ck-{80:09d}.h5", 80)
     assert not same_grids(got, straight), same_grids(got, straight)
