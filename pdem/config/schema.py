@@ -996,10 +996,6 @@ class Scene(Strict):
                 if not self.materials[b.material].deformable:
                     errors.append(f"blocks[{i}].zones: material {b.material!r} has no young and "
                                   "poisson (a zoned block needs its elasticity)")
-        zoned = [b.name for b in self.blocks if b.zones is not None]
-        if zoned:
-            if self.join:
-                errors.append(f"join: not yet supported with zoned blocks ({', '.join(zoned)})")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}

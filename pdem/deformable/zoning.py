@@ -155,9 +155,10 @@ def identity_frames(geometry: dict, arr: dict, specs) -> None:
     for r, s in enumerate(specs):
         k = g["piece_start"][r]
         e0, e1 = g["edge_start"][k], g["edge_start"][k + 1]
-        if getattr(s, "zoning", None) is None:
-            dirs.append(g["edirs_local"][g["edir_start"][k]:g["edir_start"][k + 1]])
-            counts.append(len(dirs[-1]))
+        if getattr(s, "zoning", None) is None:  # rigid: each of its pieces' own directions
+            for p in range(k, g["piece_start"][r + 1]):
+                dirs.append(g["edirs_local"][g["edir_start"][p]:g["edir_start"][p + 1]])
+                counts.append(len(dirs[-1]))
             continue
         poly = s.pieces[0]
         c = arr["x"][r]
@@ -178,6 +179,6 @@ def identity_frames(geometry: dict, arr: dict, specs) -> None:
         d = ends[:, 1] - ends[:, 0]
         dirs.append(d / np.linalg.norm(d, axis=1)[:, None])
         counts.append(len(at))
-    # one-piece blocks only reach here with zones (joined zoned blocks are refused)
+    # (a zoned block is one piece: joined zoned blocks are refused, pdem.model.rockmass)
     g["edirs_local"] = np.concatenate(dirs).reshape(-1, 3) if dirs else g["edirs_local"]
     g["edir_start"] = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
