@@ -118,6 +118,7 @@ def force_phase(dt, q, R, bodies, pairs, subs, joints, still, grid, m_true, grav
         contact_forces(dt, bodies, pairs, subs, joints, still)
     else:
         grid.force[:] = 0.0
+        grid.kc[:] = 0.0
         contact_forces_grid(dt, bodies, pairs, subs, joints, grid)
     if m_true is not None:
         update_inactive(m_true, gravity, radius, calm, still, speed, sleep_steps, force_frac,

@@ -91,10 +91,14 @@ def timestep_rows(s):
     """``(rows, n)``: the blocks whose timestep fields (pdem.selection.TIMESTEP_FIELDS, and gid)
     this rank reads and sets, its own (reduced over the ranks) the first ``n``: the blocks it
     holds, owned first (views: a mass scale set on them is the blocks'), or before the first
-    distribution its build share (or every block, when every rank built every block)."""
+    distribution its build share (or every block, when every rank built every block: then
+    rank 0's own, so that a sum over the ranks counts each block once — an exact mean of every
+    block counted P times is not the mean's bits when P is not a power of two, which made a
+    3-rank restart's replayed stage step differ from the straight run's by an ulp)."""
     b = s.blocks
     if b is not None:
         return BlockStore.catalogue({k: getattr(b, k)[:b.n]
                                      for k in ("gid", *TIMESTEP_FIELDS)}), s.n_owned
-    rows = s.share if s.share is not None else s.glob
-    return rows, len(rows.gid)
+    if s.share is not None:
+        return s.share, len(s.share.gid)
+    return s.glob, len(s.glob.gid) if s.comm.rank == 0 else 0

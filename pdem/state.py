@@ -35,7 +35,7 @@ from .model.csr import KEY_SHIFT
 from .model.fields import held_width
 from .model.runs import RunColumn
 from .mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
-from .parallel.decomposition import make_decomposition
+from .parallel.decomposition import make_decomposition, zone_work
 from .preflight import check_derived, machine_memory, preflight, rescaled
 from .resolve import REMAP_FRACTION, Resolved, contact_tolerance, resolve
 from .restart import restore
@@ -88,7 +88,7 @@ class ModelState:
     their owners, and set-up's scene data is dropped, by :mod:`pdem.distribute`."""
 
     def __init__(self, scene: Scene, comm, specs, glob, group_names, joints, resolved: Resolved,
-                 thinnest: float, share=None):
+                 thinnest: float, share=None, grids=None):
         self.scene = scene
         self.scene_yaml = dump_scene(scene)
         self.comm = comm
@@ -120,8 +120,10 @@ class ModelState:
         self.algorithm = ALGORITHMS[scene.contact.algorithm](resolved.ctol, resolved.snap_tol)
         # the initial cuts from the build shares' centroids (or every block's, when every rank
         # built every block)
-        self.decomp = make_decomposition(comm, resolved, scene.parallel,
-                                         glob.x if share is None else share.x, share is not None)
+        rows = glob if share is None else share
+        self.decomp = make_decomposition(
+            comm, resolved, scene.parallel, rows.x, share is not None,
+            None if grids is None else 1 + zone_work(grids.zones_at(rows.gid)))
         self.n_rebuilds = 0
         self.blocks = None
         self.n_owned = 0
@@ -205,7 +207,7 @@ class ModelState:
                                   share.normals_local, share.offsets_local)
         state = ModelState(scene, comm, specs, glob, group_names, joints, resolved,
                            thinnest if whole else min(allgather(comm, thinnest)),
-                           None if whole else share)
+                           None if whole else share, grids)
         state.share = None if whole else share
         state.grids = grids
         if grids is not None:  # the sub-contacts carry their gridpoints (sc_grid)
@@ -266,7 +268,8 @@ class ModelState:
     def rebalance(self) -> bool:
         """At a rebuild point, before :meth:`redistribute`: new cuts if the owned work is
         imbalanced (``parallel.rebalance``, balance rcb; collective), see parallel.decomposition."""
-        return self.decomp.rebalance(self.blocks, self.n_owned, self.contacts)
+        zones = None if self.grids is None else self.grids.zones_at(self.owned_gids())
+        return self.decomp.rebalance(self.blocks, self.n_owned, self.contacts, zones)
 
     def owned_gids(self) -> np.ndarray:
         return self.blocks.gid[:self.n_owned]

@@ -215,6 +215,7 @@ class Stepper:
                            b.still)
             return
         g.force[:] = 0.0
+        g.kc[:] = 0.0
         contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                             g.record(b, c))
 
@@ -267,7 +268,7 @@ class Stepper:
                     self.stats, b.radius[:n], b.fixed[:n], b.u_acc, b.u_geo, b.u_mig[:n],
                     s.step, s.time, r.speed_limit, r.speed_growth, s.max_step)
                 if parts == MOTION:
-                    self._grid_bad = g.step(s.dt)
+                    self._grid_bad = g.step(s.dt, s.alpha)
                     g.sync(b)
                 parts = CLOCK if parts == MOTION else 0
         with tm.phase("halo"):
@@ -332,8 +333,10 @@ class Stepper:
             domain.take_out(s, self.bodies())
             flags[FLAG_MIGRATE] = 1.0
         if s.damping.adaptive and s.step % 10 == 0:
-            sums = mpi.allreduce_sum_array(s.comm, np.array(
-                [self.stats[motion.STAT_DAMP_POWER], self.stats[motion.STAT_DEK]]))
+            sums = np.array([self.stats[motion.STAT_DAMP_POWER], self.stats[motion.STAT_DEK]])
+            if s.grids is not None:  # the gridpoints are nodes of eq. 77's sums too
+                sums += s.grids.servo_sums()
+            sums = mpi.allreduce_sum_array(s.comm, sums)
             s.alpha = motion.adaptive_alpha_update(
                 s.alpha or 1e-3, sums[0], sums[1], s.scene.solve.damping.ratio, dt=s.dt)
         # the unbalanced-force ratio: of the rigid blocks (their largest unbalanced force over

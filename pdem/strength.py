@@ -3,7 +3,10 @@
 
 From the equilibrium state the stage starts in, trial solves run with every joint's strength
 divided by F: the parameters each joint law declares (``JointLaw.strength``), angles through
-their tangents (``tan(friction) / F``), strengths divided (``cohesion / F``, ``tension / F``).
+their tangents (``tan(friction) / F``), strengths divided (``cohesion / F``, ``tension / F``);
+with every joint (no ``joints`` list), the zoned blocks' zones alike (a Mohr-Coulomb
+material's cohesion, tan(friction) and tension; elastic zones unchanged: 3DEC's and FLAC3D's
+strength reduction).
 A trial is **stable** when the unbalanced-force ratio falls below ``ratio`` within
 ``max_steps`` and no block moved more than ``max_displacement``; when
 the ratio has not fallen by then, it is stable if the motion died away (the largest
@@ -12,8 +15,8 @@ and **unstable** if it went on (a sliding mechanism); beyond ``max_displacement`
 unstable. F = 1 must be stable (else the model is not in equilibrium and the search
 is refused); the factor of safety is bracketed by bisection between the largest stable and the
 smallest unstable F until their gap is below ``tolerance`` (relative). Every trial starts from
-the same state (held in memory on each rank) and the model goes on from it, at F = 1, after
-the search.
+the same state (held in memory on each rank: the blocks, contacts and the zoned blocks'
+grids) and the model goes on from it, at F = 1, after the search.
 
 Results: the log line, the output file's root attribute ``factor_of_safety`` and the group
 ``factor_of_safety/`` (trials, the failure mechanism: the displacement field of the last
@@ -73,11 +76,15 @@ class _Snapshot:
         # the owned blocks' geometry: a trial's migration may take them to other ranks, and
         # no rank keeps the geometry of blocks it does not hold
         self.store = take_rows(b, np.arange(n), np.ones(n, np.uint8))
+        # the owned zoned blocks' grids (gridpoints, zone stresses, plastic state, ...)
+        self.grids = s.grids.saved() if s.grids is not None else None
 
     def restore(self, s):
         for k, v in self.glob.items():
             getattr(s.glob, k)[:] = v
         s.step, s.time, s.ratio, s.alpha = self.clock
+        if self.grids is not None:  # they travel with their blocks to the owners
+            s.grids = s.grids.restored(self.grids)
         distribute(s, self.gids, {k: v.copy() for k, v in self.rows.items()},
                    self.contacts.take(np.arange(self.contacts.n)), source=self.store)
 
@@ -101,6 +108,8 @@ def _trial(run, factor: float, fos, snap: _Snapshot, base_scene):
     scene = base_scene.model_copy(update={"joints": reduced_joints(base_scene.joints, factor,
                                                                    fos.joints)})
     s.joints = joint_table(scene, s.group_names)
+    if s.grids is not None and fos.joints is None:  # the whole model's strength
+        s.grids.weaken(factor)
     s.ratio = math.inf
     stable = False
     steps = 0

@@ -1,5 +1,6 @@
 """Staged scenes (pdem.stages): a slab on an incline for the strength-reduction factor of
-safety, and a small stack for stage changes and restarts.
+safety (on a fixed base, or a rigid block on a zoned base), and a small stack for stage
+changes and restarts.
 
 The incline is tilted gravity as in :mod:`pdem.cases.incline`: ``g = |g| (sin psi, 0, -cos psi)``
 on a slab resting on a fixed base. A thin slab keeps the normal stress under it nearly uniform
@@ -59,6 +60,53 @@ def slab_fos(phi: float, cohesion: float) -> float:
     lx, ly, h = SLAB
     w = RHO * G * lx * ly * h
     return (w * math.cos(psi) * math.tan(ph) + cohesion * lx * ly) / (w * math.sin(psi))
+
+
+ZONED_PHI = 30.0  # the friction of the joint the block slides on, on the zoned base
+
+
+def zoned_fos_scene(output: str | None = None, checkpoint: str | None = None,
+                    tolerance: float = 0.01) -> str:
+    """A rigid block on a zoned Mohr-Coulomb base on the incline: settle (local damping), then
+    the factor-of-safety search. The base sits on the fixed floor through a joint too strong
+    to slide in the search's range (tan 60 / tan 20 = 4.8 > ``high``), the block on the base
+    through the default joint (``ZONED_PHI``); the base's zones are weakened in the trials but
+    strong enough to stay elastic (cohesion / 4 = 250 kPa against stresses of 20 kPa). The
+    block sits off the base's centre (a cut of 2 ranks between them)."""
+    psi = math.radians(PSI)
+    g = (G * math.sin(psi), 0.0, -G * math.cos(psi))
+    out = f"output: {{file: {output}}}\n" if output else ""
+    ck = f"checkpoint: {{every_steps: 1000000, file: {checkpoint}}}\n" if checkpoint else ""
+    return f"""
+name: zoned-fos
+gravity: {vec(g)}
+materials:
+  rock: {{density: {RHO}}}
+  soft: {{density: {RHO}, young: 1.0e9, poisson: 0.25, model: mohr_coulomb, cohesion: 1.0e6,
+          friction: 40, tension: 1.0e5}}
+joints:
+  default: {{kn: {KN}, ks: {KN}, friction: {ZONED_PHI}}}
+  strong: {{kn: {KN}, ks: {KN}, friction: 60.0}}
+joint_pairs: [{{groups: [floor, base], joint: strong}}]
+blocks:
+  - {{name: floor, box: {{min: [-3, -2, -1], max: [3, 2, 0]}}, material: rock, fixed: true,
+     group: floor}}
+  - {{name: base, box: {{min: [-2.5, -1.5, 0], max: [1.5, 1.5, 0.5]}}, material: soft,
+     zones: {{size: 0.5}}, group: base}}
+  - {{name: block, box: {{min: [0.2, -0.5, 0.5], max: [1.2, 0.5, 0.8]}}, material: rock,
+     group: top}}
+solve: {{damping: local}}
+{out}{ck}stages:
+  - {{name: settle, solve: {{ratio: 1.0e-6, max_steps: 30000}}}}
+  - name: strength
+    factor_of_safety: {{tolerance: {tolerance!r}, ratio: 1.0e-5, max_steps: 4000,
+                        max_displacement: 0.02}}
+"""
+
+
+def zoned_fos() -> float:
+    """The closed form of :func:`zoned_fos_scene`: ``tan(phi) / tan(psi)`` (a planar slide)."""
+    return math.tan(math.radians(ZONED_PHI)) / math.tan(math.radians(PSI))
 
 
 def stack_stages_scene(output: str, checkpoint: str | None = None) -> str:

@@ -230,10 +230,11 @@ class RandomPolyhedra(Strict):
 
 
 class Zones(Strict):
-    """A deformable block: zoned into tetrahedra no longer than ``size`` (m) on any edge;
-    ``nmd``: nodal mixed discretization (3DEC's default; off only to compare)."""
+    """A deformable block: zoned into tetrahedra no longer than ``size`` (m) on any edge (a
+    ``mesh`` block: its tetrahedral cells are the zones, no ``size``); ``nmd``: nodal mixed
+    discretization (3DEC's default; off only to compare)."""
 
-    size: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)]
+    size: Annotated[float, Field(gt=0.0, le=LENGTH_MAX)] | None = None
     nmd: bool = True
 
 
@@ -255,7 +256,7 @@ SHAPE_MODELS: Registry[ShapeModel] = Registry("block shape")
 for _key, _model, _zoned in (
     ("box", BoxShape, True), ("polyhedron", PolyhedronShape, True), ("prism", PrismShape, True),
     ("planes", PlanesShape, True), ("array", ArrayOf, True), ("random", RandomPolyhedra, True),
-    ("mesh", MeshShape, False),
+    ("mesh", MeshShape, True),
 ):
     SHAPE_MODELS.register(_key, ShapeModel(_model, _zoned))
 SHAPE_KEYS = SHAPE_MODELS.names()
@@ -297,6 +298,11 @@ class Block(Strict):
             if kind not in ZONED_SHAPES:
                 raise ValueError(f"zones: not yet supported on {kind!r} blocks (a zoned block is "
                                  f"one convex {', '.join(ZONED_SHAPES)} shape)")
+            if kind == "mesh" and self.zones.size is not None:
+                raise ValueError("zones.size: a mesh block's zones are its tetrahedral cells as "
+                                 "the mesh has them (remove size, or mesh it finer)")
+            if kind != "mesh" and self.zones.size is None:
+                raise ValueError("zones.size: Field required (the longest zone edge, m)")
             if self.velocity_fixed and any(self.angular_velocity):
                 # a zoned block's prescribed motion is its gridpoints' fixed velocities, which
                 # are constant: a rigid rotation would need them to turn with the block
@@ -990,21 +996,6 @@ class Scene(Strict):
                 if not self.materials[b.material].deformable:
                     errors.append(f"blocks[{i}].zones: material {b.material!r} has no young and "
                                   "poisson (a zoned block needs its elasticity)")
-        zoned = [b.name for b in self.blocks if b.zones is not None]
-        if zoned:
-            if self.join:
-                errors.append(f"join: not yet supported with zoned blocks ({', '.join(zoned)})")
-            for k, st in enumerate(self.stages):
-                if st.factor_of_safety is not None:
-                    errors.append(f"stages[{k}].factor_of_safety: not yet supported with zoned "
-                                  f"blocks ({', '.join(zoned)})")
-                d = st.solve.damping if st.solve is not None else None
-                if d is not None and d.mode not in ("none", "local"):
-                    errors.append(f"stages[{k}].solve.damping.mode: not yet supported with "
-                                  f"zoned blocks ({', '.join(zoned)}); use none or local")
-            if self.solve.damping.mode not in ("none", "local"):
-                errors.append(f"solve.damping.mode: not yet supported with zoned blocks "
-                              f"({', '.join(zoned)}); use none or local")
         if "default" not in self.joints and not self.joint_pairs:
             errors.append("joints: define a joint named 'default' (used by every contact)")
         groups = {b.group for b in self.blocks}

@@ -13,7 +13,15 @@ import numpy as np
 
 from .constitutive import material
 from .mesh import TetMesh, tetrahedralise
-from .motion import N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
+from .motion import (
+    GRID_DAMPING,
+    N_GW,
+    critical_timestep,
+    cycle,
+    nodal_stiffness,
+    scaled_masses,
+    stability_alpha,
+)
 from .zones import gravity_forces, lumped_mass, surface_load, zone_geometry
 
 
@@ -28,13 +36,16 @@ class DeformableBody:
         ``model: mohr_coulomb, cohesion, friction, tension, dilation``.
     gravity : (3,) acceleration.
     nmd : nodal mixed discretization (on by default, as in 3DEC).
-    damping : local damping coefficient alpha (0 for dynamics; 0.8 is pdem's static default).
+    damping : damping coefficient alpha (0 for dynamics; 0.8 is pdem's static default).
+    damping_mode : its form, a ``solve.damping.mode`` (pdem.deformable.motion's module doc;
+        ``adaptive`` is viscous with the alpha given: its servo is the scene's).
     mass_scaling : static solution: inertial masses scaled so that ``dt = 1`` is stable
         (gravity keeps the true masses).
     """
 
     def __init__(self, mesh, spec: dict, size: float | None = None, gravity=(0.0, 0.0, 0.0),
-                 nmd: bool = True, damping: float = 0.0, mass_scaling: bool = False):
+                 nmd: bool = True, damping: float = 0.0, mass_scaling: bool = False,
+                 damping_mode: str = "local"):
         if not isinstance(mesh, TetMesh):
             if size is None:
                 raise ValueError("a polyhedron needs a zone size")
@@ -63,12 +74,18 @@ class DeformableBody:
         self.active = True  # stepped (False: its block was taken out of the model)
         self.nmd = bool(nmd)
         self.damping = float(damping)
+        self.damping_mode = GRID_DAMPING[damping_mode][0]
+        # every gridpoint's total force of the last step (combined damping's dF/dt): it
+        # travels with the body and into checkpoints
+        self.prev_force = np.zeros((n, 3))
+        self.servo = np.zeros(2)  # the last step's damping power and sum |dEk/dt| (eq. 77)
         self.mass_scaling = bool(mass_scaling)
         self.unbalanced = np.zeros(1)  # the last step's largest unbalanced gridpoint force
         # the energy accumulators since the start (pdem.deformable.motion.GW_*): they travel
         # with the body between ranks and into checkpoints
         self.work = np.zeros(N_GW)
         self.update_mass()
+        self.zone_stiffness = None  # of the built geometry (GridStore._zone_stiffness)
         self.time = 0.0
 
     # --- setup -----------------------------------------------------------------------------
@@ -78,14 +95,19 @@ class DeformableBody:
 
     def update_mass(self) -> None:
         """Inertial masses: true lumped masses, or scaled for ``dt = 1`` (static mode)."""
-        self.mass = (scaled_masses(self.stiffness(), alpha=self.damping) if self.mass_scaling
-                     else self.gravity_mass)
+        self.mass = (scaled_masses(self.stiffness(), alpha=self.stability_alpha())
+                     if self.mass_scaling else self.gravity_mass)
+        self.emass = self.mass  # the masses of the last grid step (GridStore.step)
 
     def timestep(self) -> float:
         """The zone term of eq. 88 for the current geometry and inertial masses."""
         if self.mass_scaling:
             return 1.0
-        return critical_timestep(self.stiffness(), self.mass, self.damping)
+        return critical_timestep(self.stiffness(), self.mass, self.stability_alpha())
+
+    def stability_alpha(self) -> float:
+        """The damping's factor on the critical step (pdem.deformable.motion.stability_alpha)."""
+        return stability_alpha(self.damping_mode, self.damping)
 
     def fix(self, mask, dofs=(0, 1, 2), velocity: float = 0.0) -> None:
         """Prescribe ``velocity`` on the ``dofs`` of the gridpoints in ``mask``."""
@@ -106,7 +128,8 @@ class DeformableBody:
         applied = self.applied + gforce
         done = cycle(n_steps, dt, self.nodes, self.vel, self.mass, applied, self.fixed,
                      self.fixed_vel, self.tets, self.grad, self.vol, self.stress, self.plastic,
-                     self.model, self.nmd, self.damping, self.unbalanced, gforce,
+                     self.model, self.nmd, self.damping_mode, self.damping, self.prev_force,
+                     self.unbalanced, self.servo, gforce,
                      np.zeros_like(applied), self.applied, self.params.bulk, self.params.shear,
                      self.work)
         self.time += done * dt
@@ -126,7 +149,7 @@ class DeformableBody:
         """Kinetic energy at the last half step with the inertial masses, prescribed degrees
         of freedom holding none (the energy budget's); correctly rounded, so the same bits
         on any rank."""
-        e = np.where(self.fixed, 0.0, self.mass[:, None] * self.vel ** 2)
+        e = np.where(self.fixed, 0.0, self.emass[:, None] * self.vel ** 2)
         return 0.5 * math.fsum(e.ravel().tolist())
 
     def strain_energy(self) -> float:

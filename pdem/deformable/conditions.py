@@ -213,7 +213,7 @@ def _book_switch(body, idx, k: int, sign: float) -> None:
     counts no kinetic energy in a prescribed component)."""
     on = idx[body.fixed[idx, k] == (sign > 0.0)]
     if len(on):
-        body.work[GW_BOUNDARY] += sign * 0.5 * float(np.sum(body.mass[on] * body.vel[on, k] ** 2))
+        body.work[GW_BOUNDARY] += sign * 0.5 * float(np.sum(body.emass[on] * body.vel[on, k] ** 2))
 
 
 def wholly_fixed(s) -> tuple[np.ndarray, np.ndarray]:

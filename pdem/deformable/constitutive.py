@@ -98,16 +98,29 @@ def mohr_coulomb_table(p: MohrCoulombParams) -> MohrCoulombTable:
                             tension * n_phi - two_c)
 
 
+def mohr_coulomb_reduced(p: MohrCoulombParams, factor: float) -> MohrCoulombParams:
+    """Strength reduction (FLAC3D/3DEC ``factor-of-safety``): ``cohesion / F``,
+    ``tan(friction) / F``, ``tension / F``; the dilation angle kept, but not above the
+    reduced friction angle (the flow rule must not generate energy)."""
+    phi = math.degrees(math.atan(math.tan(math.radians(p.friction)) / factor))
+    return p.model_copy(update={"cohesion": p.cohesion / factor, "friction": phi,
+                                "tension": p.tension / factor,
+                                "dilation": min(p.dilation, phi)})
+
+
 @dataclass(frozen=True)
 class ZoneModel:
     """``params``: the scene model; ``table(params)`` -> an instance of ``table_type`` (a
-    namedtuple owned by this model alone: it selects ``update`` at compile time)."""
+    namedtuple owned by this model alone: it selects ``update`` at compile time);
+    ``reduced(params, F)`` -> the params with their strength divided by F (a factor of
+    safety's trial), None: a model without strength (elastic), unchanged."""
 
     name: str
     params: type[ElasticParams]
     table_type: type
     table: Callable
     update: Callable
+    reduced: Callable | None = None
 
 
 def update_stress(table, stress_row, de):
@@ -298,7 +311,8 @@ ZONE_MODELS: Registry[ZoneModel] = Registry("zone constitutive model")
 ZONE_MODELS.register("elastic", ZoneModel("elastic", ElasticParams, ElasticTable, elastic_table,
                                           elastic_update))
 ZONE_MODELS.register("mohr_coulomb", ZoneModel("mohr_coulomb", MohrCoulombParams, MohrCoulombTable,
-                                               mohr_coulomb_table, mohr_coulomb_update))
+                                               mohr_coulomb_table, mohr_coulomb_update,
+                                               mohr_coulomb_reduced))
 
 
 def material(spec: dict):
@@ -306,3 +320,13 @@ def material(spec: dict):
     model = ZONE_MODELS[spec.get("model", "elastic")]
     params = model.params(**spec)
     return params, model.table(params)
+
+
+def reduced_table(params: ElasticParams, factor: float):
+    """The kernel table of ``params`` with its strength divided by ``factor``
+    (:attr:`ZoneModel.reduced`; the model's own table at F = 1 and for a model without
+    strength)."""
+    model = ZONE_MODELS[params.model]
+    if model.reduced is None or factor == 1.0:
+        return model.table(params)
+    return model.table(model.reduced(params, factor))

@@ -31,8 +31,10 @@ from ..jit import force_kernel, inline_kernel, kernel
 
 # dindex (rows,): zoned-block index of each block row, -1 for rigid; vel, force (N, 3): the
 # flat gridpoint velocities and contact forces; sc_node (S, 2, 3) gridpoints of sub-contact s
-# on side A (0) and B (1), sc_w (S, 2, 3) their weights (unused on a rigid side)
-Grid = namedtuple("Grid", "dindex vel force sc_node sc_w")
+# on side A (0) and B (1), sc_w (S, 2, 3) their weights (unused on a rigid side); kc (N,)
+# each gridpoint's Gershgorin contact stiffness from the step's sub-contacts, kjoint the
+# stiffest joint's max(kn, ks) (Pa/m) it is counted with (GridStore.step's partial scaling)
+Grid = namedtuple("Grid", "dindex vel force sc_node sc_w kc kjoint")
 
 
 @inline_kernel
@@ -126,13 +128,19 @@ def _grid_velocity(grid, s, side):
 
 
 @inline_kernel
-def _grid_force(grid, s, side, fx, fy, fz):
-    n, w, f = grid.sc_node, grid.sc_w, grid.force
+def _grid_force(grid, s, side, fx, fy, fz, k2):
+    """The force on a zoned side's gridpoints, and their share ``w k2`` of the spring's
+    Gershgorin row: a spring K between two weighted points couples every gridpoint of both
+    (weights >= 0, summing to 1 a side), so gridpoint i's row holds ``K w_i (1 + 1)``: ``k2``
+    is 2 K. On the triangle side this can exceed the gridpoint's own area share (a finer or
+    larger neighbour landing on a sliver's small triangles): the build's estimate misses it."""
+    n, w, f, kc = grid.sc_node, grid.sc_w, grid.force, grid.kc
     for i in range(3):
         g = n[s, side, i]
         f[g, 0] += w[s, side, i] * fx
         f[g, 1] += w[s, side, i] * fy
         f[g, 2] += w[s, side, i] * fz
+        kc[g] += w[s, side, i] * k2
 
 
 @force_kernel  # a call, not inlined: numba's IR inlining of the inlined joint law inside it warns
@@ -228,12 +236,13 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
             fx, fy, fz, dis = _sub_update(dt, subs, joints, slot, j, s, vbx - vax, vby - vay,
                                           vbz - vaz, nx, ny, nz)
             dissipated += dis
+            k2 = 2.0 * grid.kjoint * subs.area[s]
             if db >= 0:
-                _grid_force(grid, s, 1, fx, fy, fz)
+                _grid_force(grid, s, 1, fx, fy, fz, k2)
             else:
                 fb = add_point_force(fb, rbx, rby, rbz, fx, fy, fz)
             if da >= 0:
-                _grid_force(grid, s, 0, -fx, -fy, -fz)
+                _grid_force(grid, s, 0, -fx, -fy, -fz, k2)
             else:
                 fa = add_point_force(fa, rax, ray, raz, -fx, -fy, -fz)
         for i in range(3):

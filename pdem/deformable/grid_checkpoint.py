@@ -21,9 +21,10 @@ def checkpoint_rows(grids, comm, parallel: bool):
             "n_zones": np.array([len(grids.bodies[d].tets) for d in own], np.int64),
             "work": np.array([grids.bodies[d].work for d in own]).reshape(-1, N_GW)}
     arrays = {k: [getattr(grids, k)[grids.node_start[d]:grids.node_start[d + 1]] for d in own]
-              for k in ("nodes", "vel", "force")}
+              for k in ("nodes", "vel", "force", "kc")}
     arrays["stress"] = [grids.bodies[d].stress for d in own]
     arrays["plastic"] = [grids.bodies[d].plastic for d in own]
+    arrays["prev"] = [grids.bodies[d].prev_force for d in own]
     if not parallel and comm.size > 1:  # one writer: every grid to it
         parts = gather(comm, (mine, arrays))
         if comm.rank != 0:
@@ -36,7 +37,9 @@ def checkpoint_rows(grids, comm, parallel: bool):
 def write(f, rows, rank: int) -> None:
     """The grids' state (:func:`checkpoint_rows`) into group ``grids`` of an open
     checkpoint file, in gid order over all ranks: gid, gridpoint and zone counts,
-    gridpoint positions, velocities and contact forces, zone stresses and plastic bits, the
+    gridpoint positions, velocities, contact forces, contact stiffness (``kc``: the next
+    step's masses) and last total forces (``prev``: combined damping's), zone stresses and
+    plastic bits, the
     grids' energy accumulators (``work``, pdem.deformable.motion.GW_*; the sub-contacts' grid
     columns are in ``subcontacts/sc_grid``)."""
     table, mine, arrays = rows
@@ -55,7 +58,8 @@ def write(f, rows, rank: int) -> None:
     d = g.create_dataset("work", (len(order), N_GW), dtype=np.float64)
     if rank == 0:
         d[:] = allt["work"][order]
-    shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "stress": (6,), "plastic": ()}
+    shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "kc": (), "prev": (3,), "stress": (6,),
+              "plastic": ()}
     for k, shape in shapes.items():
         zones = k in ("stress", "plastic")
         off = zone_off if zones else node_off
@@ -67,7 +71,8 @@ def write(f, rows, rank: int) -> None:
 
 def load(grids, path) -> None:
     """Continue the grids held here from a checkpoint written by :func:`write` (before
-    the blocks are distributed): gridpoints, velocities, contact forces, stresses,
+    the blocks are distributed): gridpoints, velocities, contact forces, last total forces,
+    stresses,
     plastic bits, energy accumulators, and the zones' geometry from the gridpoints. ValueError (agreed over
     the ranks by the restore) if the file has no such grids."""
     with h5py.File(path, "r") as f:
@@ -90,8 +95,13 @@ def load(grids, path) -> None:
             a, e = grids.node_start[d], grids.node_start[d + 1]
             for k in ("nodes", "vel", "force"):
                 getattr(grids, k)[a:e] = g[k][node_off[i]:node_off[i + 1]]
+            # the last force pass's contact stiffness (the next step's masses); a checkpoint
+            # without it: the stage's masses
+            grids.kc[a:e] = g["kc"][node_off[i]:node_off[i + 1]] if "kc" in g else 0.0
             b.stress[:] = g["stress"][zone_off[i]:zone_off[i + 1]]
             b.plastic[:] = g["plastic"][zone_off[i]:zone_off[i + 1]]
+            # (a checkpoint without them: combined damping's dF/dt starts from nil)
+            b.prev_force[:] = g["prev"][node_off[i]:node_off[i + 1]] if "prev" in g else 0.0
             # (a checkpoint without them: the budget's grid works start over)
             b.work[:] = g["work"][i] if "work" in g else 0.0
             zone_geometry(b.nodes, b.tets, b.grad, b.vol)

@@ -3,22 +3,39 @@
 One step (the FLAC/3DEC sequence, reference eqs. 53-59 and 68-76):
 
 1. gridpoint forces at t: applied + gravity (eq. 56) + zone stresses (eq. 55);
-2. velocities at t + dt/2 by central differences (eq. 57) with local damping
-   ``F_d = alpha |F| sgn(v)`` per component (eqs. 78-79, as pdem's rigid ``local`` mode), or
+2. velocities at t + dt/2 by central differences (eq. 57) with the grid's damping (below), or
    the prescribed velocity on fixed degrees of freedom; positions to t + dt;
 3. strain rates and spins (eq. 58) on the geometry at t + dt/2, NMD on strain (eqs. 68-71);
    the zone geometry at t + dt for the next forces;
 4. stresses: Jaumann rotation by the spin, then the constitutive model (eq. 59 / plasticity),
    then NMD on the plastic volumetric stress correction (eqs. 73-76).
 
+Damping (``solve.damping.mode``, as pdem's rigid modes, pdem.dynamics.damping), per
+gridpoint component with ``F`` the total unbalanced force at t (before damping):
+
+``LOCAL``     eqs. 78-79: ``F_d = alpha |F| sgn(v(t - dt/2))`` subtracted (``none``: alpha 0).
+``COMBINED``  eq. 83 in the sign of (78): ``F_d = alpha |F| (sgn(v) - sgn(dF/dt)) / 2``,
+              ``dF/dt`` from ``F - F_prev`` (the gridpoint's total force of the step before,
+              kept in ``prev``, which travels with the grid and into checkpoints): no damping
+              of a steady motion (``F`` constant or growing along ``v``), local damping's
+              force on an oscillation.
+``VISCOUS``   eq. 49: ``v+ = (D1 v- + F dt/m) D2``, ``D1 = 1 - alpha dt/2``,
+              ``D2 = 1/(1 + alpha dt/2)``: the force ``alpha m v(t)`` with ``m`` the inertial
+              mass, so that every gridpoint's velocity decays alike, ``exp(-alpha t)`` for a
+              free block's rigid motion (with the true mass under mass scaling the lighter-
+              scaled gridpoints would be damped less, and damping a rigid motion would strain
+              the block); the rigid blocks' viscous mode uses the inertial mass too.
+              ``adaptive``: this form with the servo's alpha (eq. 77), the rigid blocks' one.
+
 Energy (the run's budget, pdem.plugins.energy): each step books on the grid's ``work``
 (columns ``GW_*``) the work of the gridpoint forces over the step with the mean velocity
 ``(v(t - dt/2) + v(t + dt/2)) / 2`` of every free degree of freedom, which makes the kinetic
 energy's change exact for the leap-frog (the rigid blocks' rule, pdem.dynamics.motion): of
 gravity, of the applied loads (a block's or a stage's ``force``, boundary stresses), of the
-contacts, what local damping took out, and the work done on the zones (minus the zone forces'
-work: the energy the zones hold and dissipated, booked rather than taken from the stresses,
-whose quadratic form is off by O(strain) at large strain). A prescribed degree of freedom
+contacts, what damping took out (its force, as applied, times the mean velocity: exact for
+each mode), and the work done on the zones (minus the zone forces' work: the energy the
+zones hold and dissipated, booked rather than taken from the stresses, whose quadratic form
+is off by O(strain) at large strain). A prescribed degree of freedom
 holds no kinetic energy: its motion does the work of the zone and contact forces on it
 (``GW_BOUNDARY``, with the prescribed velocity). ``GW_PLASTIC``: the zones' plastic work
 ``V sigma_mean : (de - C^-1 dsigma)``, booked in the steps a zone's model yields.
@@ -45,11 +62,29 @@ from .zones import add_zone_forces, rotate_stress, strain_rates, zone_geometry
 GW_GRAVITY = 0  # work of gravity
 GW_APPLIED = 1  # work of applied loads (block and stage forces, boundary stresses)
 GW_BOUNDARY = 2  # put in by prescribed gridpoint velocities
-GW_DAMPING = 3  # dissipated by local damping
+GW_DAMPING = 3  # dissipated by damping
 GW_CONTACT = 4  # work of the contact forces (diagnostic: the joints book their side)
 GW_ZONE = 5  # work done on the zones (held and dissipated in them)
 GW_PLASTIC = 6  # of which dissipated by the zones' plastic flow
 N_GW = 7
+
+# gridpoint damping forms (:func:`cycle`'s ``mode``; module doc)
+LOCAL = 0
+COMBINED = 1
+VISCOUS = 2
+# solve.damping.mode -> (form, whether alpha is kept: none is the local form with alpha 0)
+GRID_DAMPING = {"none": (LOCAL, False), "local": (LOCAL, True), "combined": (COMBINED, True),
+                "viscous": (VISCOUS, True), "adaptive": (VISCOUS, True)}
+
+
+def stability_alpha(mode: int, alpha: float) -> float:
+    """The alpha of the ``(1 + alpha)`` stiffness factor of :func:`critical_timestep` for a
+    damping form: local and combined damping may add ``alpha |F|`` to the force (combined's
+    force is local's or less); viscous damping (eq. 49, centred in time) leaves the
+    central-difference limit ``omega dt <= 2`` as it is for any alpha >= 0 (the roots of
+    ``(1 + c) z^2 - (2 - w^2 dt^2) z + 1 - c``, ``c = alpha dt / 2``, stay in the unit circle
+    exactly while ``w dt <= 2``)."""
+    return 0.0 if mode == VISCOUS else alpha
 
 
 @kernel
@@ -109,7 +144,8 @@ def nodal_stiffness_3dec(nodes, tets, vol, bulk, shear):
 
 
 def critical_timestep(stiffness: np.ndarray, mass: np.ndarray, alpha: float = 0.0) -> float:
-    """Eq. 84: ``2 min sqrt(m_i / k_i)``, reduced by ``sqrt(1 + alpha)`` under local damping.
+    """Eq. 84: ``2 min sqrt(m_i / k_i)``, reduced by ``sqrt(1 + alpha)`` under local damping
+    (and combined; ``alpha``: :func:`stability_alpha`).
 
     Local damping subtracts ``alpha |F| sgn(v)``: when the force opposes the velocity (every
     half cycle of an oscillation) it *adds* ``alpha |F|`` to it, so the effective stiffness is
@@ -127,9 +163,19 @@ def scaled_masses(stiffness: np.ndarray, dt: float = 1.0, frac: float = 0.9,
     return (1.0 + alpha) * stiffness * (dt / (2.0 * frac)) ** 2
 
 
+@inline_kernel
+def _sgn(a):
+    if a > 0.0:
+        return 1.0
+    if a < 0.0:
+        return -1.0
+    return 0.0
+
+
 @kernel
 def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
-          plastic, model, nmd, alpha, unbalanced, gforce, contact, load, bulk, shear, work):
+          plastic, model, nmd, mode, alpha, prev, unbalanced, servo, gforce, contact, load, bulk,
+          shear, work):
     """Advance ``n_steps`` steps in place (see module doc); return the steps done.
     ``unbalanced (1,)``: set to the largest unbalanced gridpoint force (the norm over its
     free degrees of freedom, before damping) of the last step, for ``solve.ratio``.
@@ -137,8 +183,12 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     ``mass (n,)`` inertial gridpoint masses; ``applied (n, 3)`` applied + gravity forces;
     ``fixed (n, 3) bool`` prescribed-velocity degrees of freedom with ``fixed_vel (n, 3)``;
     ``plastic (m,) int32`` state bits; ``model`` a constitutive table; ``nmd`` bool;
-    ``alpha`` the local damping coefficient (0: undamped). Stops early (returning fewer
-    steps) if a zone inverts.
+    ``mode`` the damping form (LOCAL, COMBINED, VISCOUS) and ``alpha`` its coefficient (LOCAL
+    with 0: undamped); ``prev (n, 3)`` every gridpoint's total force of the last step, read by
+    COMBINED and rewritten every step whatever the form (a stage may change it);
+    ``servo (2,)``: set to the last step's damping power and sum over the gridpoints of
+    ``|dEk/dt|`` (inertial masses), the adaptive servo's sums (eq. 77). Stops early
+    (returning fewer steps) if a zone inverts.
 
     Energy (module doc): ``applied`` is the sum of ``gforce`` (gravity), ``contact`` and
     ``load`` (each (n, 3); ``load`` may have no rows: no load), which are read only to book
@@ -153,17 +203,23 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     rate = np.empty((n_zones, 6))
     spin = np.empty((n_zones, 3))
     sigma_p = np.zeros(n_zones)
+    d1 = 1.0 - 0.5 * alpha * dt  # eq. 49's factors (VISCOUS)
+    d2 = 1.0 / (1.0 + 0.5 * alpha * dt)
     for step in range(n_steps):
         force[:] = applied
         add_zone_forces(tets, grad, vol, stress, force)
         big = 0.0
         wg = wa = wb = wd = wc = wz = 0.0
+        dek = 0.0
         for n in range(n_nodes):
             c = dt / mass[n]
             f2 = 0.0
+            e2 = 0.0
             for i in range(3):
                 ft = force[n, i]
                 fz = ft - applied[n, i]  # the zone forces' part
+                dfdt = ft - prev[n, i]
+                prev[n, i] = ft
                 if fixed[n, i]:
                     vp = fixed_vel[n, i]
                     vel[n, i] = vp
@@ -175,20 +231,31 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
                 f = ft
                 f2 += f * f
                 v = vel[n, i]
-                if v > 0.0:
-                    f -= alpha * abs(f)
-                elif v < 0.0:
-                    f += alpha * abs(f)
-                v1 = v + f * c
+                if mode == VISCOUS:
+                    v1 = (d1 * v + f * c) * d2
+                    vb = 0.5 * (v + v1)
+                    fd = alpha * mass[n] * vb  # eq. 49 solved for its force
+                else:
+                    if mode == COMBINED:  # (sgn(v) - sgn(dF/dt)) / 2
+                        sg = 0.5 * (_sgn(v) - _sgn(dfdt))
+                        f -= alpha * abs(f) * sg
+                    elif v > 0.0:
+                        f -= alpha * abs(f)
+                    elif v < 0.0:
+                        f += alpha * abs(f)
+                    v1 = v + f * c
+                    vb = 0.5 * (v + v1)
+                    fd = ft - f
                 vel[n, i] = v1
-                vb = 0.5 * (v + v1)
+                e2 += v1 * v1 - v * v
                 wg += gforce[n, i] * vb
                 if loaded:
                     wa += load[n, i] * vb
                 wc += contact[n, i] * vb
                 wz -= fz * vb
-                wd += (ft - f) * vb
+                wd += fd * vb
             big = max(big, f2)
+            dek += abs(0.5 * mass[n] * e2)
             for i in range(3):
                 mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
                 nodes[n, i] += vel[n, i] * dt
@@ -197,6 +264,8 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
         work[GW_APPLIED] += wa * dt
         work[GW_BOUNDARY] += wb * dt
         work[GW_DAMPING] += wd * dt
+        servo[0] = wd
+        servo[1] = dek / dt
         work[GW_CONTACT] += wc * dt
         work[GW_ZONE] += wz * dt
         # strain rates on the mid-step geometry: for a rigid rotation over the step the

@@ -16,6 +16,7 @@ ghost copies; docs/deformable.md "On several ranks"), the node arrays of all of 
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -24,8 +25,9 @@ from ..mpi import allgather
 from ..parallel.halo import RowHalo
 from .body import DeformableBody
 from .columns import TRI, W
+from .constitutive import reduced_table
 from .contact import Grid, refresh_pieces
-from .motion import N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
+from .motion import GRID_DAMPING, N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
 from .subcontacts import regrid
 from .zones import gravity_forces, zone_geometry
 
@@ -37,10 +39,12 @@ GRID_FRAC = 0.9
 class ZonedGrid:
     """One zoned block's grid as it travels between ranks (pickled by the rebuild's
     messages): its name, body (zones, gridpoints, stresses), surface gridpoints and the
-    contact forces on its gridpoints (the next step's load)."""
+    contact forces on its gridpoints (the next step's load) and their contact stiffness
+    (the next step's masses; None: none yet)."""
 
-    def __init__(self, name: str, body: DeformableBody, surf: np.ndarray, force: np.ndarray):
-        self.name, self.body, self.surf, self.force = name, body, surf, force
+    def __init__(self, name: str, body: DeformableBody, surf: np.ndarray, force: np.ndarray,
+                 kc: np.ndarray | None = None):
+        self.name, self.body, self.surf, self.force, self.kc = name, body, surf, force, kc
 
 
 class GridStore:
@@ -60,6 +64,11 @@ class GridStore:
         self.nodes = np.empty((n, 3))
         self.vel = np.zeros((n, 3))
         self.force = np.zeros((n, 3))  # contact forces on the gridpoints (F^c of eq. 54)
+        # the contact springs' Gershgorin stiffness at each gridpoint, from the last force
+        # pass's sub-contacts (pdem.deformable.contact._grid_force), and the joint stiffness
+        # they count (:meth:`restage`)
+        self.kc = np.zeros(n)
+        self.kjoint = 0.0
         self.gmass = np.empty(n)
         # boundary stresses on the owned grids' faces this step (pdem.deformable.conditions)
         self.bload = np.zeros((n, 3))
@@ -70,6 +79,8 @@ class GridStore:
             self.nodes[a:e] = b.nodes
             self.vel[a:e] = b.vel
             self.force[a:e] = z.force
+            if z.kc is not None:
+                self.kc[a:e] = z.kc
             self.gmass[a:e] = b.gravity_mass
             b.nodes, b.vel = self.nodes[a:e], self.vel[a:e]
         self.gravity = np.asarray(gravity, float)
@@ -80,6 +91,8 @@ class GridStore:
         # (set by resolve), and the last step's largest unbalanced gridpoint force over it
         self.ref_force = 1.0
         self.ratio = 0.0
+        # adaptive damping: the grids take the servo's alpha every step (:meth:`step`)
+        self.adaptive = False
 
     @classmethod
     def build(cls, scene, specs, first_gid: int) -> GridStore:
@@ -103,7 +116,8 @@ class GridStore:
         """Each grid by gid, for :func:`pdem.parallel.migrate.rebuild` to send with its
         block (owned grids only: a ghost's owner sends it)."""
         return {g: ZonedGrid(self.names[d], self.bodies[d], self.surf[d],
-                             self.force[self.node_start[d]:self.node_start[d + 1]])
+                             self.force[self.node_start[d]:self.node_start[d + 1]],
+                             self.kc[self.node_start[d]:self.node_start[d + 1]])
                 for d, g in enumerate(self.gids[:self.n_owned])}
 
     @classmethod
@@ -115,57 +129,101 @@ class GridStore:
         gids = sorted(grids, key=lambda g: row_of[int(g)])
         new = cls(old.gravity, gids, [grids[g] for g in gids],
                   sum(row_of[int(g)] < n_owned for g in gids))
-        new.dt, new.ref_force = old.dt, old.ref_force
+        new.dt, new.ref_force, new.adaptive = old.dt, old.ref_force, old.adaptive
+        new.kjoint = old.kjoint
         new.bind(blocks)
         return new
 
-    def set_damping(self, alpha: float) -> None:
-        """The grids' local damping coefficient (``solve.damping``: local, or none)."""
+    def zones_at(self, gids: np.ndarray) -> np.ndarray:
+        """The zone count of each block of ``gids`` whose grid is held here (0 for the others:
+        rigid blocks, or grids held elsewhere): RCB's work weights."""
+        count = dict(zip(self.gids, (len(b.tets) for b in self.bodies), strict=True))
+        return np.array([count.get(int(g), 0) for g in gids], np.int64)
+
+    def saved(self) -> dict:
+        """Copies of the owned grids by gid (gridpoints, velocities, contact forces, zone
+        stresses and plastic state, conditions, energy accumulators): the state a factor of
+        safety's trials start from (:meth:`restored`)."""
+        return copy.deepcopy(self.payload())
+
+    def restored(self, saved: dict) -> GridStore:
+        """A store owning fresh copies of the grids ``saved`` (:meth:`saved`), with this
+        one's step and settings: the grids a distribution of the saved blocks sends on."""
+        gids = sorted(saved)
+        new = GridStore(self.gravity, gids, [copy.deepcopy(saved[g]) for g in gids])
+        new.dt, new.ref_force, new.adaptive = self.dt, self.ref_force, self.adaptive
+        new.kjoint = self.kjoint
+        return new
+
+    def weaken(self, factor: float) -> None:
+        """The zones' strength divided by ``factor`` (a factor of safety's trial; 1: the
+        material's own): each grid's constitutive table from its material's parameters
+        (:func:`~pdem.deformable.constitutive.reduced_table`; elastic zones unchanged)."""
         for b in self.bodies:
-            b.damping = float(alpha)
+            b.model = reduced_table(b.params, factor)
+
+    def set_damping(self, mode: str, alpha: float) -> None:
+        """The grids' damping: ``solve.damping.mode`` at the gridpoints (its form,
+        pdem.deformable.motion's module doc) with coefficient ``alpha`` (none: 0; adaptive:
+        the servo's, followed every step)."""
+        form, keep = GRID_DAMPING[mode]
+        self.adaptive = mode == "adaptive"
+        for b in self.bodies:
+            b.damping_mode = form
+            b.damping = float(alpha) if keep else 0.0
 
     @staticmethod
-    def _stiffness(b, kn: float) -> np.ndarray:
-        """A grid's Gershgorin gridpoint stiffness with the joints' normal stiffness at its
-        surface gridpoints (eq. 85's ``kn A_i``, ``A_i`` a third of its surface triangles'
-        area, counted twice: on the diagonal and coupling), on its reference (build)
-        geometry: a stage's step and mass scaling are then the same whether the run went
-        straight or was restarted (the replay of the stages sees the built grid)."""
-        grad = np.empty_like(b.grad)
-        vol = np.empty_like(b.vol)
-        zone_geometry(b.nodes0, b.tets, grad, vol)
-        k = nodal_stiffness(b.tets, grad, vol, b.params.bulk, b.params.shear, len(b.nodes0))
-        # a joint spring couples the gridpoint to the other block: its Gershgorin row holds
-        # the spring on the diagonal and again off it (eq. 85's kn A_i alone bounds the step
-        # only against a fixed block)
-        return k + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
+    def _zone_stiffness(b) -> np.ndarray:
+        """A grid's Gershgorin gridpoint stiffness of its zones (eq. 84), on its reference
+        (build) geometry: a stage's step and mass scaling are then the same whether the run
+        went straight or was restarted (the replay of the stages sees the built grid)."""
+        if b.zone_stiffness is None:
+            grad = np.empty_like(b.grad)
+            vol = np.empty_like(b.vol)
+            zone_geometry(b.nodes0, b.tets, grad, vol)
+            b.zone_stiffness = nodal_stiffness(b.tets, grad, vol, b.params.bulk,
+                                               b.params.shear, len(b.nodes0))
+        return b.zone_stiffness
+
+    @classmethod
+    def _stiffness(cls, b, kn: float) -> np.ndarray:
+        """:meth:`_zone_stiffness` with the joints' normal stiffness at its surface gridpoints
+        (eq. 85's ``kn A_i``, ``A_i`` a third of its surface triangles' area, counted twice:
+        on the diagonal and coupling). A joint spring couples the gridpoint to the other
+        block: its Gershgorin row holds the spring on the diagonal and again off it (eq. 85's
+        kn A_i alone bounds the step only against a fixed block). The other block's
+        sub-contacts landing on the grid's triangles can load a gridpoint more than its own
+        share: :meth:`step` raises its mass then (from the contacts of the step)."""
+        return cls._zone_stiffness(b) + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
 
     def timestep(self, kn: float, owned: bool = False) -> float:
         """The zone term of eq. 88 (:meth:`_stiffness`, the inertial masses): the smallest
         over the grids (``owned``: the owned ones; inf without)."""
         dt = np.inf
         for b in self.bodies[:self.n_owned] if owned else self.bodies:
-            dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.damping))
+            dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.stability_alpha()))
         return float(dt)
 
     def scale_masses(self, kn: float, dt: float | None) -> None:
         """Mass scaling (``solve.mass_scaling``): each gridpoint's inertial mass raised, where
         it is too light, to make ``dt`` ``GRID_FRAC`` of its critical step (with the grid's
-        local damping); gravity keeps the true masses (``gravity_mass``). ``dt`` None: the
+        damping's :func:`~pdem.deformable.motion.stability_alpha`); gravity keeps the true
+        masses (``gravity_mass``). ``dt`` None: the
         true masses."""
         for b in self.bodies:
             if dt is None:
-                b.mass = b.gravity_mass
+                b.mass = b.emass = b.gravity_mass
                 continue
-            need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.damping)
-            b.mass = np.maximum(b.gravity_mass, need)
+            need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.stability_alpha())
+            b.mass = b.emass = np.maximum(b.gravity_mass, need)
 
     def restage(self, scene, dt: float, alpha: float, comm) -> float:
         """A stage's settings on the grids (``scene``: the scene as the stage has it): its
         damping, its mass scaling to the rigid step ``dt``, and the model step, as
         :meth:`resolve` makes them at the start (collective). Returns the step."""
-        self.set_damping(alpha if scene.solve.damping.mode == "local" else 0.0)
+        self.set_damping(scene.solve.damping.mode, alpha)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.kjoint = joint_stiffness(scene)
         self.scale_masses(kn, dt if scene.solve.mass_scaling else None)
         grid_dt = min(allgather(comm, GRID_FRAC * self.timestep(kn, owned=True)))
         if scene.solve.mass_scaling and grid_dt >= dt * (1.0 - 1e-9):
@@ -176,13 +234,14 @@ class GridStore:
     def resolve(self, scene, resolved, comm):
         """The model step: the rigid one or the grids' (eq. 88, with the largest joint normal
         stiffness at the surface gridpoints, times ``GRID_FRAC``; the smallest over the ranks'
-        build shares), the smaller; the grids' local damping from ``solve.damping``. Not the
+        build shares), the smaller; the grids' damping from ``solve.damping``. Not the
         scene's ``timestep.frac`` (0.1 by default): that is the rigid estimate's margin, the
         Gershgorin step is a bound."""
         import dataclasses
 
-        self.set_damping(resolved.alpha if scene.solve.damping.mode == "local" else 0.0)
+        self.set_damping(scene.solve.damping.mode, resolved.alpha)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.kjoint = joint_stiffness(scene)
         if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
             self.scale_masses(kn, resolved.dt)
         self.dt = min(allgather(comm, GRID_FRAC * self.timestep(kn)))
@@ -301,7 +360,8 @@ class GridStore:
                                                  + base[:, None], 0)
                 self.sc_w[:, side] = np.where(zoned[:, None], g[:, W[side]], 0.0)
             self.located = contacts
-        return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w)
+        return Grid(self.dindex, self.vel, self.force, self.sc_node, self.sc_w, self.kc,
+                    self.kjoint)
 
     def vnode(self, blocks) -> np.ndarray:
         """The gridpoint (flat index) of every vertex row of ``blocks``; -1 for rigid pieces."""
@@ -325,16 +385,20 @@ class GridStore:
                 b.vel[:] = 0.0
                 self.force[self.node_start[d]:self.node_start[d + 1]] = 0.0
 
-    def step(self, dt: float) -> int:
+    def step(self, dt: float, alpha: float = 0.0) -> int:
         """One grid step of every owned zoned block: forces at t (contacts + gravity +
         zones). Returns the gid of the first block whose grid folded (a zone inverted),
         -1 if none: the stepper's reduction makes every rank raise alike. ``ratio``: the
-        largest unbalanced gridpoint force over the mean gridpoint weight (``solve.ratio``)."""
+        largest unbalanced gridpoint force over the mean gridpoint weight (``solve.ratio``).
+        ``alpha``: the model's damping constant now, taken under adaptive damping (the
+        servo's, eq. 77: rigid blocks and grids damped by one constant)."""
         big = 0.0
         for d in range(self.n_owned):
             b = self.bodies[d]
             if not b.active:  # taken out of the model (:meth:`remove`)
                 continue
+            if self.adaptive:
+                b.damping = float(alpha)
             a, e = self.node_start[d], self.node_start[d + 1]
             gforce = gravity_forces(b.gravity_mass, self.gravity)
             # the loads (a block's `force` spread over its gridpoints, boundary stresses on its
@@ -347,11 +411,22 @@ class GridStore:
             if self.bloaded:
                 applied += self.bload[a:e]
                 load = self.bload[a:e] + b.applied if b.loaded else self.bload[a:e]
+            b.emass = inertial_masses(b.mass, self._zone_stiffness(b), self.kc[a:e], dt,
+                                      b.stability_alpha())
             if _cycle(b, applied, dt, gforce, self.force[a:e], load) < 1:
                 return self.gids[d]
             big = max(big, float(b.unbalanced[0]))
         self.ratio = big / self.ref_force
         return -1
+
+    def servo_sums(self) -> np.ndarray:
+        """The owned grids' share of the adaptive servo's sums of the last step (eq. 77):
+        damping power and sum over the gridpoints of ``|dEk/dt|``."""
+        out = np.zeros(2)
+        for d in range(self.n_owned):
+            if self.bodies[d].active:
+                out += self.bodies[d].servo
+        return out
 
     def kinetic_at(self, rows, ke: np.ndarray) -> np.ndarray:
         """``ke`` (the kinetic energies of the owned block ``rows``) with those of zoned rows
@@ -415,6 +490,26 @@ def block_conditions(body: DeformableBody, spec) -> None:
         body.applied[:] = np.outer(m / m.sum(), force)
 
 
+def joint_stiffness(scene) -> float:
+    """The stiffest joint's ``max(kn, ks)`` (Pa/m): the spring per area every sub-contact's
+    Gershgorin row counts (the 3 x 3 spring ``kn nn + ks (I - nn)`` is bounded by it)."""
+    return max(max(float(getattr(j, "kn", 0.0)), float(getattr(j, "ks", 0.0)))
+               for j in scene.joints.values())
+
+
+def inertial_masses(mass: np.ndarray, zone_stiffness: np.ndarray, kc: np.ndarray, dt: float,
+                    alpha: float) -> np.ndarray:
+    """The masses a grid steps with: ``mass`` (true or scaled at the stage's start), raised
+    where the step's contact springs (``kc``, pdem.deformable.contact._grid_force) with the
+    zones' stiffness make ``dt`` more than ``GRID_FRAC`` of the gridpoint's critical step
+    (partial density scaling). The stage's estimate counts a surface gridpoint's own area
+    share, which bounds the springs at its own sub-contacts but not those of a neighbour
+    landing on its triangles: found on a sliver piece between stiff fictitious joints
+    (kn = 1e11), whose gridpoints ran away at step 5. Where the estimate holds, the masses
+    are ``mass``'s bits."""
+    return np.maximum(mass, scaled_masses(zone_stiffness + kc, dt, GRID_FRAC, alpha))
+
+
 def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Each gridpoint's share of the surface: a third of its surface triangles' area."""
     area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]],
@@ -425,6 +520,7 @@ def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 
 def _cycle(b: DeformableBody, applied: np.ndarray, dt: float, gforce, contact, load) -> int:
-    return cycle(1, dt, b.nodes, b.vel, b.mass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
-                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping, b.unbalanced, gforce,
-                 contact, load, b.params.bulk, b.params.shear, b.work)
+    return cycle(1, dt, b.nodes, b.vel, b.emass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
+                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping_mode, b.damping,
+                 b.prev_force, b.unbalanced, b.servo, gforce, contact, load, b.params.bulk,
+                 b.params.shear, b.work)

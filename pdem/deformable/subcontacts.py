@@ -307,6 +307,13 @@ def regrid(grid, old: ContactStore, new: ContactStore, todo: np.ndarray, b, tol:
                 if s is not None:
                     for k in CARRIED:
                         sub[k][i] = old.sub[k][s]
+                    # the shear force is carried as a stress: the spring's energy
+                    # fs^2 / (2 ks A) is then the old one scaled with the area, as the
+                    # normal spring's (kn A un^2 / 2, un carried); a force kept on a
+                    # share cut smaller made energy (1/A), found at stiff joints
+                    a_old = float(old.sub["sc_area"][s])
+                    if a_old > 0.0 and area[i] != a_old:
+                        sub["sc_fs"][i] *= area[i] / a_old
         for k in parts:
             parts[k].append(sub[k])
         counts[c] = m

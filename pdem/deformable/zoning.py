@@ -7,7 +7,11 @@ import numpy as np
 
 from ..config.errors import ConfigError
 from ..geometry.polyhedron import ConvexPolyhedron
-from .mesh import tetrahedralise
+from .mesh import TetMesh, boundary_triangles, signed_volumes, tetrahedralise
+
+# a mesh block's boundary triangles on one face: their unit normals within this of each other
+# (1 - cos), their planes within this fraction of the body's size
+PLANE_TOL = 1e-9
 
 
 def surface_polyhedron(poly: ConvexPolyhedron, mesh) -> tuple[ConvexPolyhedron, np.ndarray]:
@@ -22,14 +26,82 @@ def surface_polyhedron(poly: ConvexPolyhedron, mesh) -> tuple[ConvexPolyhedron, 
         surf_nodes
 
 
+class _Planes:
+    """The face planes a mesh block's surface triangles lie on (what :func:`surface_polyhedron`
+    reads of a block's polyhedron)."""
+
+    def __init__(self, normals: np.ndarray, offsets: np.ndarray):
+        self.normals, self.offsets = normals, offsets
+
+
+def tets_as_zones(pieces) -> tuple[TetMesh, _Planes]:
+    """A ``mesh`` block's tetrahedral cells (its convex pieces, joined by the mesh's
+    ``cell_data_group``) as the zones of one grid, as 3DEC imports a zoned mesh: gridpoints
+    the cells' corners (shared where their coordinates are equal, as a mesh's shared nodes are),
+    each tet positively oriented, the boundary triangles grouped into the body's faces by plane.
+    ValueError naming what is wrong: a cell that is not a tetrahedron, a body that is not
+    convex (its contacts take it as one convex piece)."""
+    for k, p in enumerate(pieces):
+        if len(p.vertices) != 4:
+            raise ValueError(f"cell {k} of the block has {len(p.vertices)} corners: a zoned mesh "
+                             "block's zones are its tetrahedral cells (mesh it with tetrahedra)")
+    corners = np.concatenate([np.asarray(p.vertices, np.float64) for p in pieces])
+    nodes, inverse = np.unique(corners, axis=0, return_inverse=True)
+    tets = inverse.reshape(-1, 4).astype(np.int64)
+    flip = signed_volumes(nodes, tets) < 0.0
+    tets[flip] = tets[flip][:, [0, 1, 3, 2]]
+    surface = boundary_triangles(tets)
+    a, b, c = (nodes[surface[:, i]] for i in range(3))
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    d = np.einsum("ij,ij->i", n, a)
+    scale = float(np.ptp(nodes, axis=0).max())
+    face = np.empty(len(surface), np.int64)
+    normals: list[np.ndarray] = []
+    offsets: list[float] = []
+    for t in range(len(surface)):  # in triangle order: deterministic face numbering
+        for f, (m, o) in enumerate(zip(normals, offsets, strict=True)):
+            if 1.0 - float(n[t] @ m) < PLANE_TOL and abs(d[t] - o) < PLANE_TOL * scale:
+                face[t] = f
+                break
+        else:
+            face[t] = len(normals)
+            normals.append(n[t])
+            offsets.append(float(d[t]))
+    planes = _Planes(np.array(normals), np.array(offsets))
+    out = nodes @ planes.normals.T - planes.offsets[None, :]
+    worst = np.unravel_index(int(np.argmax(out)), out.shape)
+    if out[worst] > 1e-9 * scale:
+        x = nodes[worst[0]]
+        raise ValueError(
+            f"its {len(tets)} tetrahedra make a concave body (the corner at "
+            f"[{x[0]:.6g}, {x[1]:.6g}, {x[2]:.6g}] lies {out[worst]:.3g} m outside the plane of "
+            "one of its boundary faces): a zoned mesh block must be convex; group its cells "
+            "into convex blocks with cell_data_group")
+    on_surface = np.zeros(len(nodes), bool)
+    on_surface[surface.ravel()] = True
+    return TetMesh(nodes, tets, surface, face, on_surface), planes
+
+
 def zone_specs(scene, specs) -> None:
     """Zone every zoned block's shape (``blocks[i].zones``): its spec's one piece becomes the
-    surface polyhedron, ``spec.zoning`` the (mesh, surface node ids). Specs without pieces
-    (outside a build share) are left alone."""
+    surface polyhedron, ``spec.zoning`` the (mesh, surface node ids); a ``mesh`` block's
+    tetrahedral cells are its zones (:func:`tets_as_zones`). Specs without pieces (outside a
+    build share) are left alone."""
     errors = []
     for s in specs:
         z = s.spec.zones
         if z is None or s.pieces is None:
+            continue
+        if s.spec.mesh is not None:
+            try:
+                mesh, planes = tets_as_zones(s.pieces)
+            except ValueError as exc:
+                errors.append(f"blocks[{s.entry}] ({s.name!r}).zones: {exc}")
+                continue
+            poly, surf = surface_polyhedron(planes, mesh)
+            s.pieces = [poly]
+            s.zoning = (mesh, surf)
             continue
         if len(s.pieces) != 1:
             errors.append(f"blocks[{s.entry}] ({s.name!r}).zones: the block is joined from "
@@ -83,9 +155,10 @@ def identity_frames(geometry: dict, arr: dict, specs) -> None:
     for r, s in enumerate(specs):
         k = g["piece_start"][r]
         e0, e1 = g["edge_start"][k], g["edge_start"][k + 1]
-        if getattr(s, "zoning", None) is None:
-            dirs.append(g["edirs_local"][g["edir_start"][k]:g["edir_start"][k + 1]])
-            counts.append(len(dirs[-1]))
+        if getattr(s, "zoning", None) is None:  # rigid: each of its pieces' own directions
+            for p in range(k, g["piece_start"][r + 1]):
+                dirs.append(g["edirs_local"][g["edir_start"][p]:g["edir_start"][p + 1]])
+                counts.append(len(dirs[-1]))
             continue
         poly = s.pieces[0]
         c = arr["x"][r]
@@ -106,6 +179,6 @@ def identity_frames(geometry: dict, arr: dict, specs) -> None:
         d = ends[:, 1] - ends[:, 0]
         dirs.append(d / np.linalg.norm(d, axis=1)[:, None])
         counts.append(len(at))
-    # one-piece blocks only reach here with zones (joined zoned blocks are refused)
+    # (a zoned block is one piece: joined zoned blocks are refused, pdem.model.rockmass)
     g["edirs_local"] = np.concatenate(dirs).reshape(-1, 3) if dirs else g["edirs_local"]
     g["edir_start"] = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

@@ -390,6 +390,15 @@ def apply_joins(scene, spread: Spread) -> Spread:
             else:
                 member_of[k] = i
                 rows.append(k)
+        zoned = [specs[k].name for k in rows if specs[k].spec.zones is not None]
+        if zoned:
+            # (a joined block is one body of convex pieces moving as one; a zoned one would be
+            # one grid over pieces zoned apart, whose faces between them do not match)
+            errors.append(f"{where}: {', '.join(map(repr, zoned))} zoned: a joined block is one "
+                          "rigid concave body; keep zoned pieces as blocks of their own and "
+                          "glue them with a joint_pairs joint of high cohesion and tension "
+                          "(3DEC's glued contact; docs/deformable.md)")
+            continue
         if len(rows) != len(names):
             continue
         first = specs[rows[0]]

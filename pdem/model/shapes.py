@@ -219,7 +219,7 @@ for _name, _kind in (
     ("random", ShapeKind(RandomPolyhedra, _random, _random_polytope, members=lambda p: p.count,
                          zoned=True)),
     # counted once the mesh is read (the cuts' blocks likewise): one box-like block here
-    ("mesh", ShapeKind(MeshShape, None, _cuboid)),
+    ("mesh", ShapeKind(MeshShape, None, _cuboid, zoned=True)),
 ):
     SHAPES.register(_name, _kind)
 # the scene grammar's shape keys follow the kinds (config cannot import model: it keeps its own

@@ -86,7 +86,7 @@ class Decomposition:
     def describe(self) -> str:
         return f"a {'x'.join(map(str, self.dims))} grid"
 
-    def rebalance(self, blocks, n_owned: int, contacts) -> bool:
+    def rebalance(self, blocks, n_owned: int, contacts, zones=None) -> bool:
         """The grid is fixed: never moves (no collective)."""
         return False
 
@@ -109,12 +109,26 @@ def balance_of(parallel) -> str:
     return "rcb" if parallel.dims == "auto" else "uniform"
 
 
-def block_work(blocks, n_owned: int, contacts) -> np.ndarray:
+# zones per unit of work: a zone-step costs ~70 ns, a rigid block-step with its contacts ~1 us
+# (docs/deformable.md, Speed), so a zoned block of Z zones weighs Z / 14 more than a rigid one
+ZONES_PER_WORK = 14
+
+
+def zone_work(zones: np.ndarray) -> np.ndarray:
+    """The work of zoned blocks' grids (their zone counts) in RCB's units: integers, so the
+    weights' sums stay exact in any order."""
+    return np.asarray(zones, np.int64) // ZONES_PER_WORK
+
+
+def block_work(blocks, n_owned: int, contacts, zones: np.ndarray | None = None) -> np.ndarray:
     """The work weight of each owned block: 1 + the contacts it is in if it is free, 1 if it is
     fixed, 0 if it was deleted (a rank holds every contact of the free blocks it owns, so the
     weight does not depend on the decomposition; a fixed block's contacts are computed by the
-    owners of the free blocks it touches)."""
+    owners of the free blocks it touches); ``zones`` (per owned row, 0 for a rigid block):
+    a zoned block's grid adds :func:`zone_work`."""
     w = (blocks.out[:n_owned] != 2).astype(np.int64)  # 2: deleted (pdem.domain.DELETED)
+    if zones is not None:
+        w += np.where(w > 0, zone_work(zones), 0)
     if contacts.n and n_owned:
         free = blocks.fixed[:n_owned] == 0
         for side in ("ia", "ib"):
@@ -377,14 +391,14 @@ class RCBDecomposition:
     """Ranks on the leaves of an RCB cut tree (:func:`rcb_tree`) of the blocks' centroids,
     weighted by work; ``threshold``: the work imbalance (max / mean of the ranks' owned work)
     above which :meth:`rebalance` recomputes the cuts (None: the cuts of the start are kept).
-    Construction is collective: the start's cuts, every block weighing 1 (``x``: this rank's
-    share of the start's centroids)."""
+    Construction is collective: the start's cuts, every block weighing 1 or ``weights`` (``x``:
+    this rank's share of the start's centroids, ``weights`` theirs: a zoned block's grid)."""
 
     balance = "rcb"
     dims = None  # no rank grid
 
     def __init__(self, comm, lo: np.ndarray, hi: np.ndarray, x: np.ndarray,
-                 threshold: float | None):
+                 threshold: float | None, weights: np.ndarray | None = None):
         self.comm = comm
         self.size = comm.size
         self.rank = comm.rank
@@ -393,7 +407,8 @@ class RCBDecomposition:
         self.threshold = threshold
         self.imbalance = None
         self.n_balanced = 0  # cut trees computed after the start's
-        self.tree = rcb_tree(comm, x, np.ones(len(x), np.int64), self.size, self.lo, self.hi)
+        w = np.ones(len(x), np.int64) if weights is None else np.asarray(weights, np.int64)
+        self.tree = rcb_tree(comm, x, w, self.size, self.lo, self.hi)
 
     def owner_of(self, points: np.ndarray) -> np.ndarray:
         return self.tree.owner_of(points)
@@ -409,13 +424,13 @@ class RCBDecomposition:
     def describe(self) -> str:
         return "recursive coordinate bisection (parallel.balance: rcb)"
 
-    def rebalance(self, blocks, n_owned: int, contacts) -> bool:
+    def rebalance(self, blocks, n_owned: int, contacts, zones=None) -> bool:
         """At a rebuild point (collective, before the migration): if the owned work is more
         imbalanced than the threshold, recompute the cuts from the owned blocks' centroids
         and weights (:func:`block_work`); True if they were (the caller then migrates)."""
         if self.threshold is None or self.size == 1:
             return False
-        w = block_work(blocks, n_owned, contacts)
+        w = block_work(blocks, n_owned, contacts, zones)
         # the largest and the total owned work: two reductions of one integer (not an
         # allgather of every rank's, O(P) on every rank); integer sums are exact, so the
         # mean is the same double as the mean of the gathered works
@@ -436,14 +451,18 @@ class RCBDecomposition:
         pass
 
 
-def make_decomposition(comm, resolved, parallel, x: np.ndarray, shared: bool = False):
+def make_decomposition(comm, resolved, parallel, x: np.ndarray, shared: bool = False,
+                       weights: np.ndarray | None = None):
     """The decomposition ``parallel`` asks for (collective); ``x``: the start's centroids of
     every block (the same on every rank), or with ``shared`` those of this rank's build share
-    (pdem.state.build_share: the even share taken here of every block's)."""
+    (pdem.state.build_share: the even share taken here of every block's); ``weights``: their
+    work (None: 1 each)."""
     lo, hi = np.array(resolved.domain_lo), np.array(resolved.domain_hi)
     if balance_of(parallel) == "uniform":
         return Decomposition(comm, lo, hi, list(resolved.dims))
     if not shared:
         n = len(x)
-        x = x[n * comm.rank // comm.size: n * (comm.rank + 1) // comm.size]
-    return RCBDecomposition(comm, lo, hi, np.asarray(x, float), parallel.rebalance)
+        mine = slice(n * comm.rank // comm.size, n * (comm.rank + 1) // comm.size)
+        x = x[mine]
+        weights = None if weights is None else weights[mine]
+    return RCBDecomposition(comm, lo, hi, np.asarray(x, float), parallel.rebalance, weights)

@@ -187,6 +187,8 @@ class EnergyBudget(Plugin):
             self.sample()
         self.flush()
         t = self.last
+        if t is None:  # a restart from the run's last checkpoint: no step marched, no sample
+            return
         err, put_in = balance(t, self.e0)
         log.info("energy (J): kinetic %.4g, in joints %.4g; work of gravity %.4g, applied %.4g, "
                  "prescribed motion %.4g; dissipated in joints %.4g, by damping %.4g; balance "

@@ -14,6 +14,7 @@ from support import TWO_RANKS_ONLY, compare_on_rank0, run, shared_dir
 
 from pdem.config import parse_scene
 from pdem.parallel.decomposition import (
+    ZONES_PER_WORK,
     Decomposition,
     block_work,
     choose_dims,
@@ -123,3 +124,45 @@ def test_rebalanced_run_matches_one_rank_and_beats_the_grid(tmp_path):
     assert imb_rcb < imb_grid
     assert imb_rcb < 1.2
     compare_on_rank0(comm, f"{base}/rcb.h5", scene, f"{base}/rcb-ref.h5")
+
+
+# two zoned cubes (0.25 m zones: a few hundred zones each) at one end of a row of ten cubes on
+# a floor, eight rigid at the other: counted as blocks, the start's cuts split the row in the
+# middle and give one rank both grids; RCB's weights count the zones (zone_work)
+ZONED_ROW = """
+name: zoned-row-balance
+materials:
+  rock: {density: 2000}
+  soft: {density: 2000, young: 5.0e7, poisson: 0.25}
+joints: {default: {kn: 5.0e8, ks: 2.0e8, friction: 20.0}}
+blocks:
+  - {name: floor, box: {min: [-0.5, -1, -1], max: [10.5, 1, 0]}, material: rock, fixed: true}
+  - {name: z, array: {box: {min: [0, -0.5, 0], max: [1, 0.5, 1]}, count: [2, 1, 1],
+     spacing: [1.05, 0, 0]}, material: soft, zones: {size: 0.25}}
+  - {name: r, array: {box: {min: [2.1, -0.5, 0], max: [3.1, 0.5, 1]}, count: [8, 1, 1],
+     spacing: [1.05, 0, 0]}, material: rock}
+solve: {steps: 20, damping: local}
+output: {file: OUT, every_steps: 20, contacts: false}
+"""
+
+
+@TWO_RANKS_ONLY
+def test_zoned_blocks_weigh_their_zones_in_the_cuts(tmp_path):
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    scene = parse_scene(ZONED_ROW.replace("OUT", f"{base}/zb.h5"))
+    solver, _, _, report = run(scene, comm)
+    s = solver.state
+    zones = s.grids.zones_at(s.owned_gids())
+    mine = int(np.count_nonzero(zones))
+    assert comm.allgather(mine) == [1, 1], "each rank owns one of the two grids"
+    w = comm.allgather(int(block_work(s.blocks, s.n_owned, s.contacts, zones).sum()))
+    # the zones' work is ~85 % of the model's; counted as blocks one rank would hold all of it
+    assert max(w) / (sum(w) / 2) < 1.3, w
+    assert int(zones.max()) // ZONES_PER_WORK > 10  # a grid outweighs ten rigid blocks
+    # the cuts of the same blocks counted as blocks put both grids on one rank
+    x = s.blocks.x[:s.n_owned]
+    plain = rcb_tree(comm, x, np.ones(len(x), np.int64), comm.size, s.decomp.lo, s.decomp.hi)
+    held = comm.allreduce(np.bincount(plain.owner_of(x[zones > 0]), minlength=comm.size))
+    assert held.max() == 2, held
+    compare_on_rank0(comm, f"{base}/zb.h5", scene, f"{base}/zb-ref.h5")

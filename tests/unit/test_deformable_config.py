@@ -63,10 +63,7 @@ def test_contract_scene_parses_with_defaults():
      "blocks[1].zones.nmb: unknown key; did you mean 'nmd'?"),
     ("zones: {size: 0.5}", "zones: {size: 0.5}, velocity_fixed: true, angular_velocity: [0, 0, 1]",
      "blocks[1]: velocity_fixed with angular_velocity: a zoned block's prescribed motion"),
-    ("solve: {steps: 10}", "solve: {steps: 10}\njoin: [[pillar, roof]]",
-     "join: not yet supported with zoned blocks (pillar)"),
-    ("solve: {steps: 10}", "solve: {steps: 10, damping: combined}",
-     "solve.damping.mode: not yet supported with zoned blocks (pillar); use none or local"),
+    ("zones: {size: 0.5}", "zones: {}", "blocks[1]: zones.size: Field required"),
 ])
 def test_bad_input_one_line_naming_the_key(old, new, expect):
     assert old in SCENE

@@ -82,8 +82,9 @@ def test_model_registered_outside_runs_in_the_cycle():
                        size=1.0)
     b.vel[:, 0] = 1e-3 * b.nodes[:, 0]
     _uncached_cycle(3, b.timestep(), b.nodes, b.vel, b.mass, b.applied, b.fixed, b.fixed_vel,
-                    b.tets, b.grad, b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping,
-                    np.zeros(1), b.applied, b.applied, b.applied, 1.0, 1.0, b.work)
+                    b.tets, b.grad, b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping_mode,
+                    b.damping, b.prev_force, np.zeros(1), b.servo, b.applied, b.applied,
+                    b.applied, 1.0, 1.0, b.work)
     assert np.all(b.plastic == 16)
     assert np.all(b.stress[:, 0] > 0.0)  # and it is elastic: stretched along x
 

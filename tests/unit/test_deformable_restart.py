@@ -1,6 +1,7 @@
 """A scene with zoned blocks continues from a checkpoint bitwise as the uninterrupted run."""
 
 import numpy as np
+import pytest
 from mpi4py import MPI
 
 from pdem.config import parse_scene
@@ -33,8 +34,11 @@ def state_of(sim):
     return out
 
 
-def test_restart_is_bitwise(tmp_path):
-    scene = parse_scene(SCENE)
+# every gridpoint damping form: combined reads the gridpoints' forces of the step before
+# (checkpointed), adaptive the servo's alpha (the state's, checkpointed) that the grids follow
+@pytest.mark.parametrize("damping", ["local", "combined", "{mode: adaptive, alpha: 5}"])
+def test_restart_is_bitwise(tmp_path, damping):
+    scene = parse_scene(SCENE.replace("damping: local", f"damping: {damping}"))
     whole = Simulation(scene, MPI.COMM_SELF, output=False)
     for _ in range(700):
         whole.stepper.advance()

@@ -88,6 +88,27 @@ def test_restart_continues_history_schedule_and_state(tmp_path):
     assert v0[-1, 0] > 1e-3  # it slides (5 / 9.81 > tan 20 deg): 1.43 m/s2, 2.6 mm by 0.06 s
 
 
+def test_restart_from_the_last_checkpoint_marches_nothing_and_ends_cleanly(tmp_path):
+    # found: the energy budget's end-of-run line read a sample the restart never took
+    text = SCENE.replace("CK", os.path.join(tmp_path, "ck")).replace(
+        "{time: 0.06}", "{steps: 100}").replace("every: 0.02", "every_steps: 50").replace(
+        "every: 0.03", "every_steps: 50")  # the last step a multiple of the energy sampling's
+    sim = Simulation(parse_scene(text.replace("OUT", os.path.join(tmp_path, "a.h5"))),
+                     MPI.COMM_SELF)
+    sim.run()
+    sim.close()
+    last = sorted(p for p in os.listdir(tmp_path) if p.startswith("ck-"))[-1]
+    ck = read_checkpoint(os.path.join(tmp_path, last))
+    assert int(ck["attrs"]["step"]) == sim.step  # the run's last step
+    scene = parse_scene(ck["attrs"]["scene"])
+    scene = scene.model_copy(update={"output": scene.output.model_copy(
+        update={"file": os.path.join(tmp_path, "b.h5")})})
+    again = Simulation(scene, MPI.COMM_SELF, checkpoint=ck)
+    again.run()
+    again.close()
+    assert again.step == sim.step and np.array_equal(again.blocks.x, sim.blocks.x)
+
+
 def test_exact_sum_does_not_depend_on_how_rows_are_split():
     """The energy budget's reduction: correctly rounded, so any partition gives the same bits
     (a plain sum of these values depends on the order); a rank with no rows takes part."""
@@ -131,7 +152,9 @@ def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_resta
     restarts bitwise; a state value that uint8 cannot hold is refused."""
     from pdem.io.checkpoint import FORMAT_VERSION
 
-    text = SCENE.replace("CK", os.path.join(tmp_path, "ck"))
+    text = SCENE.replace("CK", os.path.join(tmp_path, "ck")).replace(
+        "{time: 0.06}", "{steps: 100}").replace("every: 0.02", "every_steps: 50").replace(
+        "every: 0.03", "every_steps: 50")  # the last step a multiple of the energy sampling's
     sim = Simulation(parse_scene(text.replace("OUT", os.path.join(tmp_path, "a.h5"))),
                      MPI.COMM_SELF)
     sim.run()

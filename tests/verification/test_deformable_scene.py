@@ -172,7 +172,8 @@ def test_contacts_between_rigid_blocks_use_the_rigid_arithmetic():
             contact_forces(s.dt, bodies, pairs, subs, s.joints.kernel_args, np.zeros_like(b.still))
         else:
             grid = Grid(np.full(b.n, -1, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
-                        np.zeros((c.n_sub, 2, 3), np.int64), np.zeros((c.n_sub, 2, 3)))
+                        np.zeros((c.n_sub, 2, 3), np.int64), np.zeros((c.n_sub, 2, 3)),
+                        np.zeros(0), 0.0)
             contact_forces_grid(s.dt, bodies, pairs, subs, s.joints.kernel_args, grid)
         results.append(copy.deepcopy((bodies.force, bodies.moment, bodies.work, subs.un, subs.fs)))
     for x, y in zip(*results, strict=True):
