@@ -61,7 +61,7 @@ materials:
   soft: {{density: {RHO}, young: {E}, poisson: 0.0}}
 joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
 blocks:
-  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, {L}]}}, material: soft, zones: {{size: 0.5}}}}
+  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, {L}]}}, material: soft, zones: {{size: 0.35}}}}
 boundary:
   velocity:
     - {{range: {{box: {{min: [-1, -1, -0.01], max: [2, 2, 0.01]}}}},
@@ -94,15 +94,17 @@ def test_a_pulse_in_a_zoned_column_exchanges_kinetic_and_strain_energy():
     print(f"wave: {s.step} steps; boundary work {at[2.25]['boundary_work'] / put:.4f} of "
           f"rho c A int v^2; (kinetic, zone strain) / it at t c / L: {summary}; balance "
           f"{worst:.2e} of the energy put in")
-    # measured 0.9855: the grid's reaction to the driven base is not quite the 1-D rod's
-    # (the pulse's dispersion on ~0.2 m zones, the lumped masses)
+    # measured 0.9869: the grid's reaction to the driven base is not quite the 1-D rod's
+    # (the pulse's dispersion on 0.2 x 0.235 m lattice boxes, size 0.35, the lumped masses;
+    # at size 0.5, boxes of 1/3 m, six per half sine, the dispersed tail leaves 0.8975
+    # kinetic at the top's reflection and 0.827 strain at the base's)
     assert abs(at[2.25]["boundary_work"] / put - 1.0) < 0.03
-    for k in (0.5, 0.75):  # travelling: half and half (measured 0.493, 0.493)
+    for k in (0.5, 0.75):  # travelling: half and half (measured 0.494, 0.493)
         assert abs(at[k]["kinetic"] / put - 0.5) < 0.03
         assert abs(at[k]["zone_strain"] / put - 0.5) < 0.03
-    # reflecting at the free top: all kinetic (measured 0.951 kinetic, 0.034 strain)
+    # reflecting at the free top: all kinetic (measured 0.956 kinetic, 0.031 strain)
     assert at[1.25]["kinetic"] > 0.9 * put and at[1.25]["zone_strain"] < 0.08 * put
-    # reflecting at the held base: all strain (measured 0.903 strain, 0.083 kinetic)
+    # reflecting at the held base: all strain (measured 0.911 strain, 0.076 kinetic)
     assert at[2.25]["zone_strain"] > 0.85 * put and at[2.25]["kinetic"] < 0.12 * put
     assert at[2.25]["strain"] == 0.0 and at[2.25]["plastic_work"] == 0.0
     assert worst < 1e-9  # no contacts: the leap-frog's own balance, to round-off

@@ -17,6 +17,7 @@ from mpi4py import MPI
 from pdem.cases import vec
 from pdem.config import parse_scene
 from pdem.contact.forces import normal_forces
+from pdem.deformable.store import GRID_FRAC
 from pdem.simulation import Simulation
 
 G = 9.81
@@ -194,11 +195,12 @@ def test_zoned_block_on_zoned_block_loads_the_floor():
     assert max(b.max_speed() for b in s.grids.bodies) < 1e-4
 
 
-def column_to_ratio(scaling: str = ""):
-    """The column of test_column_settles_as_closed_form solved to ``solve.ratio`` 1e-5 (with
-    ``scaling`` added to ``solve``): (state, top settlement error relative to the closed form)."""
+def column_to_ratio(scaling: str = "", size: float = 0.35):
+    """The column of test_column_settles_as_closed_form (zone ``size``) solved to
+    ``solve.ratio`` 1e-5 (with ``scaling`` added to ``solve``): (state, top settlement error
+    relative to the closed form)."""
     E, H = 1.0e8, 2.0
-    text = COLUMN.format(rho=RHO, E=E, kn=KN, H=H, size=0.5, extra="", steps=1).replace(
+    text = COLUMN.format(rho=RHO, E=E, kn=KN, H=H, size=size, extra="", steps=1).replace(
         "steps: 1,", "ratio: 1.0e-5," + scaling)
     sim = Simulation(parse_scene(text), MPI.COMM_SELF, output=False)
     sim.runner.run()
@@ -222,8 +224,16 @@ def test_column_solved_to_a_ratio_and_with_mass_scaling():
     scaled, err_scaled = column_to_ratio(" mass_scaling: true,")
     assert scaled.ratio < 1e-5 and 200 < scaled.step < 0.5 * s.step, (scaled.step, s.step)
     assert abs(err_scaled) < 1e-3, (err_scaled, scaled.step)
-    assert scaled.dt > 2.0 * s.dt  # the step the grids would limit, now the rigid static one
+    assert scaled.dt > 2.0 * s.dt  # the rigid dynamic step before, the rigid static one now
+    # size 0.35 (lattice spacing 0.2 x 0.235 m): the grid's own step at its true masses
+    # (1.76e-4 s) is below the rigid static one (2.19e-4 s), so gridpoint masses are raised
+    # (38 of them); at size 0.5 (spacing 1/3 m) it is 2.40e-4 s and none needs raising
     body = scaled.grids.bodies[0]
+    mass = body.mass
+    body.mass = body.gravity_mass
+    true_dt = GRID_FRAC * scaled.grids.timestep(KN)
+    body.mass = mass
+    assert true_dt < scaled.dt, (true_dt, scaled.dt)
     assert (body.mass >= body.gravity_mass).all() and (body.mass > body.gravity_mass).any()
 
 
@@ -246,17 +256,19 @@ solve: {{steps: 3000, damping: local}}
 
 def test_rigid_edge_between_gridpoints_rests_on_the_zoned_face():
     """A rigid wedge standing on its edge on a zoned block, the edge between the block's top
-    gridpoints (none within 0.12 m of it): no gridpoint of the zoned block meets the wedge, so
+    gridpoints (none within 0.16 m of it): no gridpoint of the zoned block meets the wedge, so
     the wedge's corners become the sub-contacts (point_area each) and it rests on the face
     (weight 3.9 kN on 2 x kn point_area = 2e7 N/m: 0.2 mm, plus the face's local dent).
     Without them it sank 2.1 cm in these 3000 steps, still at 0.3 m/s."""
     from pdem.deformable.mesh import tetrahedralise
     from pdem.geometry.builders import box
 
-    x = 0.37
+    # the base's top gridpoints lie on the lattice lines x = k/3 (spacing 2/6 at size 0.5):
+    # the edge at x = 0.5, midway between x = 1/3 and 2/3
+    x = 0.5
     nodes = tetrahedralise(box((-1, -1, 0), (1, 1, 1)), 0.5).nodes
     under = nodes[(np.abs(nodes[:, 2] - 1.0) < 1e-9) & (np.abs(nodes[:, 1]) <= 0.45)]
-    assert np.abs(under[:, 0] - x).min() > 0.1  # the edge is between gridpoints
+    assert np.abs(under[:, 0] - x).min() > 0.16  # the edge is between gridpoints
     sim = run(WEDGE.format(x=x, x0=x - 0.5, x1=x + 0.5))
     s = sim.state
     b = s.blocks
