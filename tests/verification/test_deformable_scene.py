@@ -93,7 +93,7 @@ def test_rigid_block_on_zoned_block_loads_the_floor():
 PSI = 20.0
 
 
-def incline(phi: float, steps: int) -> str:
+def incline(phi: float, steps: int, damping: str = "none") -> str:
     psi = math.radians(PSI)
     g = (G * math.sin(psi), 0.0, -G * math.cos(psi))
     delta = RHO * G * math.cos(psi) / KN
@@ -110,7 +110,7 @@ blocks:
     box: {{min: {vec((-0.5, -0.5, -delta))}, max: {vec((0.5, 0.5, 1.0 - delta))}}}
     material: soft
     zones: {{size: 0.5}}
-solve: {{steps: {steps}, damping: none}}
+solve: {{steps: {steps}, damping: {damping}}}
 """
 
 
@@ -132,14 +132,19 @@ def test_zoned_block_slides_down_incline():
 
 
 def test_zoned_block_holds_on_incline_when_friction_exceeds_slope():
-    sim = Simulation(parse_scene(incline(30.0, 10 ** 9)), MPI.COMM_SELF, output=False)
+    """Statics, so local damping (as the columns): undamped, the zones' vibration from the
+    start makes the block creep down-slope and rock off (docs/deformable.md, "Doubts")."""
+    sim = Simulation(parse_scene(incline(30.0, 10 ** 9, "local")), MPI.COMM_SELF,
+                     output=False)
     s = sim.state
     r = s.owned_row(1)
     x0 = s.blocks.x[r, 0]
     for _ in range(3000):
         sim.stepper.advance()
-    # sliding at the 10 degree rate would have gone 0.5 a t^2 (~2 cm here); held, the block
-    # moves by its elastic shear and the joint's shear spring only
+    # sliding at the 10 degree rate would have gone 0.5 a t^2 (~7 cm here); held, the block
+    # moves by its elastic shear and the joint's shear spring only (measured 3.4e-5 m, at
+    # rest; undamped 1.4e-3 m and accelerating)
+    assert s.grids.bodies[0].max_speed() < 1e-4
     slid = 0.5 * G * (math.sin(math.radians(PSI)) - math.cos(math.radians(PSI))
                       * math.tan(math.radians(10.0))) * s.time ** 2
     assert abs(s.blocks.x[r, 0] - x0) < 0.02 * slid, (s.blocks.x[r, 0] - x0, slid)
