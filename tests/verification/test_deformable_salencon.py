@@ -19,7 +19,9 @@ hydrostatic in and out of the plane. The closed form on this finite ring:
 Asserted: the plastic radius (where half of a radial band's zones have yielded) within 8 % of
 r0, the wall's mean radial displacement within 10 %, the zones' radial stress averaged in
 bands within 5 % of p. What limits them: CST zones across the steep gradient at the wall
-(the hoop stress in the plastic ring is 9-13 % of p short: not asserted), the polygonal hole.
+(the hoop stress in the plastic ring is 6-27 % of p short: not asserted), the polygonal hole.
+Measured at the Kirsch test's size 0.25 (5,411 zones): plastic radius 1.489 m (within 0.1 %),
+wall -2.684 mm (+4.6 %), radial stress by band within 4.3 % of p (bench/salencon.py).
 """
 
 import math
