@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..dynamics.damping import sign_of
 from ..jit import inline_kernel, kernel
 from .constitutive import SHEAR_NOW, SHEAR_PAST, TENSION_NOW, TENSION_PAST, update_stress
 from .nmd import nmd_strain, nmd_stress
@@ -163,15 +164,6 @@ def scaled_masses(stiffness: np.ndarray, dt: float = 1.0, frac: float = 0.9,
     return (1.0 + alpha) * stiffness * (dt / (2.0 * frac)) ** 2
 
 
-@inline_kernel
-def _sgn(a):
-    if a > 0.0:
-        return 1.0
-    if a < 0.0:
-        return -1.0
-    return 0.0
-
-
 @kernel
 def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
           plastic, model, nmd, mode, alpha, prev, unbalanced, servo, gforce, contact, load, bulk,
@@ -237,7 +229,7 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
                     fd = alpha * mass[n] * vb  # eq. 49 solved for its force
                 else:
                     if mode == COMBINED:  # (sgn(v) - sgn(dF/dt)) / 2
-                        sg = 0.5 * (_sgn(v) - _sgn(dfdt))
+                        sg = 0.5 * (sign_of(v) - sign_of(dfdt))
                         f -= alpha * abs(f) * sg
                     elif v > 0.0:
                         f -= alpha * abs(f)

@@ -41,7 +41,8 @@ DAMPING.register("adaptive", DampingMode(ViscousDamping, 0.0, adaptive=True))
 
 
 @inline_kernel
-def _sgn(a):
+def sign_of(a):
+    """-1, 0 or 1 (the damping modes' sgn; the zoned grids' combined damping too)."""
     if a > 0.0:
         return 1.0
     if a < 0.0:
@@ -61,7 +62,7 @@ def damped_momentum(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
 
 @inline_kernel
 def _sgn3(a):
-    return _sgn(a[0]), _sgn(a[1]), _sgn(a[2])
+    return sign_of(a[0]), sign_of(a[1]), sign_of(a[2])
 
 
 @inline_kernel
@@ -100,10 +101,10 @@ def _combined(d, mi, dt, v0, l0, w0, ft, m, pf, pm):
     # eq. 83 in the sign of (78): F_d = alpha |F| (sgn(v) - sgn(dF/dt)) / 2
     sv = _sgn3(v0)
     sw = _sgn3(w0)
-    sf = (0.5 * (sv[0] - _sgn(ft[0] - pf[0])), 0.5 * (sv[1] - _sgn(ft[1] - pf[1])),
-          0.5 * (sv[2] - _sgn(ft[2] - pf[2])))
-    sm = (0.5 * (sw[0] - _sgn(m[0] - pm[0])), 0.5 * (sw[1] - _sgn(m[1] - pm[1])),
-          0.5 * (sw[2] - _sgn(m[2] - pm[2])))
+    sf = (0.5 * (sv[0] - sign_of(ft[0] - pf[0])), 0.5 * (sv[1] - sign_of(ft[1] - pf[1])),
+          0.5 * (sv[2] - sign_of(ft[2] - pf[2])))
+    sm = (0.5 * (sw[0] - sign_of(m[0] - pm[0])), 0.5 * (sw[1] - sign_of(m[1] - pm[1])),
+          0.5 * (sw[2] - sign_of(m[2] - pm[2])))
     return _applied(mi, dt, v0, l0, ft, m, _against(d.alpha, ft, sf), _against(d.alpha, m, sm))
 
 

@@ -152,9 +152,7 @@ def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_resta
     restarts bitwise; a state value that uint8 cannot hold is refused."""
     from pdem.io.checkpoint import FORMAT_VERSION
 
-    text = SCENE.replace("CK", os.path.join(tmp_path, "ck")).replace(
-        "{time: 0.06}", "{steps: 100}").replace("every: 0.02", "every_steps: 50").replace(
-        "every: 0.03", "every_steps: 50")  # the last step a multiple of the energy sampling's
+    text = SCENE.replace("CK", os.path.join(tmp_path, "ck"))
     sim = Simulation(parse_scene(text.replace("OUT", os.path.join(tmp_path, "a.h5"))),
                      MPI.COMM_SELF)
     sim.run()
