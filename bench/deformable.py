@@ -177,7 +177,7 @@ def stack(k: int, zone_size: float | None, steps: int, profile: bool = False,
 
         probe = Probe()
         probe.wrap(dstore.GridStore, "step", "grids: step (Python + cycle)")
-        probe.wrap(dstore, "_cycle", "grids:   cycle kernel")
+        probe.wrap(dstore, "step_grids", "grids:   cycle kernel")
         probe.wrap(dstore.GridStore, "sync", "grids: piece refresh (sync)")
         probe.wrap(motion, "integrate", "rigid integration")
         probe.wrap(dstore.GridStore, "record", "contacts: locate (record)")

@@ -16,6 +16,12 @@ from .mesh import TetMesh, tetrahedralise
 from .motion import (
     GRID_DAMPING,
     N_GW,
+    N_SC,
+    SC_ACTIVE,
+    SC_DAMPING,
+    SC_LOADED,
+    SC_MODE,
+    SC_NMD,
     critical_timestep,
     cycle,
     nodal_stiffness,
@@ -70,6 +76,10 @@ class DeformableBody:
         # a prescribed velocity's history (pdem.deformable.conditions): its index, -1 none
         self.vhist = np.full((n, 3), -1, np.int32)
         self.applied = np.zeros((n, 3))
+        # the scalars the grid steps with, in one row (pdem.deformable.motion.SC_*: in a
+        # scene a view of the GridStore's rows, which its one kernel reads), by the
+        # properties below
+        self.scalars = np.zeros(N_SC)
         self.loaded = False  # applied holds a load (GridStore.step adds it)
         self.active = True  # stepped (False: its block was taken out of the model)
         self.nmd = bool(nmd)
@@ -87,6 +97,46 @@ class DeformableBody:
         self.update_mass()
         self.zone_stiffness = None  # of the built geometry (GridStore._zone_stiffness)
         self.time = 0.0
+
+    @property
+    def active(self) -> bool:
+        return bool(self.scalars[SC_ACTIVE])
+
+    @active.setter
+    def active(self, on: bool) -> None:
+        self.scalars[SC_ACTIVE] = bool(on)
+
+    @property
+    def loaded(self) -> bool:
+        return bool(self.scalars[SC_LOADED])
+
+    @loaded.setter
+    def loaded(self, on: bool) -> None:
+        self.scalars[SC_LOADED] = bool(on)
+
+    @property
+    def nmd(self) -> bool:
+        return bool(self.scalars[SC_NMD])
+
+    @nmd.setter
+    def nmd(self, on: bool) -> None:
+        self.scalars[SC_NMD] = bool(on)
+
+    @property
+    def damping_mode(self) -> int:
+        return int(self.scalars[SC_MODE])
+
+    @damping_mode.setter
+    def damping_mode(self, mode: int) -> None:
+        self.scalars[SC_MODE] = int(mode)
+
+    @property
+    def damping(self) -> float:
+        return float(self.scalars[SC_DAMPING])
+
+    @damping.setter
+    def damping(self, alpha: float) -> None:
+        self.scalars[SC_DAMPING] = float(alpha)
 
     # --- setup -----------------------------------------------------------------------------
     def stiffness(self) -> np.ndarray:

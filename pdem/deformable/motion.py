@@ -69,6 +69,16 @@ GW_ZONE = 5  # work done on the zones (held and dissipated in them)
 GW_PLASTIC = 6  # of which dissipated by the zones' plastic flow
 N_GW = 7
 
+# columns of a grid's scalar row (DeformableBody.scalars; the store's rows, read by
+# :func:`step_grids`): stepped (0: taken out of the model), a load in ``applied``, NMD, the
+# damping form and its coefficient
+SC_ACTIVE = 0
+SC_LOADED = 1
+SC_NMD = 2
+SC_MODE = 3
+SC_DAMPING = 4
+N_SC = 5
+
 # gridpoint damping forms (:func:`cycle`'s ``mode``; module doc)
 LOCAL = 0
 COMBINED = 1
@@ -188,107 +198,200 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     accumulates.
     """
     n_nodes = nodes.shape[0]
-    loaded = load.shape[0] > 0
     n_zones = tets.shape[0]
     force = np.empty((n_nodes, 3))
     mid = np.empty((n_nodes, 3))
     rate = np.empty((n_zones, 6))
     spin = np.empty((n_zones, 3))
     sigma_p = np.zeros(n_zones)
+    for step in range(n_steps):
+        if not advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
+                       plastic, model, nmd, mode, alpha, prev, unbalanced, servo, gforce,
+                       contact, load, (bulk, shear), work, force, mid, rate, spin, sigma_p):
+            return step
+    return n_steps
+
+
+@inline_kernel
+def advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress, plastic,
+            model, nmd, mode, alpha, prev, unbalanced, servo, gforce, contact, load, moduli, work,
+            force, mid, rate, spin, sigma_p):
+    """One step of :func:`cycle` (its arguments, ``moduli`` its ``(bulk, shear)``: fewer
+    than 31, or Python 3.11 passes them as ``*args``, which numba cannot inline), with the
+    scratch arrays ``force``, ``mid`` (n, 3),
+    ``rate`` (m, 6), ``spin`` (m, 3), ``sigma_p`` (m,). False if a zone inverted. Inlined into
+    :func:`cycle` and :func:`step_grids`: the same arithmetic, so the same bits, on either
+    path."""
+    n_nodes = nodes.shape[0]
+    n_zones = tets.shape[0]
+    loaded = load.shape[0] > 0
+    bulk, shear = moduli
     d1 = 1.0 - 0.5 * alpha * dt  # eq. 49's factors (VISCOUS)
     d2 = 1.0 / (1.0 + 0.5 * alpha * dt)
-    for step in range(n_steps):
-        force[:] = applied
-        add_zone_forces(tets, grad, vol, stress, force)
-        big = 0.0
-        wg = wa = wb = wd = wc = wz = 0.0
-        dek = 0.0
-        for n in range(n_nodes):
-            c = dt / mass[n]
-            f2 = 0.0
-            e2 = 0.0
+    force[:] = applied
+    add_zone_forces(tets, grad, vol, stress, force)
+    big = 0.0
+    wg = wa = wb = wd = wc = wz = 0.0
+    dek = 0.0
+    for n in range(n_nodes):
+        c = dt / mass[n]
+        f2 = 0.0
+        e2 = 0.0
+        for i in range(3):
+            ft = force[n, i]
+            fz = ft - applied[n, i]  # the zone forces' part
+            dfdt = ft - prev[n, i]
+            prev[n, i] = ft
+            if fixed[n, i]:
+                vp = fixed_vel[n, i]
+                vel[n, i] = vp
+                # the prescribed motion strains the zones and the joints: it puts in the
+                # work of their forces on the gridpoint (their reactions)
+                wz -= fz * vp
+                wb -= (fz + contact[n, i]) * vp
+                continue
+            f = ft
+            f2 += f * f
+            v = vel[n, i]
+            if mode == VISCOUS:
+                v1 = (d1 * v + f * c) * d2
+                vb = 0.5 * (v + v1)
+                fd = alpha * mass[n] * vb  # eq. 49 solved for its force
+            else:
+                if mode == COMBINED:  # (sgn(v) - sgn(dF/dt)) / 2
+                    sg = 0.5 * (sign_of(v) - sign_of(dfdt))
+                    f -= alpha * abs(f) * sg
+                elif v > 0.0:
+                    f -= alpha * abs(f)
+                elif v < 0.0:
+                    f += alpha * abs(f)
+                v1 = v + f * c
+                vb = 0.5 * (v + v1)
+                fd = ft - f
+            vel[n, i] = v1
+            e2 += v1 * v1 - v * v
+            wg += gforce[n, i] * vb
+            if loaded:
+                wa += load[n, i] * vb
+            wc += contact[n, i] * vb
+            wz -= fz * vb
+            wd += fd * vb
+        big = max(big, f2)
+        dek += abs(0.5 * mass[n] * e2)
+        for i in range(3):
+            mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
+            nodes[n, i] += vel[n, i] * dt
+    unbalanced[0] = np.sqrt(big)
+    work[GW_GRAVITY] += wg * dt
+    work[GW_APPLIED] += wa * dt
+    work[GW_BOUNDARY] += wb * dt
+    work[GW_DAMPING] += wd * dt
+    servo[0] = wd
+    servo[1] = dek / dt
+    work[GW_CONTACT] += wc * dt
+    work[GW_ZONE] += wz * dt
+    # strain rates on the mid-step geometry: for a rigid rotation over the step the
+    # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
+    if zone_geometry(mid, tets, grad, vol) <= 0.0:
+        return False
+    strain_rates(vel, tets, grad, rate, spin)
+    if nmd:
+        nmd_strain(tets, vol, rate, n_nodes)
+    if zone_geometry(nodes, tets, grad, vol) <= 0.0:  # forces of the next step at t + dt
+        return False
+    rotate_stress(stress, spin, dt)
+    wp = 0.0
+    for z in range(n_zones):
+        de = (rate[z, 0] * dt, rate[z, 1] * dt, rate[z, 2] * dt, rate[z, 3] * dt,
+              rate[z, 4] * dt, rate[z, 5] * dt)
+        s0 = (stress[z, 0], stress[z, 1], stress[z, 2], stress[z, 3], stress[z, 4],
+              stress[z, 5])
+        bits, sigma_p[z] = update_stress(model, stress[z], de)
+        if bits & (SHEAR_NOW | TENSION_NOW):
+            wp += vol[z] * plastic_increment(s0, stress[z], de, bulk, shear)
+        past = plastic[z] & (SHEAR_PAST | TENSION_PAST)
+        if plastic[z] & SHEAR_NOW:
+            past |= SHEAR_PAST
+        if plastic[z] & TENSION_NOW:
+            past |= TENSION_PAST
+        plastic[z] = past | bits
+    work[GW_PLASTIC] += wp
+    if nmd:
+        nmd_stress(tets, vol, sigma_p, stress, n_nodes)
+    return True
+
+
+@kernel
+def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zone_start,
+               scalars, moduli, work, servo, unbalanced, nodes, vel, contact, kc, gmass, mass,
+               emass, zstiff, applied, fixed, fixed_vel, prev, bload, tets, grad, vol, stress,
+               plastic, ap, gf, load, force, mid, rate, spin, sigma_p):
+    """One step of the grids ``d0 <= d < d1`` of a :class:`~pdem.deformable.store.GridStore`
+    (all of the constitutive table ``model``), each as :func:`cycle`'s step on its slices of
+    the flat arrays (CSR by ``node_start``, ``zone_start``; ``tets`` hold each grid's own
+    gridpoint numbers), in order; a grid whose row of ``scalars`` (``SC_*``) says inactive
+    is skipped. Per grid, before its step: with ``adaptive`` its damping becomes ``alpha``;
+    its inertial masses ``emass`` are ``mass`` raised where the contact stiffness ``kc`` with
+    the zones' ``zstiff`` needs it (``q = (dt / (2 GRID_FRAC))^2``: the store's
+    ``inertial_masses``); its applied forces ``contact + m_g g (+ applied) (+ bload)`` and
+    loads ``(bload) (+ applied)`` into the scratch ``ap``, ``load`` (gravity's ``gf``), each
+    sum in the order the per-grid numpy made it. ``moduli (k, 2)``: bulk and shear moduli;
+    ``work``, ``servo``, ``unbalanced``: the grids' rows. Returns the first grid that folded
+    (-1: none; the grids after it are not stepped) and the largest unbalanced gridpoint
+    force of the grids stepped."""
+    big = 0.0
+    for d in range(d0, d1):
+        if scalars[d, SC_ACTIVE] == 0.0:  # taken out of the model
+            continue
+        if adaptive:
+            scalars[d, SC_DAMPING] = alpha
+        mode = int(scalars[d, SC_MODE])
+        damping = scalars[d, SC_DAMPING]
+        sa = 0.0 if mode == VISCOUS else damping  # stability_alpha
+        loaded = scalars[d, SC_LOADED] != 0.0
+        a, e = node_start[d], node_start[d + 1]
+        za, ze = zone_start[d], zone_start[d + 1]
+        for n in range(a, e):
+            need = (1.0 + sa) * (zstiff[n] + kc[n]) * q
+            emass[n] = need if need > mass[n] else mass[n]
             for i in range(3):
-                ft = force[n, i]
-                fz = ft - applied[n, i]  # the zone forces' part
-                dfdt = ft - prev[n, i]
-                prev[n, i] = ft
-                if fixed[n, i]:
-                    vp = fixed_vel[n, i]
-                    vel[n, i] = vp
-                    # the prescribed motion strains the zones and the joints: it puts in the
-                    # work of their forces on the gridpoint (their reactions)
-                    wz -= fz * vp
-                    wb -= (fz + contact[n, i]) * vp
-                    continue
-                f = ft
-                f2 += f * f
-                v = vel[n, i]
-                if mode == VISCOUS:
-                    v1 = (d1 * v + f * c) * d2
-                    vb = 0.5 * (v + v1)
-                    fd = alpha * mass[n] * vb  # eq. 49 solved for its force
-                else:
-                    if mode == COMBINED:  # (sgn(v) - sgn(dF/dt)) / 2
-                        sg = 0.5 * (sign_of(v) - sign_of(dfdt))
-                        f -= alpha * abs(f) * sg
-                    elif v > 0.0:
-                        f -= alpha * abs(f)
-                    elif v < 0.0:
-                        f += alpha * abs(f)
-                    v1 = v + f * c
-                    vb = 0.5 * (v + v1)
-                    fd = ft - f
-                vel[n, i] = v1
-                e2 += v1 * v1 - v * v
-                wg += gforce[n, i] * vb
+                gi = gmass[n] * g[i]
+                gf[n, i] = gi
+                f = contact[n, i] + gi
                 if loaded:
-                    wa += load[n, i] * vb
-                wc += contact[n, i] * vb
-                wz -= fz * vb
-                wd += fd * vb
-            big = max(big, f2)
-            dek += abs(0.5 * mass[n] * e2)
-            for i in range(3):
-                mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
-                nodes[n, i] += vel[n, i] * dt
-        unbalanced[0] = np.sqrt(big)
-        work[GW_GRAVITY] += wg * dt
-        work[GW_APPLIED] += wa * dt
-        work[GW_BOUNDARY] += wb * dt
-        work[GW_DAMPING] += wd * dt
-        servo[0] = wd
-        servo[1] = dek / dt
-        work[GW_CONTACT] += wc * dt
-        work[GW_ZONE] += wz * dt
-        # strain rates on the mid-step geometry: for a rigid rotation over the step the
-        # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
-        if zone_geometry(mid, tets, grad, vol) <= 0.0:
-            return step
-        strain_rates(vel, tets, grad, rate, spin)
-        if nmd:
-            nmd_strain(tets, vol, rate, n_nodes)
-        if zone_geometry(nodes, tets, grad, vol) <= 0.0:  # forces of the next step at t + dt
-            return step
-        rotate_stress(stress, spin, dt)
-        wp = 0.0
-        for z in range(n_zones):
-            de = (rate[z, 0] * dt, rate[z, 1] * dt, rate[z, 2] * dt, rate[z, 3] * dt,
-                  rate[z, 4] * dt, rate[z, 5] * dt)
-            s0 = (stress[z, 0], stress[z, 1], stress[z, 2], stress[z, 3], stress[z, 4],
-                  stress[z, 5])
-            bits, sigma_p[z] = update_stress(model, stress[z], de)
-            if bits & (SHEAR_NOW | TENSION_NOW):
-                wp += vol[z] * plastic_increment(s0, stress[z], de, bulk, shear)
-            past = plastic[z] & (SHEAR_PAST | TENSION_PAST)
-            if plastic[z] & SHEAR_NOW:
-                past |= SHEAR_PAST
-            if plastic[z] & TENSION_NOW:
-                past |= TENSION_PAST
-            plastic[z] = past | bits
-        work[GW_PLASTIC] += wp
-        if nmd:
-            nmd_stress(tets, vol, sigma_p, stress, n_nodes)
-    return n_steps
+                    f += applied[n, i]
+                if bloaded:
+                    f += bload[n, i]
+                    load[n, i] = bload[n, i] + applied[n, i] if loaded else bload[n, i]
+                elif loaded:
+                    load[n, i] = applied[n, i]
+                ap[n, i] = f
+        nmd = scalars[d, SC_NMD] != 0.0
+        # (no load: no rows, as cycle's; control flow stays out of the call, for numba)
+        ld = load[a:e] if loaded or bloaded else load[a:a]
+        moduli_d = (moduli[d, 0], moduli[d, 1])
+        if not advance(dt, nodes[a:e], vel[a:e], emass[a:e], ap[a:e], fixed[a:e],
+                       fixed_vel[a:e], tets[za:ze], grad[za:ze], vol[za:ze], stress[za:ze],
+                       plastic[za:ze], model, nmd, mode, damping,
+                       prev[a:e], unbalanced[d:d + 1], servo[d], gf[a:e], contact[a:e],
+                       ld, moduli_d, work[d],
+                       force[a:e], mid[a:e], rate[za:ze], spin[za:ze], sigma_p[za:ze]):
+            return d, big
+        if unbalanced[d] > big:
+            big = unbalanced[d]
+    return -1, big
+
+
+@kernel
+def servo_total(servo, scalars, n):
+    """The sum over the first ``n`` grids that step (``scalars``' SC_ACTIVE) of their rows of
+    ``servo`` (the adaptive servo's sums, :func:`cycle`), in row order."""
+    out = np.zeros(2)
+    for d in range(n):
+        if scalars[d, SC_ACTIVE] != 0.0:
+            out[0] += servo[d, 0]
+            out[1] += servo[d, 1]
+    return out
 
 
 @inline_kernel

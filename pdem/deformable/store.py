@@ -10,8 +10,9 @@ piece from the moved gridpoints, and the common plane and sub-contacts work unch
 
 :class:`GridStore` holds the grids of the zoned blocks a rank holds (owned ones first, then
 ghost copies; docs/deformable.md "On several ranks"), the node arrays of all of them flat
-(``nodes``, ``vel``, ``force``: CSR by ``node_start``), each owned block stepped by
-:func:`pdem.deformable.motion.cycle` on its own slice.
+(``nodes``, ``vel``, ``force``, ...: CSR by ``node_start``, the zones' by ``zone_start``),
+the owned blocks stepped by one call of :func:`pdem.deformable.motion.step_grids` (a call per
+run of blocks of one constitutive table), each on its own slices.
 """
 
 from __future__ import annotations
@@ -27,9 +28,18 @@ from .body import DeformableBody
 from .columns import TRI, W
 from .constitutive import reduced_table
 from .contact import Grid, refresh_pieces
-from .motion import GRID_DAMPING, N_GW, critical_timestep, cycle, nodal_stiffness, scaled_masses
+from .motion import (
+    GRID_DAMPING,
+    N_GW,
+    N_SC,
+    critical_timestep,
+    nodal_stiffness,
+    scaled_masses,
+    servo_total,
+    step_grids,
+)
 from .subcontacts import regrid
-from .zones import gravity_forces, zone_geometry
+from .zones import zone_geometry
 
 # margin under the grids' Gershgorin step (a guaranteed bound of the elastic grid with its
 # joint springs; the margin covers the coupling to rigid blocks through their contacts)
@@ -60,7 +70,12 @@ class GridStore:
         self.n_owned = len(grids) if n_owned is None else int(n_owned)
         counts = [len(b.nodes) for b in self.bodies]
         self.node_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        n = int(self.node_start[-1])
+        self.zone_start = np.concatenate([[0], np.cumsum([len(b.tets) for b in self.bodies])]
+                                         ).astype(np.int64)
+        n, m, k = int(self.node_start[-1]), int(self.zone_start[-1]), len(self.bodies)
+        # every array the grid step reads or writes is flat over the grids (CSR by
+        # node_start, zone_start; one row a grid), the bodies' arrays views of them: the
+        # step of all the owned grids is one kernel call (:meth:`step`)
         self.nodes = np.empty((n, 3))
         self.vel = np.zeros((n, 3))
         self.force = np.zeros((n, 3))  # contact forces on the gridpoints (F^c of eq. 54)
@@ -70,19 +85,64 @@ class GridStore:
         self.kc = np.zeros(n)
         self.kjoint = 0.0
         self.gmass = np.empty(n)
+        self.mass = np.empty(n)  # the stage's inertial masses (scale_masses)
+        self.emass = np.empty(n)  # the last step's (inertial_masses)
+        self.zstiff = np.zeros(n)  # the zones' Gershgorin stiffness (_zone_stiffness)
+        self.applied = np.zeros((n, 3))
+        self.fixed = np.zeros((n, 3), bool)
+        self.fixed_vel = np.zeros((n, 3))
+        self.prev = np.zeros((n, 3))
+        self.tets = np.empty((m, 4), np.int64)  # (each grid's own gridpoint numbers)
+        self.grad = np.empty((m, 4, 3))
+        self.vol = np.empty(m)
+        self.stress = np.empty((m, 6))
+        self.plastic = np.empty(m, np.int32)
+        self.scalars = np.zeros((k, N_SC))
+        self.moduli = np.empty((k, 2))  # bulk, shear
+        self.work = np.zeros((k, N_GW))
+        self.servo = np.zeros((k, 2))
+        self.unbalanced = np.zeros(k)
+        self.stiffness_known = np.zeros(k, bool)
         # boundary stresses on the owned grids' faces this step (pdem.deformable.conditions)
         self.bload = np.zeros((n, 3))
         self.bloaded = False
         for d, (b, z) in enumerate(zip(self.bodies, grids, strict=True)):
-            # the bodies' node arrays become views of the flat ones
             a, e = self.node_start[d], self.node_start[d + 1]
-            self.nodes[a:e] = b.nodes
-            self.vel[a:e] = b.vel
+            za, ze = self.zone_start[d], self.zone_start[d + 1]
             self.force[a:e] = z.force
             if z.kc is not None:
                 self.kc[a:e] = z.kc
-            self.gmass[a:e] = b.gravity_mass
-            b.nodes, b.vel = self.nodes[a:e], self.vel[a:e]
+            self.tets[za:ze] = b.tets
+            self.moduli[d] = b.params.bulk, b.params.shear
+            if b.zone_stiffness is not None:
+                self.zstiff[a:e] = b.zone_stiffness
+                b.zone_stiffness = self.zstiff[a:e]
+                self.stiffness_known[d] = True
+            # the bodies' arrays become views of the flat ones
+            for name, flat in (("nodes", self.nodes), ("vel", self.vel),
+                               ("gravity_mass", self.gmass), ("mass", self.mass),
+                               ("emass", self.emass), ("applied", self.applied),
+                               ("fixed", self.fixed), ("fixed_vel", self.fixed_vel),
+                               ("prev_force", self.prev)):
+                flat[a:e] = getattr(b, name)
+                setattr(b, name, flat[a:e])
+            for name, flat in (("grad", self.grad), ("vol", self.vol), ("stress", self.stress),
+                               ("plastic", self.plastic)):
+                flat[za:ze] = getattr(b, name)
+                setattr(b, name, flat[za:ze])
+            for name, flat in (("scalars", self.scalars), ("work", self.work),
+                               ("servo", self.servo)):
+                flat[d] = getattr(b, name)
+                setattr(b, name, flat[d])
+            self.unbalanced[d] = b.unbalanced[0]
+            b.unbalanced = self.unbalanced[d:d + 1]
+        # the step's scratch (gridpoint forces and loads, mid-step positions, zone strain
+        # rates, spins, plastic volumetric corrections)
+        self._nscratch = np.empty((5, n, 3))
+        self._rate = np.empty((m, 6))
+        self._spin = np.empty((m, 3))
+        self._sigma_p = np.zeros(m)
+        self._runs = None  # the owned grids in runs of one constitutive table (_table_runs)
         self.gravity = np.asarray(gravity, float)
         self.rows = np.zeros(len(self.bodies), np.int64)
         self.dt = np.inf
@@ -161,6 +221,7 @@ class GridStore:
         (:func:`~pdem.deformable.constitutive.reduced_table`; elastic zones unchanged)."""
         for b in self.bodies:
             b.model = reduced_table(b.params, factor)
+        self._runs = None
 
     def set_damping(self, mode: str, alpha: float) -> None:
         """The grids' damping: ``solve.damping.mode`` at the gridpoints (its form,
@@ -172,21 +233,24 @@ class GridStore:
             b.damping_mode = form
             b.damping = float(alpha) if keep else 0.0
 
-    @staticmethod
-    def _zone_stiffness(b) -> np.ndarray:
-        """A grid's Gershgorin gridpoint stiffness of its zones (eq. 84), on its reference
+    def _zone_stiffness(self, d: int) -> np.ndarray:
+        """Grid ``d``'s Gershgorin gridpoint stiffness of its zones (eq. 84), on its reference
         (build) geometry: a stage's step and mass scaling are then the same whether the run
-        went straight or was restarted (the replay of the stages sees the built grid)."""
-        if b.zone_stiffness is None:
+        went straight or was restarted (the replay of the stages sees the built grid).
+        Computed once (it travels with the body: ``zone_stiffness``)."""
+        a, e = self.node_start[d], self.node_start[d + 1]
+        if not self.stiffness_known[d]:
+            b = self.bodies[d]
             grad = np.empty_like(b.grad)
             vol = np.empty_like(b.vol)
             zone_geometry(b.nodes0, b.tets, grad, vol)
-            b.zone_stiffness = nodal_stiffness(b.tets, grad, vol, b.params.bulk,
+            self.zstiff[a:e] = nodal_stiffness(b.tets, grad, vol, b.params.bulk,
                                                b.params.shear, len(b.nodes0))
-        return b.zone_stiffness
+            b.zone_stiffness = self.zstiff[a:e]
+            self.stiffness_known[d] = True
+        return self.zstiff[a:e]
 
-    @classmethod
-    def _stiffness(cls, b, kn: float) -> np.ndarray:
+    def _stiffness(self, d: int, kn: float) -> np.ndarray:
         """:meth:`_zone_stiffness` with the joints' normal stiffness at its surface gridpoints
         (eq. 85's ``kn A_i``, ``A_i`` a third of its surface triangles' area, counted twice:
         on the diagonal and coupling). A joint spring couples the gridpoint to the other
@@ -194,14 +258,16 @@ class GridStore:
         kn A_i alone bounds the step only against a fixed block). The other block's
         sub-contacts landing on the grid's triangles can load a gridpoint more than its own
         share: :meth:`step` raises its mass then (from the contacts of the step)."""
-        return cls._zone_stiffness(b) + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
+        b = self.bodies[d]
+        return self._zone_stiffness(d) + 2.0 * kn * _shares(b.nodes0, b.mesh.surface)
 
     def timestep(self, kn: float, owned: bool = False) -> float:
         """The zone term of eq. 88 (:meth:`_stiffness`, the inertial masses): the smallest
         over the grids (``owned``: the owned ones; inf without)."""
         dt = np.inf
-        for b in self.bodies[:self.n_owned] if owned else self.bodies:
-            dt = min(dt, critical_timestep(self._stiffness(b, kn), b.mass, b.stability_alpha()))
+        for d in range(self.n_owned if owned else len(self.bodies)):
+            b = self.bodies[d]
+            dt = min(dt, critical_timestep(self._stiffness(d, kn), b.mass, b.stability_alpha()))
         return float(dt)
 
     def scale_masses(self, kn: float, dt: float | None) -> None:
@@ -210,12 +276,12 @@ class GridStore:
         damping's :func:`~pdem.deformable.motion.stability_alpha`); gravity keeps the true
         masses (``gravity_mass``). ``dt`` None: the
         true masses."""
-        for b in self.bodies:
+        for d, b in enumerate(self.bodies):
             if dt is None:
-                b.mass = b.emass = b.gravity_mass
+                b.mass[:] = b.emass[:] = b.gravity_mass
                 continue
-            need = scaled_masses(self._stiffness(b, kn), dt, GRID_FRAC, b.stability_alpha())
-            b.mass = b.emass = np.maximum(b.gravity_mass, need)
+            need = scaled_masses(self._stiffness(d, kn), dt, GRID_FRAC, b.stability_alpha())
+            b.mass[:] = b.emass[:] = np.maximum(b.gravity_mass, need)
 
     def restage(self, scene, dt: float, alpha: float, comm) -> float:
         """A stage's settings on the grids (``scene``: the scene as the stage has it): its
@@ -391,42 +457,54 @@ class GridStore:
         -1 if none: the stepper's reduction makes every rank raise alike. ``ratio``: the
         largest unbalanced gridpoint force over the mean gridpoint weight (``solve.ratio``).
         ``alpha``: the model's damping constant now, taken under adaptive damping (the
-        servo's, eq. 77: rigid blocks and grids damped by one constant)."""
+        servo's, eq. 77: rigid blocks and grids damped by one constant).
+
+        The grids step in row order in one kernel call per run of grids of one constitutive
+        table (:func:`~pdem.deformable.motion.step_grids`: a rock mass of one material is
+        one call), each with the masses, loads and arithmetic of a grid's own
+        :func:`~pdem.deformable.motion.cycle`: the loads (a block's ``force`` spread over
+        its gridpoints, boundary stresses on its faces) apart, their work booked apart; the
+        masses raised where the step's contact springs need it (:func:`inertial_masses`).
+        The table is a compile-time constant of the kernel (its model's update,
+        pdem.deformable.constitutive): grids of several materials in turn are several calls."""
+        if self._runs is None:
+            self._runs = self._table_runs()
+        q = (dt / (2.0 * GRID_FRAC)) ** 2  # (scaled_masses' factor, as it makes it)
         big = 0.0
-        for d in range(self.n_owned):
-            b = self.bodies[d]
-            if not b.active:  # taken out of the model (:meth:`remove`)
-                continue
-            if self.adaptive:
-                b.damping = float(alpha)
-            a, e = self.node_start[d], self.node_start[d + 1]
-            gforce = gravity_forces(b.gravity_mass, self.gravity)
-            # the loads (a block's `force` spread over its gridpoints, boundary stresses on its
-            # faces), whose work is booked apart
-            applied = self.force[a:e] + gforce
-            load = _NO_LOAD  # (its work is nil: the cycle skips it)
-            if b.loaded:
-                applied += b.applied
-                load = b.applied
-            if self.bloaded:
-                applied += self.bload[a:e]
-                load = self.bload[a:e] + b.applied if b.loaded else self.bload[a:e]
-            b.emass = inertial_masses(b.mass, self._zone_stiffness(b), self.kc[a:e], dt,
-                                      b.stability_alpha())
-            if _cycle(b, applied, dt, gforce, self.force[a:e], load) < 1:
-                return self.gids[d]
-            big = max(big, float(b.unbalanced[0]))
+        ap, gf, load, force, mid = self._nscratch
+        for d0, d1, table in self._runs:
+            bad, top = step_grids(
+                d0, d1, table, dt, q, self.gravity, self.adaptive, float(alpha), self.bloaded,
+                self.node_start, self.zone_start, self.scalars, self.moduli, self.work,
+                self.servo, self.unbalanced, self.nodes, self.vel, self.force, self.kc,
+                self.gmass, self.mass, self.emass, self.zstiff, self.applied, self.fixed,
+                self.fixed_vel, self.prev, self.bload, self.tets, self.grad, self.vol,
+                self.stress, self.plastic, ap, gf, load, force, mid, self._rate, self._spin,
+                self._sigma_p)
+            if bad >= 0:
+                return self.gids[bad]
+            big = max(big, top)
         self.ratio = big / self.ref_force
         return -1
+
+    def _table_runs(self) -> list:
+        """The owned grids as runs ``(d0, d1, table)`` of consecutive grids of one
+        constitutive table (equal type and constants), each with its zone stiffness known:
+        :meth:`step`'s kernel calls."""
+        runs = []
+        for d in range(self.n_owned):
+            self._zone_stiffness(d)
+            t = self.bodies[d].model
+            if runs and type(runs[-1][2]) is type(t) and runs[-1][2] == t:
+                runs[-1][1] = d + 1
+            else:
+                runs.append([d, d + 1, t])
+        return [tuple(r) for r in runs]
 
     def servo_sums(self) -> np.ndarray:
         """The owned grids' share of the adaptive servo's sums of the last step (eq. 77):
         damping power and sum over the gridpoints of ``|dEk/dt|``."""
-        out = np.zeros(2)
-        for d in range(self.n_owned):
-            if self.bodies[d].active:
-                out += self.bodies[d].servo
-        return out
+        return servo_total(self.servo, self.scalars, self.n_owned)
 
     def kinetic_at(self, rows, ke: np.ndarray) -> np.ndarray:
         """``ke`` (the kinetic energies of the owned block ``rows``) with those of zoned rows
@@ -457,9 +535,6 @@ class GridStore:
                 np.array([self.bodies[d].kinetic_as_integrated() for d in own]),
                 np.array([self.bodies[d].work for d in own]).reshape(len(own), N_GW), shift)
 
-
-
-_NO_LOAD = np.zeros((0, 3))  # a grid step without loads (GridStore.step)
 
 
 def block_conditions(body: DeformableBody, spec) -> None:
@@ -517,10 +592,3 @@ def _shares(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
     share = np.zeros(len(x))
     np.add.at(share, tri.ravel(), np.repeat(area / 3.0, 3))
     return share
-
-
-def _cycle(b: DeformableBody, applied: np.ndarray, dt: float, gforce, contact, load) -> int:
-    return cycle(1, dt, b.nodes, b.vel, b.emass, applied, b.fixed, b.fixed_vel, b.tets, b.grad,
-                 b.vol, b.stress, b.plastic, b.model, b.nmd, b.damping_mode, b.damping,
-                 b.prev_force, b.unbalanced, b.servo, gforce, contact, load, b.params.bulk,
-                 b.params.shear, b.work)

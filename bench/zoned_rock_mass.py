@@ -1,0 +1,191 @@
+"""Zone-steps/s per core of one large zoned block and of a rock mass of many small zoned blocks
+with about the same zones, and the rock mass's 2-rank efficiency (issue 40, part 3).
+
+    PYTHONPATH=. .venv/bin/python bench/zoned_rock_mass.py --label after --save
+    PYTHONPATH=. .venv/bin/mpiexec -n 2 .venv/bin/python bench/zoned_rock_mass.py \\
+        --only rock_mass --label after --save
+
+1. **Large block**: one ``n x n x n`` m elastic block zoned at ``--zone`` (E = 1e10, NMD on),
+   standing on a fixed rigid floor (gravity, local damping).
+2. **Rock mass**: ``n^3`` unit cubes (``array``, ``n = 10``: 1,000 zoned blocks, each zoned at
+   ``--zone``, 0.5: 192 zones) in face contact, on the same floor: about the zones of 1.
+
+Each scene steps by the stepper (``stepper.advance``, the steps a zoned scene takes); a timing
+is the best of 3 chunks of ``--steps`` steps after ``--warm`` steps (numba compiles on the
+first run of a fresh cache: run twice and quote the second). Printed and saved per scene: the
+CPU time of the process per step (on several ranks the largest rank's) and its zone-steps/s
+per core (zones x steps / CPU s / ranks); the same of the grids' step alone
+(``GridStore.step``, probed inside the same chunks: the compiled cycle of every owned grid
+with the Python around it); the wall time per step. On several ranks, the efficiency against
+the last 1-rank row of the same ``--label`` in the csv: ``T1 / (ranks x T_ranks)`` from the
+CPU times and from the wall times. Not a test: the machines it ran on are shared and noisy
+(the csv says how).
+
+``--save`` appends the rows to bench/results/zoned_rock_mass.csv. Runs on main's tree too
+(``PYTHONPATH`` at it): the "before" rows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import time
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from pdem.config import parse_scene
+from pdem.deformable.store import GridStore
+from pdem.simulation import Simulation
+
+CSV = Path(__file__).resolve().parent / "results" / "zoned_rock_mass.csv"
+FIELDS = ["date", "label", "scene", "ranks", "blocks", "zones", "steps", "cpu_ms_step",
+          "wall_ms_step", "zone_steps_per_s_core", "grid_cpu_ms_step",
+          "grid_zone_steps_per_s_core", "eff_cpu", "eff_wall", "note"]
+
+HEAD = """
+name: {name}
+materials:
+  rock: {{density: 2500.0}}
+  soft: {{density: 2500.0, young: 1.0e10, poisson: 0.25}}
+joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
+blocks:
+  - {{name: floor, box: {{min: [-1, -1, -1], max: [{m}, {m}, 0]}}, material: rock, fixed: true}}
+"""
+TAIL = "solve: {steps: 1000000000, damping: local}\n"
+
+
+def large_text(n: int, zone: float) -> str:
+    return HEAD.format(name="large", m=n + 1) + (
+        f"  - {{name: big, box: {{min: [0, 0, 0], max: [{n}, {n}, {n}]}}, material: soft, "
+        f"zones: {{size: {zone}}}}}\n") + TAIL
+
+
+def rock_mass_text(n: int, zone: float) -> str:
+    return HEAD.format(name="rock_mass", m=n + 1) + (
+        f"  - name: c\n    array: {{box: {{min: [0, 0, 0], max: [1, 1, 1]}}, "
+        f"count: [{n}, {n}, {n}], spacing: [1, 1, 1]}}\n"
+        f"    material: soft\n    zones: {{size: {zone}}}\n") + TAIL
+
+
+class GridProbe:
+    """CPU time of this process spent in ``GridStore.step``."""
+
+    def __init__(self):
+        self.cpu = 0.0
+        self.orig = GridStore.step
+        probe = self
+
+        def step(store, *a, **kw):
+            t0 = time.process_time()
+            try:
+                return probe.orig(store, *a, **kw)
+            finally:
+                probe.cpu += time.process_time() - t0
+
+        GridStore.step = step
+
+    def undo(self):
+        GridStore.step = self.orig
+
+
+def timed(text: str, steps: int, warm: int, comm) -> dict:
+    """The scene of ``text`` on ``comm``: (see module doc) per step, the largest rank's."""
+    t0 = time.perf_counter()
+    sim = Simulation(parse_scene(text), comm, output=False)
+    setup = time.perf_counter() - t0
+    g = sim.state.grids
+    zones = comm.allreduce(sum(len(g.bodies[d].tets) for d in range(g.n_owned)))
+    blocks = comm.allreduce(g.n_owned)
+    for _ in range(warm):
+        sim.stepper.advance()
+    probe = GridProbe()
+    best = None
+    try:
+        for _ in range(3):
+            comm.Barrier()
+            probe.cpu = 0.0
+            c0, w0 = time.process_time(), time.perf_counter()
+            for _ in range(steps):
+                sim.stepper.advance()
+            c, w = time.process_time() - c0, time.perf_counter() - w0
+            top = comm.allreduce(np.array([c, w, probe.cpu]), op=MPI.MAX) / steps
+            if best is None or top[0] < best[0]:
+                best = top
+    finally:
+        probe.undo()
+    cpu, wall, grid = best
+    ranks = comm.size
+    return {"scene": sim.state.scene.name, "ranks": ranks, "blocks": blocks, "zones": zones,
+            "steps": steps, "cpu_ms_step": 1e3 * cpu, "wall_ms_step": 1e3 * wall,
+            "zone_steps_per_s_core": zones / cpu / ranks,
+            "grid_cpu_ms_step": 1e3 * grid, "grid_zone_steps_per_s_core": zones / grid / ranks,
+            "setup_s": setup}
+
+
+def efficiency(row: dict, label: str) -> None:
+    """``row``'s efficiency against the last 1-rank row of ``label`` and its scene."""
+    row["eff_cpu"] = row["eff_wall"] = ""
+    if row["ranks"] == 1 or not CSV.exists():
+        return
+    with CSV.open() as f:
+        ones = [r for r in csv.DictReader(f) if r["label"] == label and r["ranks"] == "1"
+                and r["scene"] == row["scene"]]
+    if ones:
+        one = ones[-1]
+        row["eff_cpu"] = float(one["cpu_ms_step"]) / (row["ranks"] * row["cpu_ms_step"])
+        row["eff_wall"] = float(one["wall_ms_step"]) / (row["ranks"] * row["wall_ms_step"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=10, help="rock mass: n^3 unit cubes; block: n m")
+    ap.add_argument("--zone", type=float, default=0.5, help="zone size of both scenes")
+    ap.add_argument("--large-zone", type=float, default=None,
+                    help="zone size of the large block (default --zone)")
+    ap.add_argument("--steps", type=int, default=10)
+    ap.add_argument("--warm", type=int, default=10)
+    ap.add_argument("--only", choices=("large", "rock_mass"), default=None)
+    ap.add_argument("--label", default="", help="the tree measured (before/after)")
+    ap.add_argument("--note", default="")
+    ap.add_argument("--save", action="store_true", help=f"append the rows to {CSV}")
+    args = ap.parse_args()
+    comm = MPI.COMM_WORLD
+    scenes = []
+    if args.only in (None, "large"):
+        scenes.append(large_text(args.n, args.large_zone or args.zone))
+    if args.only in (None, "rock_mass"):
+        scenes.append(rock_mass_text(args.n, args.zone))
+    rows = []
+    for text in scenes:
+        r = timed(text, args.steps, args.warm, comm)
+        r.update(date=datetime.date.today().isoformat(), label=args.label, note=args.note)
+        efficiency(r, args.label)
+        rows.append(r)
+        if comm.rank == 0:
+            eff = (f", efficiency {r['eff_cpu']:.2f} (CPU) {r['eff_wall']:.2f} (wall)"
+                   if r["eff_cpu"] != "" else "")
+            print(f"{r['scene']:10s} {r['ranks']} rank(s) {r['blocks']:5d} blocks {r['zones']:7d} "
+                  f"zones: {r['cpu_ms_step']:8.2f} ms/step CPU ({r['wall_ms_step']:.2f} wall), "
+                  f"{r['zone_steps_per_s_core']:.3g} zone-steps/s/core; grids' step "
+                  f"{r['grid_cpu_ms_step']:.2f} ms, {r['grid_zone_steps_per_s_core']:.3g} "
+                  f"zone-steps/s/core{eff} (set-up {r['setup_s']:.0f} s)", flush=True)
+    if len(rows) == 2 and comm.rank == 0:
+        a, b = rows
+        print(f"rock mass / large block, CPU per zone-step: scene "
+              f"{a['zone_steps_per_s_core'] / b['zone_steps_per_s_core']:.2f}x, grids' step "
+              f"{a['grid_zone_steps_per_s_core'] / b['grid_zone_steps_per_s_core']:.2f}x")
+    if args.save and comm.rank == 0:
+        new = not CSV.exists()
+        with CSV.open("a", newline="") as f:
+            w = csv.DictWriter(f, FIELDS, extrasaction="ignore")
+            if new:
+                w.writeheader()
+            for r in rows:
+                w.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+if __name__ == "__main__":
+    main()
