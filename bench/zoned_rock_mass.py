@@ -11,7 +11,7 @@ with about the same zones, and the rock mass's 2-rank efficiency (issue 40, part
    ``--zone``, 0.5: 192 zones) in face contact, on the same floor: about the zones of 1.
 
 Each scene steps by the stepper (``stepper.advance``, the steps a zoned scene takes); a timing
-is the best of 3 chunks of ``--steps`` steps after ``--warm`` steps (numba compiles on the
+is the best of ``--chunks`` (5) chunks of ``--steps`` steps after ``--warm`` steps (numba compiles on the
 first run of a fresh cache: run twice and quote the second). Printed and saved per scene: the
 CPU time of the process per step (on several ranks the largest rank's) and its zone-steps/s
 per core (zones x steps / CPU s / ranks); the same of the grids' step alone
@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import sys
 import time
 from pathlib import Path
 
@@ -41,9 +42,11 @@ from pdem.deformable.store import GridStore
 from pdem.simulation import Simulation
 
 CSV = Path(__file__).resolve().parent / "results" / "zoned_rock_mass.csv"
-FIELDS = ["date", "label", "scene", "ranks", "blocks", "zones", "steps", "cpu_ms_step",
-          "wall_ms_step", "zone_steps_per_s_core", "grid_cpu_ms_step",
-          "grid_zone_steps_per_s_core", "eff_cpu", "eff_wall", "note"]
+# bench/results/README.md's columns: a row per measured quantity
+FIELDS = ["date", "host", "command", "quantity", "value", "unit", "note"]
+QUANTITIES = {"cpu_ms_step": "ms", "wall_ms_step": "ms", "zone_steps_per_s_core": "1/s",
+              "grid_cpu_ms_step": "ms", "grid_zone_steps_per_s_core": "1/s", "zones": "",
+              "eff_cpu": "", "eff_wall": ""}
 
 HEAD = """
 name: {name}
@@ -91,7 +94,7 @@ class GridProbe:
         GridStore.step = self.orig
 
 
-def timed(text: str, steps: int, warm: int, comm) -> dict:
+def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
     """The scene of ``text`` on ``comm``: (see module doc) per step, the largest rank's."""
     t0 = time.perf_counter()
     sim = Simulation(parse_scene(text), comm, output=False)
@@ -104,14 +107,16 @@ def timed(text: str, steps: int, warm: int, comm) -> dict:
     probe = GridProbe()
     best = None
     try:
-        for _ in range(3):
+        for _ in range(chunks):
             comm.Barrier()
             probe.cpu = 0.0
             c0, w0 = time.process_time(), time.perf_counter()
             for _ in range(steps):
                 sim.stepper.advance()
             c, w = time.process_time() - c0, time.perf_counter() - w0
-            top = comm.allreduce(np.array([c, w, probe.cpu]), op=MPI.MAX) / steps
+            top = np.empty(3)
+            comm.Allreduce(np.array([c, w, probe.cpu]), top, op=MPI.MAX)
+            top /= steps
             if best is None or top[0] < best[0]:
                 best = top
     finally:
@@ -125,18 +130,26 @@ def timed(text: str, steps: int, warm: int, comm) -> dict:
             "setup_s": setup}
 
 
+def quantity(scene: str, ranks: int, name: str) -> str:
+    return f"{scene} {ranks}-rank {name}"
+
+
 def efficiency(row: dict, label: str) -> None:
     """``row``'s efficiency against the last 1-rank row of ``label`` and its scene."""
     row["eff_cpu"] = row["eff_wall"] = ""
     if row["ranks"] == 1 or not CSV.exists():
         return
     with CSV.open() as f:
-        ones = [r for r in csv.DictReader(f) if r["label"] == label and r["ranks"] == "1"
-                and r["scene"] == row["scene"]]
-    if ones:
-        one = ones[-1]
-        row["eff_cpu"] = float(one["cpu_ms_step"]) / (row["ranks"] * row["cpu_ms_step"])
-        row["eff_wall"] = float(one["wall_ms_step"]) / (row["ranks"] * row["wall_ms_step"])
+        rows = list(csv.DictReader(f))
+    one = {}
+    for r in rows:
+        if r["note"].split(";")[0] == label:
+            one[r["quantity"]] = r["value"]
+    cpu = one.get(quantity(row["scene"], 1, "cpu_ms_step"))
+    wall = one.get(quantity(row["scene"], 1, "wall_ms_step"))
+    if cpu and wall:
+        row["eff_cpu"] = float(cpu) / (row["ranks"] * row["cpu_ms_step"])
+        row["eff_wall"] = float(wall) / (row["ranks"] * row["wall_ms_step"])
 
 
 def main() -> None:
@@ -147,6 +160,7 @@ def main() -> None:
                     help="zone size of the large block (default --zone)")
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--warm", type=int, default=10)
+    ap.add_argument("--chunks", type=int, default=5)
     ap.add_argument("--only", choices=("large", "rock_mass"), default=None)
     ap.add_argument("--label", default="", help="the tree measured (before/after)")
     ap.add_argument("--note", default="")
@@ -160,7 +174,7 @@ def main() -> None:
         scenes.append(rock_mass_text(args.n, args.zone))
     rows = []
     for text in scenes:
-        r = timed(text, args.steps, args.warm, comm)
+        r = timed(text, args.steps, args.warm, args.chunks, comm)
         r.update(date=datetime.date.today().isoformat(), label=args.label, note=args.note)
         efficiency(r, args.label)
         rows.append(r)
@@ -179,13 +193,27 @@ def main() -> None:
               f"{a['grid_zone_steps_per_s_core'] / b['grid_zone_steps_per_s_core']:.2f}x")
     if args.save and comm.rank == 0:
         new = not CSV.exists()
+        argv = sys.argv[1:]
+        if "--note" in argv:  # (the note has its own column)
+            k = argv.index("--note")
+            argv = argv[:k] + argv[k + 2:]
+        command = "bench/zoned_rock_mass.py " + " ".join(a for a in argv if a != "--save")
+        if comm.size > 1:
+            command = f"mpiexec -n {comm.size} {command}"
         with CSV.open("a", newline="") as f:
-            w = csv.DictWriter(f, FIELDS, extrasaction="ignore")
+            w = csv.DictWriter(f, FIELDS)
             if new:
                 w.writeheader()
             for r in rows:
-                w.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()})
-
+                for name, unit in QUANTITIES.items():
+                    if r[name] == "":
+                        continue
+                    v = r[name]
+                    w.writerow({"date": r["date"], "host": "2-core shared machine",
+                                "command": command,
+                                "quantity": quantity(r["scene"], r["ranks"], name),
+                                "value": f"{v:.4g}" if isinstance(v, float) else v,
+                                "unit": unit, "note": f"{args.label}; {args.note}"})
 
 if __name__ == "__main__":
     main()
