@@ -112,12 +112,14 @@ solve: {{damping: local, mass_scaling: true}}
 """
 
 
-@pytest.mark.parametrize("K", [1.0, 0.5])
-def test_tunnel_in_elastic_rock_against_kirsch(K):
-    sim = Simulation(parse_scene(scene(K)), MPI.COMM_SELF, output=False)
-    assert sim.run()["ratio"] <= 2.0e-3
+BANDS = ((1.5, 2.0), (2.0, R))  # radial bands (of a) of the asserted zone stresses
+
+
+def measured(sim, K: float):
+    """The wall's radial displacement at the springline and the crown, each ``(measured,
+    closed form)``, and the zones' radial and hoop stress errors averaged by band along both
+    axes, of p: ``{(lo, hi, theta): (srr, stt, zones)}``."""
     sx, sz = -K * P, -P
-    scale = P * A / (2 * G)
     wall, zones = [], []
     for b in sim.state.grids.bodies:
         if not b.active:  # the excavated core
@@ -136,13 +138,28 @@ def test_tunnel_in_elastic_rock_against_kirsch(K):
         exact = ring(sx, sz, A, R, G, NU, rc, tc)
         zones.append(np.c_[rc, tc, srr - exact[0], stt - exact[1]])
     wall, zones = np.vstack(wall), np.vstack(zones)
+    at_wall = {}
     for th in (0.0, math.pi / 2):  # springline and crown gridpoints
         k = np.argmin(np.abs(wall[:, 0] - th))
         assert abs(wall[k, 0] - th) < 1e-9
-        assert abs(wall[k, 1] - wall[k, 2]) < 0.10 * scale, (th, wall[k])
-    for lo, hi in ((1.5, 2.0), (2.0, R)):
+        at_wall[th] = (wall[k, 1], wall[k, 2])
+    bands = {}
+    for lo, hi in BANDS:
         for th in (0.0, math.pi / 2):
             band = (zones[:, 0] >= lo * A) & (zones[:, 0] < hi) & (np.abs(zones[:, 1] - th) < 0.15)
-            assert band.sum() > 20
             err = zones[band, 2:].mean(axis=0) / P
-            assert np.all(np.abs(err) < 0.05), (lo, hi, th, err)
+            bands[(lo, hi, th)] = (err[0], err[1], int(band.sum()))
+    return at_wall, bands
+
+
+@pytest.mark.parametrize("K", [1.0, 0.5])
+def test_tunnel_in_elastic_rock_against_kirsch(K):
+    sim = Simulation(parse_scene(scene(K)), MPI.COMM_SELF, output=False)
+    assert sim.run()["ratio"] <= 2.0e-3
+    scale = P * A / (2 * G)
+    at_wall, bands = measured(sim, K)
+    for th, (got, exact) in at_wall.items():
+        assert abs(got - exact) < 0.10 * scale, (th, got, exact)
+    for key, (srr, stt, n) in bands.items():
+        assert n > 20
+        assert abs(srr) < 0.05 and abs(stt) < 0.05, (key, srr, stt)
