@@ -268,7 +268,7 @@ class ModelState:
     def rebalance(self) -> bool:
         """At a rebuild point, before :meth:`redistribute`: new cuts if the owned work is
         imbalanced (``parallel.rebalance``, balance rcb; collective), see parallel.decomposition."""
-        zones = None if self.grids is None else self.grids.zones_at(self.owned_gids())
+        zones = None if self.grids is None else self.grids.zones_at(self.blocks.gid[:self.blocks.n])
         return self.decomp.rebalance(self.blocks, self.n_owned, self.contacts, zones)
 
     def owned_gids(self) -> np.ndarray:

@@ -124,18 +124,27 @@ def block_work(blocks, n_owned: int, contacts, zones: np.ndarray | None = None) 
     """The work weight of each owned block: 1 + the contacts it is in if it is free, 1 if it is
     fixed, 0 if it was deleted (a rank holds every contact of the free blocks it owns, so the
     weight does not depend on the decomposition; a fixed block's contacts are computed by the
-    owners of the free blocks it touches); ``zones`` (per owned row, 0 for a rigid block):
-    a zoned block's grid adds :func:`zone_work`."""
+    owners of the free blocks it touches); ``zones`` (per held row, owned first, 0 for a
+    rigid block; or per owned row): a zoned block's grid adds :func:`zone_work`, and a contact
+    with a zoned block adds its gridpoint sub-contacts the same way (a sub-contact's force
+    costs about a zone's step: docs/deformable.md, Speed), which rigid contacts, a few
+    sub-contacts each, do not."""
     w = (blocks.out[:n_owned] != 2).astype(np.int64)  # 2: deleted (pdem.domain.DELETED)
     if zones is not None:
-        w += np.where(w > 0, zone_work(zones), 0)
+        w += np.where(w > 0, zone_work(zones[:n_owned]), 0)
     if contacts.n and n_owned:
         free = blocks.fixed[:n_owned] == 0
+        each = np.ones(contacts.n, np.int64)
+        if zones is not None and len(zones) > n_owned:
+            ia = np.asarray(contacts.arrays["ia"], np.int64)
+            ib = np.asarray(contacts.arrays["ib"], np.int64)
+            zoned = (zones[ia] > 0) | (zones[ib] > 0)
+            each += np.where(zoned, zone_work(np.diff(contacts.sc_start)), 0)
         for side in ("ia", "ib"):
             rows = np.asarray(contacts.arrays[side], np.int64)
-            rows = rows[rows < n_owned]
-            rows = rows[free[rows]]
-            w += np.bincount(rows, minlength=n_owned)
+            mine = (rows < n_owned)
+            mine[mine] = free[rows[mine]]
+            w += np.bincount(rows[mine], weights=each[mine], minlength=n_owned).astype(np.int64)
     return w
 
 

@@ -12,6 +12,7 @@ class is built on MPI.COMM_SELF with dims [1, 1, 1].
 from __future__ import annotations
 
 import itertools
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,8 +20,10 @@ from mpi4py import MPI
 
 from pdem.config import parse_scene
 from pdem.parallel.decomposition import (
+    ZONES_PER_WORK,
     Decomposition,
     balance_of,
+    block_work,
     choose_dims,
     rcb_tree,
 )
@@ -269,3 +272,27 @@ def test_weighted_share_is_contiguous_complete_and_balanced():
             if w.sum() > 0:
                 even = w.sum() / size
                 assert all(abs(w[lo:hi].sum() - even) <= w.max() + 1e-9 for lo, hi in shares)
+
+
+def test_work_counts_zones_and_gridpoint_subcontacts_but_not_rigid_ones():
+    """RCB's weights (block_work): a rigid free block weighs 1 + its contacts; a zoned one adds
+    its zones // ZONES_PER_WORK, and a contact with a zoned block (owned or ghost) adds its
+    gridpoint sub-contacts // ZONES_PER_WORK to each owned free block in it; a rigid contact
+    weighs 1 whatever its sub-contacts. Rows: 0 rigid free, 1 zoned free, 2 rigid fixed (owned),
+    3 zoned ghost."""
+    blocks = SimpleNamespace(out=np.zeros(4, np.int8), fixed=np.array([0, 0, 1, 0], np.int8))
+    zones = np.array([0, 700, 0, 1400], np.int64)
+    # contacts: 0-2 rigid (4 sub-contacts), 1-2 zoned on the fixed block (42 gridpoint
+    # sub-contacts), 0-3 rigid with the zoned ghost (28), 1-3 zoned with zoned (70)
+    contacts = SimpleNamespace(n=4, arrays={"ia": np.array([0, 1, 0, 1]),
+                                            "ib": np.array([2, 2, 3, 3])},
+                               sc_start=np.array([0, 4, 46, 74, 144]))
+    k = ZONES_PER_WORK
+    w = block_work(blocks, 3, contacts, zones)
+    assert w.tolist() == [1 + 1 + (1 + 28 // k),
+                          1 + 700 // k + (1 + 42 // k) + (1 + 70 // k),
+                          1]
+    # owned rows' zones only (no ghosts known): zones weigh, contacts count 1 each
+    assert block_work(blocks, 3, contacts, zones[:3]).tolist() == [3, 1 + 700 // k + 2, 1]
+    # a rigid scene: as before
+    assert block_work(blocks, 3, contacts).tolist() == [3, 3, 1]
