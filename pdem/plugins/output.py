@@ -18,6 +18,7 @@ from ..io.joints import CONTACT_FIELDS, SUB_FIELDS
 from ..io.layout import writer_range
 from ..io.surfaces import body_surfaces
 from ..io.writer import OutputWriter, quat_to_matrix
+from ..memory import mapping_large_blocks
 from ..model import csr
 from ..model.fields import OUTPUT
 from ..resolve import mass_scaling_summary
@@ -114,11 +115,14 @@ def _contact_dict(state, bonded: np.ndarray, keep: np.ndarray, fn_all: np.ndarra
     nsub = np.diff(sel.sc_start)
     fn = fn_all[csr.take(c.sc_start, keep)[0]]
     b = state.blocks
-    ia = np.repeat(sel.ia, nsub)
-    R = quat_to_matrix(b.q[ia])
+    # each contact's rotation, taken by its sub-contacts (one matrix a sub-contact was 72 bytes
+    # each of a round's sub-contacts); the same element-wise sums as before
+    R = quat_to_matrix(b.q[sel.ia])
+    of = np.repeat(np.arange(len(nsub)), nsub)
     pa = sel.sc_pa
-    point = b.x[ia] + (R[:, :, 0] * pa[:, 0:1] + R[:, :, 1] * pa[:, 1:2]
-                       + R[:, :, 2] * pa[:, 2:3])
+    point = b.x[sel.ia][of] + (R[of, :, 0] * pa[:, 0:1] + R[of, :, 1] * pa[:, 1:2]
+                               + R[of, :, 2] * pa[:, 2:3])
+    del R, of
     bits = sel.sc_state.astype(np.int64)  # the output's int64 (the store's uint8)
     joint = np.repeat(sel.joint, nsub)
     bits[~bonded[joint]] &= ~FAILED
@@ -216,7 +220,8 @@ class Snapshots(Plugin):
     def write(self):
         s = self.state
         b, n = s.blocks, s.n_owned
-        with s.timers.phase("io"), writing(self.writer.path):
+        # mapped: the snapshot's contact arrays too go back to the system when freed
+        with s.timers.phase("io"), writing(self.writer.path), mapping_large_blocks():
             contacts = SnapshotContacts(s, self.bonded) if self.contacts else None
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
