@@ -145,7 +145,10 @@ class BlockSeries:
         self.conn, self.my_tblock = conn + self.vlo, tri_block
         self.n_blocks, self.n_points = n, int(counts[:, 0].sum())
         self.n_tri = int(counts[:, 1].sum())
-        self.my_verts = body_mesh.verts.copy()
+        # a copy only of a view (every block's mesh cut to this range): the mesh given for this
+        # range alone is kept as it is, not copied beside itself while the writer is built
+        verts = body_mesh.verts
+        self.my_verts = verts.copy() if verts.base is not None else verts
         # int32: blocks of this rank's range (kept for the run: 4 bytes a vertex, a triangle)
         self.my_vblock = np.repeat(np.arange(hi - lo, dtype=np.int32),
                                    np.diff(body_mesh.vert_start))

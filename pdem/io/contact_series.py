@@ -144,8 +144,8 @@ class ContactSeries:
         srows = np.zeros((0, joints.S_WIDTH))
         # made in the order of the ranks they go to: the exchange sends them as they are, no
         # sorted copy of the round's rows (they are sorted by key once received)
-        to = np.searchsorted(core.bounds, np.asarray(source.block_a, np.int64).reshape(-1)[idx],
-                             side="right")
+        to = np.searchsorted(core.bounds, np.asarray(source.block_a).reshape(-1)[idx]
+                             .astype(np.int64), side="right")
         idx = idx[np.argsort(to, kind="stable")]
         del to
         try:
