@@ -17,16 +17,19 @@ __all__ = ["ContactSeries", "ContactSource", "DictContacts", "CONTACT_CHUNK", "R
 
 CONTACT_CHUNK = 1024  # rows per chunk of the flat contact and sub-contact datasets
 # rows (contacts and sub-contacts) a rank receives and writes per round of a snapshot's
-# contacts: what the writer holds at once is bounded by this, not by the rank's contacts
-ROUND_ROWS = 1 << 16
+# contacts: what the writer holds at once is bounded by this, not by the rank's contacts (about
+# twice a round's packed rows, ~100 bytes a row: ~7 MB; 64,000 cubes on 2 ranks, 8 rounds a
+# snapshot: 1 << 16 held ~8 MB more a rank for ~15% less snapshot time, bench/output_memory.py)
+ROUND_ROWS = 1 << 15
 
 
 class ContactSource(Protocol):
     """A rank's contacts for one snapshot, made row by row as the writer streams them:
     ``block_a`` (k,) the gid of each contact's block A, ``n_sub`` (k,) its sub-contacts,
     ``n_subs`` their total as given (None: not known before ``rows``), and ``rows(idx)`` the
-    contacts ``idx`` (ascending) in :meth:`pdem.io.writer.OutputWriter.write_snapshot`'s dict
-    format, their sub-contacts in contact order."""
+    contacts ``idx`` (in that order: grouped by the rank they go to) in
+    :meth:`pdem.io.writer.OutputWriter.write_snapshot`'s dict format, their sub-contacts in
+    contact order."""
 
     block_a: np.ndarray
     n_sub: np.ndarray
@@ -49,8 +52,8 @@ class DictContacts:
 
     def rows(self, idx: np.ndarray) -> dict:
         d = self.d
-        if len(idx) == len(self.n_sub):  # every contact (idx ascends): the dict as given
-            return d
+        if len(idx) == len(self.n_sub) and np.array_equal(idx, np.arange(len(idx))):
+            return d  # every contact in order: the dict as given
         sub_idx, _ = csr.take(csr.starts(self.n_sub), idx)
         out = {k: np.asarray(v)[idx] for k, v in d.items() if k != "sub"}
         out["sub"] = {k: np.asarray(v)[sub_idx] for k, v in d["sub"].items()}
@@ -139,6 +142,12 @@ class ContactSeries:
         core, msg = self.core, None
         crows = np.zeros((0, joints.C_WIDTH))
         srows = np.zeros((0, joints.S_WIDTH))
+        # made in the order of the ranks they go to: the exchange sends them as they are, no
+        # sorted copy of the round's rows (they are sorted by key once received)
+        to = np.searchsorted(core.bounds, np.asarray(source.block_a).reshape(-1)[idx]
+                             .astype(np.int64), side="right")
+        idx = idx[np.argsort(to, kind="stable")]
+        del to
         try:
             if len(idx):
                 d = source.rows(idx)

@@ -25,13 +25,19 @@ from . import layout as row_layout
 from .layout import even_share
 from .xdmf import view_path
 
-__all__ = ["H5Core", "CHUNK_ROWS", "REOPEN_EVERY", "add_view", "add_range_view"]
+__all__ = ["H5Core", "CHUNK_ROWS", "MPIO_HINTS", "REOPEN_EVERY", "add_view", "add_range_view"]
 
 # Parallel HDF5 duplicates the file's communicator for every virtual dataset that names the
 # file itself as its source, and frees them only when the file closes: MPICH allows ~2048
 # communicators, i.e. ~220 snapshots of views. So the file is closed and reopened every this
 # many snapshots (collective; measured: 3000 views, no leak).
 REOPEN_EVERY = 32  # 10 views per snapshot, 24 with contacts, 34 with zones: 1088 at most
+# MPI-IO hints of the parallel file (ROMIO's; other MPI-IO layers ignore them). Each rank writes
+# its own contiguous rows, so collective buffering only moved every rank's rows through the
+# aggregator: one rank a node (rank 0 on one node), whose 16 MiB buffer then stayed resident
+# while the file was open (64,000 cubes on 2 ranks: rank 0 ~11 MB above rank 1 a snapshot,
+# bench/output_memory.py). HDF5's collective calls are unchanged; the bytes written are the same.
+MPIO_HINTS = {"romio_cb_write": "disable"}
 CHUNK_ROWS = 1 << 16  # rows per chunk along the block/vertex axis (1.5 MiB for 3 doubles)
 
 
@@ -103,9 +109,7 @@ class H5Core:
         """Create the file (IO ranks) with the root attributes ``attrs``, in their order."""
         # Format v108 at least: dense attribute storage, so a large scene fits in an attribute.
         if self.parallel:
-            self.f = h5py.File(
-                self.path, "w", driver="mpio", comm=self.comm, libver=("v108", "latest")
-            )
+            self.f = self._mpio_file("w", libver=("v108", "latest"))
             self.dxpl = h5p.create(h5p.DATASET_XFER)
             self.dxpl.set_dxpl_mpio(h5fd.MPIO_COLLECTIVE)
         else:
@@ -117,7 +121,18 @@ class H5Core:
         """Close and reopen the file (collective): frees the communicators of the views. The
         section writers look their datasets up by path, so nothing is rebound."""
         self.f.close()
-        self.f = h5py.File(self.path, "r+", driver="mpio", comm=self.comm)
+        self.f = self._mpio_file("r+")
+
+    def _mpio_file(self, mode: str, **kwargs) -> h5py.File:
+        """The file opened on every rank with the ``mpio`` driver and :data:`MPIO_HINTS`."""
+        info = MPI.Info.Create()
+        for key, value in MPIO_HINTS.items():
+            info.Set(key, value)
+        try:
+            return h5py.File(self.path, mode, driver="mpio", comm=self.comm, info=info,
+                             **kwargs)
+        finally:
+            info.Free()
 
     def flush(self) -> None:
         """Flush the HDF5 file to disk (collective)."""
@@ -153,7 +168,10 @@ class H5Core:
         received in source-rank order, then row order): one ``Alltoall`` of the counts, one
         ``Alltoallv`` per array."""
         comm, size = self.comm, self.comm.size
-        order = np.argsort(dest, kind="stable")
+        # rows already grouped by rank (a rank's own blocks in gid order, the usual snapshot)
+        # are sent as they are: no sorted copy of every array
+        grouped = len(dest) < 2 or bool((dest[1:] >= dest[:-1]).all())
+        order = None if grouped else np.argsort(dest, kind="stable")
         send_n = np.bincount(dest, minlength=size).astype(np.int64)
         recv_n = np.empty(size, dtype=np.int64)
         comm.Alltoall(send_n, recv_n)
@@ -165,7 +183,8 @@ class H5Core:
             mtype = MPI.INT64_T if a.dtype == np.int64 else MPI.DOUBLE
             got = np.empty((int(recv_n.sum()), *a.shape[1:]), dtype=a.dtype)
             comm.Alltoallv(
-                [np.ascontiguousarray(a[order]), (send_n * c, sdispl * c), mtype],
+                [np.ascontiguousarray(a if grouped else a[order]), (send_n * c, sdispl * c),
+                 mtype],
                 [got, (recv_n * c, rdispl * c), mtype],
             )
             out.append(got)

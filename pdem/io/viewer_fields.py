@@ -102,9 +102,14 @@ class ViewerFields:
         values = block_fields(cols(mine, "centroid"), self.x0, cols(mine, "velocity"),
                               cols(mine, "angular_velocity"), cols(mine, "removed")[:, 0],
                               cols(mine, "stage_origin"))
-        for name, _, _ in CELL_FIELDS:
+        for name, _, _ in CELL_FIELDS:  # each field's values dropped once written
             d = f[f"surface/{name}"]
             d.resize(i + 1, axis=0)
-            core.write_row(d, i, values[name][blocks.my_tblock], blocks.tlo)
+            # stored as float32: each block's value converted once, then repeated on its
+            # triangles (the same bits as converting every triangle's; no float64 copy of the
+            # triangles' values, 24 bytes a triangle for a vector)
+            per_block = np.asarray(values.pop(name), np.float32)
+            core.write_row(d, i, per_block[blocks.my_tblock], blocks.tlo)
+            del per_block
         for path in VIEWED_SERIES:
             add_view(f, path, i)

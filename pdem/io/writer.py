@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
-from ..memory import return_freed_memory
+from ..memory import mapping_large_blocks, return_freed_memory
 from .block_series import BlockSeries, quat_to_matrix
 from .contact_series import ContactSeries
 from .h5core import REOPEN_EVERY, H5Core
@@ -208,8 +208,16 @@ class OutputWriter:
         (m, 6) and ``plastic``), each zoned block passed by exactly one rank. Their boundary
         gridpoints are also the vertices of their triangles in ``surface/points``.
         """
+        self._core.check_open()
+        # the snapshot's arrays are mapped, each returned to the system when freed (pdem.memory)
+        with mapping_large_blocks():
+            self._write_snapshot(step, time, gids, fields, contacts, stage, zones)
+        # the snapshot's small objects and HDF5's buffers back to the system: glibc keeps freed
+        # blocks for reuse, and each snapshot's peak otherwise came on top of the last one's
+        return_freed_memory()
+
+    def _write_snapshot(self, step, time, gids, fields, contacts, stage, zones) -> None:
         core = self._core
-        core.check_open()
         msg, gids, rows = self._blocks.pack(gids, fields)
         source = None
         if self.contacts:
@@ -222,7 +230,9 @@ class OutputWriter:
             zmsg, zone_items = self._zones.snapshot(zones)
             msg = msg or zmsg
         core.raise_if_any(msg)
-        mine = self._blocks.assemble(gids, rows)
+        packed = [gids, rows]  # handed over: assemble frees the passed rows once sent
+        del gids, rows
+        mine = self._blocks.assemble(packed)
         if "stage_origin" not in fields:
             self._fields.fill_origin(mine)
         zoned_points = None
@@ -239,7 +249,7 @@ class OutputWriter:
             if self.zone_layout is not None:
                 self._zones.write(i, zone_items)
         # the block rows are written: not held while the contacts' rounds are made
-        del gids, rows, mine, zone_items, zoned_points
+        del mine, zone_items, zoned_points
         if self.contacts:  # every rank: the contacts are streamed in rounds
             self._contacts.write(i, source)
             del source
@@ -249,10 +259,6 @@ class OutputWriter:
             core.f.flush()
         if self.xdmf_path is not None and self.comm.rank == 0:
             self._write_xdmf()
-        # the snapshot's rows, rounds and HDF5's buffers back to the system: glibc keeps freed
-        # blocks for reuse, and each snapshot's peak otherwise came on top of the last one's
-        # (64,000 cubes on 2 ranks: ~45 MB a rank a snapshot, bench/output_memory.py)
-        return_freed_memory()
 
     def _write_xdmf(self) -> None:
         c, lay = self._contacts, self.zone_layout

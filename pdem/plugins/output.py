@@ -18,7 +18,7 @@ from ..io.joints import CONTACT_FIELDS, SUB_FIELDS
 from ..io.layout import writer_range
 from ..io.surfaces import body_surfaces
 from ..io.writer import OutputWriter, quat_to_matrix
-from ..model import csr
+from ..memory import mapping_large_blocks
 from ..model.fields import OUTPUT
 from ..resolve import mass_scaling_summary
 from ..selection import timestep_rows
@@ -83,42 +83,46 @@ def contact_rows(state, bonded: np.ndarray) -> dict:
     name (pdem.io.joints.OutputColumn ``field``)."""
     c = state.contacts
     keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
-    return _contact_dict(state, bonded, keep, c.normal_forces(state.joints.kernel_args))
+    return _contact_dict(state, bonded, keep)
 
 
 class SnapshotContacts:
     """This rank's share of a snapshot's contacts as the writer streams them
     (:class:`pdem.io.contact_series.ContactSource`): :func:`contact_rows`' contacts, each
     round's rows made when the writer asks for them, so that no rank holds every contact's
-    output rows at once (issue 39: they were most of the output's memory)."""
+    output rows at once (issue 39: they were most of the output's memory). Held for the
+    snapshot: 12 bytes a contact written (int32 row, block A, sub-contact count)."""
 
     def __init__(self, state, bonded: np.ndarray) -> None:
         c = state.contacts
         self.state, self.bonded = state, bonded
-        self.keep = np.nonzero(written_contacts(state) & (np.diff(c.sc_start) > 0))[0]
-        self.block_a = c.ga[self.keep].astype(np.int64)
-        self.n_sub = np.diff(c.sc_start)[self.keep]
+        self.keep = np.flatnonzero(written_contacts(state) & (np.diff(c.sc_start) > 0)
+                                   ).astype(np.int32)
+        self.block_a = c.ga[self.keep]
+        self.n_sub = np.diff(c.sc_start)[self.keep].astype(np.int32)
         self.n_subs = int(self.n_sub.sum())
-        self.fn = c.normal_forces(state.joints.kernel_args)  # every sub-contact's, 8 B each
 
     def rows(self, idx: np.ndarray) -> dict:
         """The contacts ``idx`` (of those this rank writes) in the writer's dict format."""
-        return _contact_dict(self.state, self.bonded, self.keep[idx], self.fn)
+        return _contact_dict(self.state, self.bonded, self.keep[idx])
 
 
-def _contact_dict(state, bonded: np.ndarray, keep: np.ndarray, fn_all: np.ndarray) -> dict:
-    """:func:`contact_rows` of the contacts ``keep`` (rows of the store), ``fn_all`` every
-    sub-contact's normal force."""
+def _contact_dict(state, bonded: np.ndarray, keep: np.ndarray) -> dict:
+    """:func:`contact_rows` of the contacts ``keep`` (rows of the store)."""
     c = state.contacts
     sel = c.take(keep)
     nsub = np.diff(sel.sc_start)
-    fn = fn_all[csr.take(c.sc_start, keep)[0]]
+    # each sub-contact's force by its own law and state: the taken ones' alone, the same bits
+    fn = sel.normal_forces(state.joints.kernel_args)
     b = state.blocks
-    ia = np.repeat(sel.ia, nsub)
-    R = quat_to_matrix(b.q[ia])
+    # each contact's rotation, taken by its sub-contacts (one matrix a sub-contact was 72 bytes
+    # each of a round's sub-contacts); the same element-wise sums as before
+    R = quat_to_matrix(b.q[sel.ia])
+    of = np.repeat(np.arange(len(nsub)), nsub)
     pa = sel.sc_pa
-    point = b.x[ia] + (R[:, :, 0] * pa[:, 0:1] + R[:, :, 1] * pa[:, 1:2]
-                       + R[:, :, 2] * pa[:, 2:3])
+    point = b.x[sel.ia][of] + (R[of, :, 0] * pa[:, 0:1] + R[of, :, 1] * pa[:, 1:2]
+                               + R[of, :, 2] * pa[:, 2:3])
+    del R, of
     bits = sel.sc_state.astype(np.int64)  # the output's int64 (the store's uint8)
     joint = np.repeat(sel.joint, nsub)
     bits[~bonded[joint]] &= ~FAILED
@@ -216,7 +220,8 @@ class Snapshots(Plugin):
     def write(self):
         s = self.state
         b, n = s.blocks, s.n_owned
-        with s.timers.phase("io"), writing(self.writer.path):
+        # mapped: the snapshot's contact arrays too go back to the system when freed
+        with s.timers.phase("io"), writing(self.writer.path), mapping_large_blocks():
             contacts = SnapshotContacts(s, self.bonded) if self.contacts else None
             self.writer.write_snapshot(s.step, s.time, b.gid[:n],
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
