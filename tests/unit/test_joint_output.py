@@ -17,6 +17,7 @@ from mpi4py import MPI
 from pdem.cases import incline
 from pdem.config import parse_scene
 from pdem.io import contacts_path, read_xdmf, subcontacts_path, summarise
+from pdem.io.contact_series import CONTACT_CHUNK, contact_chunk
 from pdem.simulation import Simulation
 
 RHO, KN, G = 2500.0, 1.0e9, 9.81
@@ -217,3 +218,15 @@ def test_paraview_reads_the_contact_grids(which, request, tmp_path):
                 [fn_last.min(), fn_last.max()]), reader
         assert r["glyph_points"] > 0, reader
         assert r["drawn"] > 0.001, reader
+
+
+def test_contact_chunks_grow_with_the_scene_within_their_bounds(cube):
+    """Small scenes keep 1,024-row chunks (a larger chunk there only grows the file), a large
+    one 16,384 (fewer chunks: less heap left in HDF5 and MPI-IO, a smaller file; docs/parallel.md
+    With output)."""
+    lo, hi = CONTACT_CHUNK
+    sizes = [contact_chunk(n) for n in (1, 1000, 4096, 4097 * 2, 10_648, 64_001, 10**7)]
+    assert sizes == [lo, lo, lo, 2048, 4096, hi, hi]
+    with h5py.File(cube, "r") as f:
+        assert f["contacts/normal_force"].chunks[0] == lo
+        assert f["subcontacts/normal_force"].chunks[0] == lo
