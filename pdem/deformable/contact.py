@@ -277,12 +277,12 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
 
 @kernel
 def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, dx, radius,
-                   piece_start, vert_start, verts_local, face_start, fvert_start, face_verts,
-                   normals_local, offsets_local, edge_start, edges, edir_start, edirs_local):
+                   piece_start, vert_start, verts_local):
     """After a grid step: each zoned block's row from its gridpoints (``x`` the mass-weighted
     centroid, ``v`` the mean velocity, ``dx`` the largest gridpoint motion of the step as a
-    vector, so that eq. 1's motion bound covers the deforming surface) and its piece geometry
-    in the identity frame (vertices, triangle planes, edge directions), and its radius."""
+    vector, so that eq. 1's motion bound covers the deforming surface), its piece's vertices
+    in the identity frame and its radius. The piece's planes follow from the vertices when
+    they are read (:func:`piece_planes`)."""
     for d in range(rows.shape[0]):
         r = rows[d]
         a, e = node_start[d], node_start[d + 1]
@@ -323,6 +323,16 @@ def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, 
         v[r, 0], v[r, 1], v[r, 2] = vx / m, vy / m, vz / m
         dx[r, 0], dx[r, 1], dx[r, 2] = bx, by, bz
         radius[r] = rad
+
+
+@kernel
+def piece_planes(rows, piece_start, verts_local, face_start, fvert_start, face_verts,
+                 normals_local, offsets_local, edge_start, edges, edir_start, edirs_local):
+    """The zoned blocks' (block ``rows``) piece planes from their vertices: the triangles'
+    unit normals and offsets, and the directions of the piece's first edges
+    (pdem.deformable.zoning)."""
+    for d in range(rows.shape[0]):
+        k = piece_start[rows[d]]
         for f in range(face_start[k], face_start[k + 1]):
             j = fvert_start[f]
             p, q, t = face_verts[j], face_verts[j + 1], face_verts[j + 2]
@@ -340,7 +350,6 @@ def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, 
                                 + ny * (verts_local[p, 1] + verts_local[q, 1] + verts_local[t, 1])
                                 + nz * (verts_local[p, 2] + verts_local[q, 2] + verts_local[t, 2])
                                 ) / 3.0
-        # the edge directions: of the piece's first edges (pdem.deformable.zoning)
         t0 = edir_start[k]
         for i in range(edir_start[k + 1] - t0):
             p, q = edges[edge_start[k] + i, 0], edges[edge_start[k] + i, 1]
