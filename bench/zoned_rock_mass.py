@@ -16,10 +16,14 @@ first run of a fresh cache: run twice and quote the second). Printed and saved p
 CPU time of the process per step (on several ranks the largest rank's) and its zone-steps/s
 per core (zones x steps / CPU s / ranks); the same of the grids' step alone
 (``GridStore.step``, probed inside the same chunks: the compiled cycle of every owned grid
-with the Python around it); the wall time per step. On several ranks, the efficiency against
-the last 1-rank row of the same ``--label`` in the csv: ``T1 / (ranks x T_ranks)`` from the
-CPU times and from the wall times. Not a test: the machines it ran on are shared and noisy
-(the csv says how).
+with the Python around it), and of the step's other parts, probed alike: the contact forces
+(``force_phase``: the sub-contact force kernel with the rotation matrices and the zeroed
+force sums) and the piece refresh (``GridStore.sync``: the zoned blocks' rows and pieces from
+their gridpoints, owned and ghosts), the rest being the rigid motion, the halo, the contact
+updates, the reduction and the Python around them; the wall time per step. On several ranks,
+the efficiency against the last 1-rank row of the same ``--label`` in the csv:
+``T1 / (ranks x T_ranks)`` from the CPU times and from the wall times. Not a test: the
+machines it ran on are shared and noisy (the csv says how).
 
 ``--save`` appends the rows to bench/results/zoned_rock_mass.csv. Runs on main's tree too
 (``PYTHONPATH`` at it): the "before" rows.
@@ -37,6 +41,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from pdem import stepper
 from pdem.config import parse_scene
 from pdem.deformable.store import GridStore
 from pdem.simulation import Simulation
@@ -45,8 +50,9 @@ CSV = Path(__file__).resolve().parent / "results" / "zoned_rock_mass.csv"
 # bench/results/README.md's columns: a row per measured quantity
 FIELDS = ["date", "host", "command", "quantity", "value", "unit", "note"]
 QUANTITIES = {"cpu_ms_step": "ms", "wall_ms_step": "ms", "zone_steps_per_s_core": "1/s",
-              "grid_cpu_ms_step": "ms", "grid_zone_steps_per_s_core": "1/s", "zones": "",
-              "eff_cpu": "", "eff_wall": ""}
+              "grid_cpu_ms_step": "ms", "grid_zone_steps_per_s_core": "1/s",
+              "forces_cpu_ms_step": "ms", "refresh_cpu_ms_step": "ms", "rest_cpu_ms_step": "ms",
+              "zones": "", "eff_cpu": "", "eff_wall": ""}
 
 HEAD = """
 name: {name}
@@ -73,25 +79,27 @@ def rock_mass_text(n: int, zone: float) -> str:
         f"    material: soft\n    zones: {{size: {zone}}}\n") + TAIL
 
 
-class GridProbe:
-    """CPU time of this process spent in ``GridStore.step``."""
+class Probe:
+    """CPU time of this process spent in ``owner.name`` (a function looked up at each call:
+    a method of GridStore, a kernel in pdem.stepper's namespace)."""
 
-    def __init__(self):
+    def __init__(self, owner, name: str):
         self.cpu = 0.0
-        self.orig = GridStore.step
+        self.owner, self.name = owner, name
+        self.orig = getattr(owner, name)
         probe = self
 
-        def step(store, *a, **kw):
+        def timed_call(*a, **kw):
             t0 = time.process_time()
             try:
-                return probe.orig(store, *a, **kw)
+                return probe.orig(*a, **kw)
             finally:
                 probe.cpu += time.process_time() - t0
 
-        GridStore.step = step
+        setattr(owner, name, timed_call)
 
     def undo(self):
-        GridStore.step = self.orig
+        setattr(self.owner, self.name, self.orig)
 
 
 def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
@@ -104,29 +112,34 @@ def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
     blocks = comm.allreduce(g.n_owned)
     for _ in range(warm):
         sim.stepper.advance()
-    probe = GridProbe()
+    probes = [Probe(GridStore, "step"), Probe(stepper, "force_phase"), Probe(GridStore, "sync")]
     best = None
     try:
         for _ in range(chunks):
             comm.Barrier()
-            probe.cpu = 0.0
+            for p in probes:
+                p.cpu = 0.0
             c0, w0 = time.process_time(), time.perf_counter()
             for _ in range(steps):
                 sim.stepper.advance()
             c, w = time.process_time() - c0, time.perf_counter() - w0
-            top = np.empty(3)
-            comm.Allreduce(np.array([c, w, probe.cpu]), top, op=MPI.MAX)
+            top = np.empty(2 + len(probes))
+            comm.Allreduce(np.array([c, w, *(p.cpu for p in probes)]), top, op=MPI.MAX)
             top /= steps
             if best is None or top[0] < best[0]:
                 best = top
     finally:
-        probe.undo()
-    cpu, wall, grid = best
+        for p in reversed(probes):
+            p.undo()
+    cpu, wall, grid, forces, refresh = best
     ranks = comm.size
     return {"scene": sim.state.scene.name, "ranks": ranks, "blocks": blocks, "zones": zones,
             "steps": steps, "cpu_ms_step": 1e3 * cpu, "wall_ms_step": 1e3 * wall,
             "zone_steps_per_s_core": zones / cpu / ranks,
             "grid_cpu_ms_step": 1e3 * grid, "grid_zone_steps_per_s_core": zones / grid / ranks,
+            "forces_cpu_ms_step": 1e3 * forces, "refresh_cpu_ms_step": 1e3 * refresh,
+            # (each part the largest rank's: on several ranks not exactly the rest of that rank)
+            "rest_cpu_ms_step": 1e3 * (cpu - grid - forces - refresh),
             "setup_s": setup}
 
 
@@ -185,7 +198,11 @@ def main() -> None:
                   f"zones: {r['cpu_ms_step']:8.2f} ms/step CPU ({r['wall_ms_step']:.2f} wall), "
                   f"{r['zone_steps_per_s_core']:.3g} zone-steps/s/core; grids' step "
                   f"{r['grid_cpu_ms_step']:.2f} ms, {r['grid_zone_steps_per_s_core']:.3g} "
-                  f"zone-steps/s/core{eff} (set-up {r['setup_s']:.0f} s)", flush=True)
+                  f"zone-steps/s/core{eff} (set-up {r['setup_s']:.0f} s)\n"
+                  f"{'':10s} parts, ms/step CPU: grids' step {r['grid_cpu_ms_step']:.2f}, "
+                  f"contact forces {r['forces_cpu_ms_step']:.2f}, piece refresh "
+                  f"{r['refresh_cpu_ms_step']:.2f}, the rest {r['rest_cpu_ms_step']:.2f}",
+                  flush=True)
     if len(rows) == 2 and comm.rank == 0:
         a, b = rows
         print(f"rock mass / large block, CPU per zone-step: scene "

@@ -32,6 +32,8 @@ def distribute(state, owned_gids, rows: dict, contacts: ContactStore, source=Non
     with state.timers.phase("migrate"):
         r = state.resolved
         grids = state.grids
+        if grids is not None:  # the blocks' geometry travels: the zoned pieces' planes first
+            grids.fresh_planes(state.blocks)
         state.blocks, state.n_owned, state.contacts, state.halo, held = rebuild(
             state.comm, state.decomp, state.glob, state.blocks if source is None else source,
             owned_gids, rows, contacts, 0.5 * r.ctol, r.margin,

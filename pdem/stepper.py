@@ -131,6 +131,8 @@ class Stepper:
                 todo |= c.moved > s.resolved.refresh_tolerance
         if not todo.any():  # nothing to update
             return
+        if s.grids is not None:  # the zoned pieces' planes, behind their vertices
+            s.grids.fresh_planes(b)
         todo = todo.astype(np.uint8)
         self.redetected += int(np.count_nonzero(todo))
         joints = s.joints.kernel_args

@@ -74,7 +74,10 @@ class _Snapshot:
         self.clock = (s.step, s.time, s.ratio, s.alpha)
         self.glob = {k: getattr(s.glob, k).copy() for k in ("fixed", "out")}
         # the owned blocks' geometry: a trial's migration may take them to other ranks, and
-        # no rank keeps the geometry of blocks it does not hold
+        # no rank keeps the geometry of blocks it does not hold (the zoned pieces' planes
+        # made from their vertices first)
+        if s.grids is not None:
+            s.grids.fresh_planes(b)
         self.store = take_rows(b, np.arange(n), np.ones(n, np.uint8))
         # the owned zoned blocks' grids (gridpoints, zone stresses, plastic state, ...)
         self.grids = s.grids.saved() if s.grids is not None else None

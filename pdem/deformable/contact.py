@@ -19,14 +19,8 @@ from collections import namedtuple
 import numpy as np
 
 from ..contact.forces import carry_shear, turn_normal
-from ..contact.laws import SLIPPING, apply_law, joint_dissipation
-from ..contact.rigid import (
-    add_point_force,
-    apply_pair,
-    book_dissipation,
-    pair_motion,
-    point_motion,
-)
+from ..contact.laws import OPEN, SLIPPING, apply_law, joint_dissipation, law_stays_open
+from ..contact.rigid import add_point_force, apply_pair, book_dissipation, pair_motion
 from ..jit import force_kernel, inline_kernel, kernel
 
 # dindex (rows,): zoned-block index of each block row, -1 for rigid; vel, force (N, 3): the
@@ -115,152 +109,180 @@ def locate(ia, ib, ka, kb, sc_start, pa, x, R, face_start, fvert_start, face_ver
                         sc_w[s, side, 0], sc_w[s, side, 1], sc_w[s, side, 2] = wa, wb, wc
 
 
-@inline_kernel
-def _grid_velocity(grid, s, side):
-    n, w, v = grid.sc_node, grid.sc_w, grid.vel
-    vx = vy = vz = 0.0
-    for i in range(3):
-        g = n[s, side, i]
-        vx += w[s, side, i] * v[g, 0]
-        vy += w[s, side, i] * v[g, 1]
-        vz += w[s, side, i] * v[g, 2]
-    return vx, vy, vz
-
-
-@inline_kernel
-def _grid_force(grid, s, side, fx, fy, fz, k2):
-    """The force on a zoned side's gridpoints, and their share ``w k2`` of the spring's
-    Gershgorin row: a spring K between two weighted points couples every gridpoint of both
-    (weights >= 0, summing to 1 a side), so gridpoint i's row holds ``K w_i (1 + 1)``: ``k2``
-    is 2 K. On the triangle side this can exceed the gridpoint's own area share (a finer or
-    larger neighbour landing on a sliver's small triangles): the build's estimate misses it."""
-    n, w, f, kc = grid.sc_node, grid.sc_w, grid.force, grid.kc
-    for i in range(3):
-        g = n[s, side, i]
-        f[g, 0] += w[s, side, i] * fx
-        f[g, 1] += w[s, side, i] * fy
-        f[g, 2] += w[s, side, i] * fz
-        kc[g] += w[s, side, i] * k2
-
-
-@force_kernel  # a call, not inlined: numba's IR inlining of the inlined joint law inside it warns
-def _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny, nz):
-    """One sub-contact's joint update from the relative velocity (as in contact_forces):
-    returns the force on B and the energy the joint dissipated."""
-    dun = (vx * nx + vy * ny + vz * nz) * dt
-    dsx = vx * dt - dun * nx
-    dsy = vy * dt - dun * ny
-    dsz = vz * dt - dun * nz
-    un0 = subs.un[s]
-    un = un0 - dun
-    subs.un[s] = un
-    fx, fy, fz = carry_shear(subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2], nx, ny, nz)
-    ux = subs.us[s, 0] + dsx
-    uy = subs.us[s, 1] + dsy
-    uz = subs.us[s, 2] + dsz
-    subs.us[s, 0], subs.us[s, 1], subs.us[s, 2] = ux, uy, uz
-    area = subs.area[s]
-    gx, gy, gz = fx, fy, fz
-    dil0 = subs.dil[s]
-    st0 = subs.state[s]
-    fn, dil, st, fx, fy, fz = apply_law(joints.laws, slot, j, s, subs.hist, un, dil0, fx, fy, fz,
-                                        dsx, dsy, dsz, area, ux, uy, uz, st0)
-    subs.dil[s] = dil
-    subs.state[s] = st
-    subs.fs[s, 0], subs.fs[s, 1], subs.fs[s, 2] = fx, fy, fz
-    dissipated = 0.0
-    if (st & SLIPPING) or st != st0 or dil != dil0:
-        dissipated = joint_dissipation(joints.laws, slot, j, s, subs.hist, dun, dsx, dsy, dsz,
-                                       area, un0, dil0, gx, gy, gz, st0, un, dil, fn, fx, fy, fz,
-                                       st)
-    return fx + fn * nx, fy + fn * ny, fz + fn * nz, dissipated
-
-
 @force_kernel
 def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
     """:func:`pdem.contact.forces.contact_forces` for a scene with zoned blocks (no held
-    inactive contacts: ``solve.inactive`` is refused with zones). A zoned side's velocity and
-    force are its triangle's gridpoints' (module doc); its ``dtheta`` is zero, so the plane
-    normal turns with the rigid side only."""
-    for c in range(pairs.ia.shape[0]):
-        a = pairs.ia[c]
-        b = pairs.ib[c]
-        pairs.frozen[c] = 0
-        nx, ny, nz = turn_normal(pairs.normal, bodies.dtheta, c, a, b)
-        s0 = pairs.sc_start[c]
-        s1 = pairs.sc_start[c + 1]
+    inactive contacts: ``solve.inactive`` is refused with zones). A zoned side's velocity is
+    the barycentric sum of its triangle's gridpoint velocities and its force goes to those
+    gridpoints with the same weights (module doc); its ``dtheta`` is zero, so the plane normal
+    turns with the rigid side only. A contact of two rigid blocks takes the rigid kernel's
+    arithmetic (``point_motion``, one force and moment sum, ``apply_pair``).
+
+    Every sub-contact also adds to ``grid.kc`` its spring's share of the Gershgorin row of
+    each gridpoint of a zoned side: a spring ``K = kjoint A`` between two weighted points
+    (weights >= 0, summing to 1 a side) couples every gridpoint of both, so gridpoint i's row
+    holds ``K w_i (1 + 1)``, ``w_i k2`` with ``k2 = 2 K`` (GridStore.step's partial density
+    scaling). On the triangle side this can exceed the gridpoint's own area share (a finer or
+    larger neighbour landing on a sliver's small triangles): the build's estimate misses it.
+
+    Written as one loop over plain arrays taken from the records once, above the loops:
+    numba counts the references of an array bound to a variable (an atomic increment and
+    decrement), and a helper called or inlined per sub-contact with the records binds each
+    of their arrays anew, which took ~60 % of this loop on a rock mass of 1,000 zoned cubes
+    (bench/zoned_rock_mass.py). As in the rigid kernel, a sub-contact that is separated and
+    stays so skips its law (zero forces, the same state: the force sums and the dissipation
+    unchanged, the sums never being -0) but still adds its ``kc``; dilation and state are
+    stored only when changed."""
+    ia, ib, normal, sc_start, joint, frozen = (pairs.ia, pairs.ib, pairs.normal, pairs.sc_start,
+                                               pairs.joint, pairs.frozen)
+    pa, sarea, sun, sfs, sus, sdil, sstate, hist = subs
+    laws, jslot, jrow = joints.laws, joints.slot, joints.row
+    dindex, vel, gforce, sc_node, sc_w, kc = (grid.dindex, grid.vel, grid.force, grid.sc_node,
+                                              grid.sc_w, grid.kc)
+    k2j = 2.0 * grid.kjoint
+    v, w, force, moment = bodies.v, bodies.w, bodies.force, bodies.moment
+    for c in range(ia.shape[0]):
+        a = np.uint64(ia[c])
+        b = np.uint64(ib[c])
+        frozen[c] = 0
+        nx, ny, nz = turn_normal(normal, bodies.dtheta, c, a, b)
+        s0 = sc_start[c]
+        s1 = sc_start[c + 1]
         if s1 == s0:
             continue
         rel = pair_motion(bodies, a, b)
-        jrow = pairs.joint[c]
-        slot = joints.slot[jrow]
-        j = joints.row[jrow]
-        da = grid.dindex[a]
-        db = grid.dindex[b]
-        acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        dissipated = 0.0
-        if da < 0 and db < 0:  # the rigid seam, as contact_forces
-            for s in range(s0, s1):
-                rax, ray, raz, vx, vy, vz = point_motion(rel, subs.pa[s, 0], subs.pa[s, 1],
-                                                         subs.pa[s, 2])
-                fx, fy, fz, dis = _sub_update(dt, subs, joints, slot, j, s, vx, vy, vz, nx, ny,
-                                              nz)
-                dissipated += dis
-                acc = add_point_force(acc, rax, ray, raz, fx, fy, fz)
-            apply_pair(bodies, a, b, rel, acc, dissipated)
-            continue
+        slot = jslot[joint[c]]
+        j = jrow[joint[c]]
+        da = dindex[a]
+        db = dindex[b]
+        rigid = da < 0 and db < 0
         ra = rel[0]
         ddx, ddy, ddz = rel[1]
-        v, w = bodies.v, bodies.w
-        # rigid-side sums: force and moment on A about x_a, on B about x_b
+        v0x, v0y, v0z = rel[2]
+        dwx, dwy, dwz = rel[3]
+        rbx = rby = rbz = 0.0
+        # force and moment sums: on B about x_b, or (two rigid blocks) about x_a as the rigid
+        # kernel's; on a rigid A about x_a
         fa = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         fb = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        for s in range(s0, s1):
-            p0, p1, p2 = subs.pa[s, 0], subs.pa[s, 1], subs.pa[s, 2]
+        dissipated = 0.0
+        # unsigned: no negative-index wrap on the sub-contact and gridpoint reads
+        for s in range(np.uint64(s0), np.uint64(s1)):
+            p0, p1, p2 = pa[s, 0], pa[s, 1], pa[s, 2]
             rax = ra[0] * p0 + ra[1] * p1 + ra[2] * p2
             ray = ra[3] * p0 + ra[4] * p1 + ra[5] * p2
             raz = ra[6] * p0 + ra[7] * p1 + ra[8] * p2
-            rbx, rby, rbz = rax + ddx, ray + ddy, raz + ddz
-            if da >= 0:
-                vax, vay, vaz = _grid_velocity(grid, s, 0)
+            if rigid:  # eq. 15, as point_motion
+                vx = v0x + (dwy * raz - dwz * ray)
+                vy = v0y + (dwz * rax - dwx * raz)
+                vz = v0z + (dwx * ray - dwy * rax)
             else:
-                vax = v[a, 0] + (w[a, 1] * raz - w[a, 2] * ray)
-                vay = v[a, 1] + (w[a, 2] * rax - w[a, 0] * raz)
-                vaz = v[a, 2] + (w[a, 0] * ray - w[a, 1] * rax)
+                rbx, rby, rbz = rax + ddx, ray + ddy, raz + ddz
+                vax = vay = vaz = 0.0
+                if da >= 0:
+                    for i in range(3):
+                        g = np.uint64(sc_node[s, 0, i])
+                        vax += sc_w[s, 0, i] * vel[g, 0]
+                        vay += sc_w[s, 0, i] * vel[g, 1]
+                        vaz += sc_w[s, 0, i] * vel[g, 2]
+                else:
+                    vax = v[a, 0] + (w[a, 1] * raz - w[a, 2] * ray)
+                    vay = v[a, 1] + (w[a, 2] * rax - w[a, 0] * raz)
+                    vaz = v[a, 2] + (w[a, 0] * ray - w[a, 1] * rax)
+                vbx = vby = vbz = 0.0
+                if db >= 0:
+                    for i in range(3):
+                        g = np.uint64(sc_node[s, 1, i])
+                        vbx += sc_w[s, 1, i] * vel[g, 0]
+                        vby += sc_w[s, 1, i] * vel[g, 1]
+                        vbz += sc_w[s, 1, i] * vel[g, 2]
+                else:
+                    vbx = v[b, 0] + (w[b, 1] * rbz - w[b, 2] * rby)
+                    vby = v[b, 1] + (w[b, 2] * rbx - w[b, 0] * rbz)
+                    vbz = v[b, 2] + (w[b, 0] * rby - w[b, 1] * rbx)
+                vx, vy, vz = vbx - vax, vby - vay, vbz - vaz
+            # the joint update (as contact_forces'): eqs. 20-22, the law, eq. 23
+            dun = (vx * nx + vy * ny + vz * nz) * dt
+            dsx = vx * dt - dun * nx
+            dsy = vy * dt - dun * ny
+            dsz = vz * dt - dun * nz
+            un0 = sun[s]
+            un = un0 - dun
+            sun[s] = un
+            ux = sus[s, 0] + dsx
+            uy = sus[s, 1] + dsy
+            uz = sus[s, 2] + dsz
+            sus[s, 0], sus[s, 1], sus[s, 2] = ux, uy, uz
+            area = sarea[s]
+            k2 = k2j * area
+            dil0 = sdil[s]
+            st0 = sstate[s]
+            if st0 & OPEN and law_stays_open(laws, slot, j, s, hist, un, dil0, area, st0):
+                sfs[s, 0], sfs[s, 1], sfs[s, 2] = 0.0, 0.0, 0.0
+                if db >= 0:
+                    for i in range(3):
+                        kc[np.uint64(sc_node[s, 1, i])] += sc_w[s, 1, i] * k2
+                if da >= 0:
+                    for i in range(3):
+                        kc[np.uint64(sc_node[s, 0, i])] += sc_w[s, 0, i] * k2
+                continue
+            fx, fy, fz = carry_shear(sfs[s, 0], sfs[s, 1], sfs[s, 2], nx, ny, nz)
+            gx, gy, gz = fx, fy, fz
+            fn, dil, st, fx, fy, fz = apply_law(laws, slot, j, s, hist, un, dil0, fx, fy, fz,
+                                                dsx, dsy, dsz, area, ux, uy, uz, st0)
+            if dil != dil0:
+                sdil[s] = dil
+            if st != st0:
+                sstate[s] = st
+            sfs[s, 0], sfs[s, 1], sfs[s, 2] = fx, fy, fz
+            if (st & SLIPPING) or st != st0 or dil != dil0:
+                dissipated += joint_dissipation(laws, slot, j, s, hist, dun, dsx, dsy, dsz,
+                                                area, un0, dil0, gx, gy, gz, st0, un, dil, fn,
+                                                fx, fy, fz, st)
+            # the force on B (eq. 28 with our sign), on A its opposite
+            fx, fy, fz = fx + fn * nx, fy + fn * ny, fz + fn * nz
+            if rigid:
+                fb = add_point_force(fb, rax, ray, raz, fx, fy, fz)
+                continue
             if db >= 0:
-                vbx, vby, vbz = _grid_velocity(grid, s, 1)
-            else:
-                vbx = v[b, 0] + (w[b, 1] * rbz - w[b, 2] * rby)
-                vby = v[b, 1] + (w[b, 2] * rbx - w[b, 0] * rbz)
-                vbz = v[b, 2] + (w[b, 0] * rby - w[b, 1] * rbx)
-            fx, fy, fz, dis = _sub_update(dt, subs, joints, slot, j, s, vbx - vax, vby - vay,
-                                          vbz - vaz, nx, ny, nz)
-            dissipated += dis
-            k2 = 2.0 * grid.kjoint * subs.area[s]
-            if db >= 0:
-                _grid_force(grid, s, 1, fx, fy, fz, k2)
+                for i in range(3):
+                    g = np.uint64(sc_node[s, 1, i])
+                    wi = sc_w[s, 1, i]
+                    gforce[g, 0] += wi * fx
+                    gforce[g, 1] += wi * fy
+                    gforce[g, 2] += wi * fz
+                    kc[g] += wi * k2
             else:
                 fb = add_point_force(fb, rbx, rby, rbz, fx, fy, fz)
             if da >= 0:
-                _grid_force(grid, s, 0, -fx, -fy, -fz, k2)
+                for i in range(3):
+                    g = np.uint64(sc_node[s, 0, i])
+                    wi = sc_w[s, 0, i]
+                    gforce[g, 0] += wi * -fx
+                    gforce[g, 1] += wi * -fy
+                    gforce[g, 2] += wi * -fz
+                    kc[g] += wi * k2
             else:
                 fa = add_point_force(fa, rax, ray, raz, -fx, -fy, -fz)
+        if rigid:
+            apply_pair(bodies, a, b, rel, fb, dissipated)
+            continue
         for i in range(3):
-            bodies.force[a, i] += fa[i]
-            bodies.moment[a, i] += fa[3 + i]
-            bodies.force[b, i] += fb[i]
-            bodies.moment[b, i] += fb[3 + i]
+            force[a, i] += fa[i]
+            moment[a, i] += fa[3 + i]
+            force[b, i] += fb[i]
+            moment[b, i] += fb[3 + i]
         book_dissipation(bodies, a, b, dissipated)
 
 
 @kernel
 def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, dx, radius,
-                   piece_start, vert_start, verts_local, face_start, fvert_start, face_verts,
-                   normals_local, offsets_local, edge_start, edges, edir_start, edirs_local):
+                   piece_start, vert_start, verts_local):
     """After a grid step: each zoned block's row from its gridpoints (``x`` the mass-weighted
     centroid, ``v`` the mean velocity, ``dx`` the largest gridpoint motion of the step as a
-    vector, so that eq. 1's motion bound covers the deforming surface) and its piece geometry
-    in the identity frame (vertices, triangle planes, edge directions), and its radius."""
+    vector, so that eq. 1's motion bound covers the deforming surface), its piece's vertices
+    in the identity frame and its radius. The piece's planes follow from the vertices when
+    they are read (:func:`piece_planes`)."""
     for d in range(rows.shape[0]):
         r = rows[d]
         a, e = node_start[d], node_start[d + 1]
@@ -301,6 +323,16 @@ def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, 
         v[r, 0], v[r, 1], v[r, 2] = vx / m, vy / m, vz / m
         dx[r, 0], dx[r, 1], dx[r, 2] = bx, by, bz
         radius[r] = rad
+
+
+@kernel
+def piece_planes(rows, piece_start, verts_local, face_start, fvert_start, face_verts,
+                 normals_local, offsets_local, edge_start, edges, edir_start, edirs_local):
+    """The zoned blocks' (block ``rows``) piece planes from their vertices: the triangles'
+    unit normals and offsets, and the directions of the piece's first edges
+    (pdem.deformable.zoning)."""
+    for d in range(rows.shape[0]):
+        k = piece_start[rows[d]]
         for f in range(face_start[k], face_start[k + 1]):
             j = fvert_start[f]
             p, q, t = face_verts[j], face_verts[j + 1], face_verts[j + 2]
@@ -318,7 +350,6 @@ def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, 
                                 + ny * (verts_local[p, 1] + verts_local[q, 1] + verts_local[t, 1])
                                 + nz * (verts_local[p, 2] + verts_local[q, 2] + verts_local[t, 2])
                                 ) / 3.0
-        # the edge directions: of the piece's first edges (pdem.deformable.zoning)
         t0 = edir_start[k]
         for i in range(edir_start[k + 1] - t0):
             p, q = edges[edge_start[k] + i, 0], edges[edge_start[k] + i, 1]

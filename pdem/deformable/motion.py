@@ -56,7 +56,7 @@ import numpy as np
 from ..dynamics.damping import sign_of
 from ..jit import inline_kernel, kernel
 from .constitutive import SHEAR_NOW, SHEAR_PAST, TENSION_NOW, TENSION_PAST, update_stress
-from .nmd import nmd_strain, nmd_stress
+from .nmd import nmd_strain_into, nmd_stress_into
 from .zones import add_zone_forces, rotate_stress, strain_rates, zone_geometry
 
 # columns of a grid's energy accumulators (DeformableBody.work), booked by :func:`cycle`
@@ -295,8 +295,8 @@ def advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, st
     if zone_geometry(mid, tets, grad, vol) <= 0.0:
         return False
     strain_rates(vel, tets, grad, rate, spin)
-    if nmd:
-        nmd_strain(tets, vol, rate, n_nodes)
+    if nmd:  # (scratch: ``mid``, read above, and ``sigma_p``, written below)
+        nmd_strain_into(tets, vol, rate, mid, sigma_p)
     if zone_geometry(nodes, tets, grad, vol) <= 0.0:  # forces of the next step at t + dt
         return False
     rotate_stress(stress, spin, dt)
@@ -316,8 +316,8 @@ def advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, st
             past |= TENSION_PAST
         plastic[z] = past | bits
     work[GW_PLASTIC] += wp
-    if nmd:
-        nmd_stress(tets, vol, sigma_p, stress, n_nodes)
+    if nmd:  # (scratch: ``mid`` and ``spin``, read above)
+        nmd_stress_into(tets, vol, sigma_p, stress, mid, spin[:, 0])
     return True
 
 

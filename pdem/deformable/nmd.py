@@ -18,44 +18,65 @@ from ..jit import kernel
 
 
 @kernel
-def _zone_average_of_nodes(tets, vol, zone_value, n_nodes):
-    """Per zone: the mean over its 4 nodes of the volume-weighted nodal mean of ``zone_value``."""
-    num = np.zeros(n_nodes)
-    den = np.zeros(n_nodes)
+def nmd_strain_into(tets, vol, rate, nodal, ev_bar):
+    """Replace every zone's volumetric strain rate ``ev`` by its nodal average (eqs. 68-71),
+    in place: per zone, the mean over its 4 nodes of the volume-weighted nodal mean of
+    ``ev``. ``nodal`` (n_nodes, >= 2) and ``ev_bar`` (n_zones,): scratch the caller owns
+    (the grid step's: a small grid's step allocated its own, ~1,000 allocations a step in a
+    rock mass of zoned blocks)."""
+    for n in range(nodal.shape[0]):
+        nodal[n, 0] = 0.0
+        nodal[n, 1] = 0.0
     for z in range(tets.shape[0]):
+        ev = (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
         for a in range(4):
-            num[tets[z, a]] += zone_value[z] * vol[z]
-            den[tets[z, a]] += vol[z]
-    out = np.empty(tets.shape[0])
+            nodal[tets[z, a], 0] += ev * vol[z]
+            nodal[tets[z, a], 1] += vol[z]
     for z in range(tets.shape[0]):
         acc = 0.0
         for a in range(4):
             n = tets[z, a]
-            acc += num[n] / den[n]
-        out[z] = 0.25 * acc
-    return out
-
-
-@kernel
-def nmd_strain(tets, vol, rate, n_nodes):
-    """Replace every zone's volumetric strain rate by its nodal average (eqs. 68-71), in place."""
-    ev = np.empty(tets.shape[0])
+            acc += nodal[n, 0] / nodal[n, 1]
+        ev_bar[z] = 0.25 * acc
     for z in range(tets.shape[0]):
-        ev[z] = (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
-    ev_bar = _zone_average_of_nodes(tets, vol, ev, n_nodes)
-    for z in range(tets.shape[0]):
-        d = ev_bar[z] - ev[z]
+        d = ev_bar[z] - (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
         rate[z, 0] += d
         rate[z, 1] += d
         rate[z, 2] += d
 
 
 @kernel
-def nmd_stress(tets, vol, sigma_p, stress, n_nodes):
-    """Substitute the nodal average of ``sigma_p`` for each zone's own (eq. 76), in place."""
-    bar = _zone_average_of_nodes(tets, vol, sigma_p, n_nodes)
+def nmd_stress_into(tets, vol, sigma_p, stress, nodal, bar):
+    """Substitute the nodal average of ``sigma_p`` (as :func:`nmd_strain_into` averages)
+    for each zone's own (eq. 76), in place; ``nodal``, ``bar``: the caller's scratch."""
+    for n in range(nodal.shape[0]):
+        nodal[n, 0] = 0.0
+        nodal[n, 1] = 0.0
+    for z in range(tets.shape[0]):
+        for a in range(4):
+            nodal[tets[z, a], 0] += sigma_p[z] * vol[z]
+            nodal[tets[z, a], 1] += vol[z]
+    for z in range(tets.shape[0]):
+        acc = 0.0
+        for a in range(4):
+            n = tets[z, a]
+            acc += nodal[n, 0] / nodal[n, 1]
+        bar[z] = 0.25 * acc
     for z in range(tets.shape[0]):
         d = sigma_p[z] - bar[z]
         stress[z, 0] += d
         stress[z, 1] += d
         stress[z, 2] += d
+
+
+@kernel
+def nmd_strain(tets, vol, rate, n_nodes):
+    """:func:`nmd_strain_into` with scratch of its own."""
+    nmd_strain_into(tets, vol, rate, np.empty((n_nodes, 2)), np.empty(tets.shape[0]))
+
+
+@kernel
+def nmd_stress(tets, vol, sigma_p, stress, n_nodes):
+    """:func:`nmd_stress_into` with scratch of its own."""
+    nmd_stress_into(tets, vol, sigma_p, stress, np.empty((n_nodes, 2)),
+                    np.empty(tets.shape[0]))
