@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import kernel
+from ..jit import inline_kernel, kernel
 
 
 @kernel
@@ -24,20 +24,9 @@ def nmd_strain_into(tets, vol, rate, nodal, ev_bar):
     ``ev``. ``nodal`` (n_nodes, >= 2) and ``ev_bar`` (n_zones,): scratch the caller owns
     (the grid step's: a small grid's step allocated its own, ~1,000 allocations a step in a
     rock mass of zoned blocks)."""
-    for n in range(nodal.shape[0]):
-        nodal[n, 0] = 0.0
-        nodal[n, 1] = 0.0
     for z in range(tets.shape[0]):
-        ev = (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
-        for a in range(4):
-            nodal[tets[z, a], 0] += ev * vol[z]
-            nodal[tets[z, a], 1] += vol[z]
-    for z in range(tets.shape[0]):
-        acc = 0.0
-        for a in range(4):
-            n = tets[z, a]
-            acc += nodal[n, 0] / nodal[n, 1]
-        ev_bar[z] = 0.25 * acc
+        ev_bar[z] = (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
+    volume_average(tets, vol, ev_bar, nodal, ev_bar)
     for z in range(tets.shape[0]):
         d = ev_bar[z] - (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
         rate[z, 0] += d
@@ -49,24 +38,32 @@ def nmd_strain_into(tets, vol, rate, nodal, ev_bar):
 def nmd_stress_into(tets, vol, sigma_p, stress, nodal, bar):
     """Substitute the nodal average of ``sigma_p`` (as :func:`nmd_strain_into` averages)
     for each zone's own (eq. 76), in place; ``nodal``, ``bar``: the caller's scratch."""
+    volume_average(tets, vol, sigma_p, nodal, bar)
+    for z in range(tets.shape[0]):
+        d = sigma_p[z] - bar[z]
+        stress[z, 0] += d
+        stress[z, 1] += d
+        stress[z, 2] += d
+
+
+@inline_kernel
+def volume_average(tets, vol, value, nodal, out):
+    """Per zone, the mean over its 4 nodes of the volume-weighted nodal mean of the zones'
+    ``value`` (eqs. 69-71), into ``out`` (``value`` itself may be ``out``: it is read whole
+    before ``out`` is written); ``nodal`` (n_nodes, >= 2): scratch."""
     for n in range(nodal.shape[0]):
         nodal[n, 0] = 0.0
         nodal[n, 1] = 0.0
     for z in range(tets.shape[0]):
         for a in range(4):
-            nodal[tets[z, a], 0] += sigma_p[z] * vol[z]
+            nodal[tets[z, a], 0] += value[z] * vol[z]
             nodal[tets[z, a], 1] += vol[z]
     for z in range(tets.shape[0]):
         acc = 0.0
         for a in range(4):
             n = tets[z, a]
             acc += nodal[n, 0] / nodal[n, 1]
-        bar[z] = 0.25 * acc
-    for z in range(tets.shape[0]):
-        d = sigma_p[z] - bar[z]
-        stress[z, 0] += d
-        stress[z, 1] += d
-        stress[z, 2] += d
+        out[z] = 0.25 * acc
 
 
 @kernel
