@@ -100,8 +100,9 @@ def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: 
                  "stiffness (lower solve.timestep.frac or give a smaller dt).")
     elif made > 0.01 * scale:
         cause = (" Probable cause: the contact model created energy: blocks moved too far "
-                 "into each other between contact updates (contact.detect_every: 1) or "
-                 "vertex/edge sub-contacts too small for the impact (raise contact.point_area).")
+                 "into each other between contact updates (contact.detect_every is "
+                 f"{state.scene.contact.detect_every}: lower it, down to 1) or vertex/edge "
+                 "sub-contacts too small for the impact (raise contact.point_area).")
     else:
         cause = (" The energy balances, so the speed was put in by the loads (gravity, "
                  "applied forces, prescribed velocities): check them.")
