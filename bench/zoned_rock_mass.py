@@ -10,7 +10,9 @@ with about the same zones, and the rock mass's 2-rank efficiency (issue 40, part
 2. **Rock mass**: ``n^3`` unit cubes (``array``, ``n = 10``: 1,000 zoned blocks, each zoned at
    ``--zone``, 0.5: 192 zones) in face contact, on the same floor: about the zones of 1.
 
-Each scene steps by the stepper (``stepper.advance``, the steps a zoned scene takes); a timing
+Each scene steps by the stepper (``stepper.advance``: the Python path, whose parts can be
+probed) or, with ``--fused``, as a run does (``Stepper.advance_many``: the compiled loop of steps,
+pdem.cycle.fused_grid_steps; the parts are not probed, only the whole step); a timing
 is the best of ``--chunks`` (5) chunks of ``--steps`` steps after ``--warm`` steps (numba compiles on the
 first run of a fresh cache: run twice and quote the second). Printed and saved per scene: the
 CPU time of the process per step (on several ranks the largest rank's) and its zone-steps/s
@@ -102,7 +104,7 @@ class Probe:
         setattr(self.owner, self.name, self.orig)
 
 
-def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
+def timed(text: str, steps: int, warm: int, chunks: int, comm, fused: bool = False) -> dict:
     """The scene of ``text`` on ``comm``: (see module doc) per step, the largest rank's."""
     t0 = time.perf_counter()
     sim = Simulation(parse_scene(text), comm, output=False)
@@ -110,9 +112,18 @@ def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
     g = sim.state.grids
     zones = comm.allreduce(sum(len(g.bodies[d].tets) for d in range(g.n_owned)))
     blocks = comm.allreduce(g.n_owned)
-    for _ in range(warm):
-        sim.stepper.advance()
-    probes = [Probe(GridStore, "step"), Probe(stepper, "force_phase"), Probe(GridStore, "sync")]
+
+    def march(n):
+        while fused and n > 0:  # (as Run does, without its per-call plugins)
+            n -= sim.stepper.advance_many(n)
+            if sim.stepper.migrate_due:
+                sim.runner._migrate()
+        for _ in range(n):
+            sim.stepper.advance()
+
+    march(warm)
+    probes = [] if fused else [Probe(GridStore, "step"), Probe(stepper, "force_phase"),
+                               Probe(GridStore, "sync")]
     best = None
     try:
         for _ in range(chunks):
@@ -120,8 +131,7 @@ def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
             for p in probes:
                 p.cpu = 0.0
             c0, w0 = time.process_time(), time.perf_counter()
-            for _ in range(steps):
-                sim.stepper.advance()
+            march(steps)
             c, w = time.process_time() - c0, time.perf_counter() - w0
             top = np.empty(2 + len(probes))
             comm.Allreduce(np.array([c, w, *(p.cpu for p in probes)]), top, op=MPI.MAX)
@@ -131,6 +141,9 @@ def timed(text: str, steps: int, warm: int, chunks: int, comm) -> dict:
     finally:
         for p in reversed(probes):
             p.undo()
+    if fused:  # (the parts are not probed)
+        assert "fused" in sim.state.timers.report(), "the compiled loop did not run"
+        best = np.concatenate([best, np.full(3, np.nan)])
     cpu, wall, grid, forces, refresh = best
     ranks = comm.size
     return {"scene": sim.state.scene.name, "ranks": ranks, "blocks": blocks, "zones": zones,
@@ -178,6 +191,8 @@ def main() -> None:
     ap.add_argument("--label", default="", help="the tree measured (before/after)")
     ap.add_argument("--note", default="")
     ap.add_argument("--save", action="store_true", help=f"append the rows to {CSV}")
+    ap.add_argument("--fused", action="store_true",
+                    help="step as a run does, in the compiled loop (the parts not probed)")
     args = ap.parse_args()
     comm = MPI.COMM_WORLD
     scenes = []
@@ -187,7 +202,7 @@ def main() -> None:
         scenes.append(rock_mass_text(args.n, args.zone))
     rows = []
     for text in scenes:
-        r = timed(text, args.steps, args.warm, args.chunks, comm)
+        r = timed(text, args.steps, args.warm, args.chunks, comm, args.fused)
         r.update(date=datetime.date.today().isoformat(), label=args.label, note=args.note)
         efficiency(r, args.label)
         rows.append(r)
@@ -223,7 +238,7 @@ def main() -> None:
                 w.writeheader()
             for r in rows:
                 for name, unit in QUANTITIES.items():
-                    if r[name] == "":
+                    if r[name] == "" or (isinstance(r[name], float) and np.isnan(r[name])):
                         continue
                     v = r[name]
                     w.writerow({"date": r["date"], "host": "2-core shared machine",

@@ -19,6 +19,7 @@ from .cycle import (
     NEEDS_PYTHON,
     REDUCED,
     STEP_FLAGS,
+    fused_grid_steps,
     fused_steps,
     motion_record,
 )
@@ -30,7 +31,7 @@ from .model.contacts import ContactStore, sub_columns
 from .model.fields import row_width
 from .mpi import reduces_nonblocking
 from .parallel import native
-from .parallel.halo import halo_columns
+from .parallel.halo import GRID_HALO_TAG, halo_columns
 from .resolve import REMAP_FRACTION
 
 NO_STEP = 2**62  # no step bound for a compiled run of steps
@@ -45,21 +46,27 @@ class CompiledRuns:
     def __init__(self, stepper):
         self.stepper = stepper
         self.net = None  # (halo, its pdem.parallel.native.Net) for compiled runs on ranks
-        self.dropped_ir = False  # the compiled loop's inlining IR freed (pdem.jit)
+        self.grid_net = None  # (the grids' halo, its Net) for the zoned blocks' gridpoints
+        self.dropped_ir = set()  # the compiled loops whose inlining IR is freed (pdem.jit)
         self.python_run = 0  # steps taken in Python after the loop's last 1-step return
         self.python_left = 0  # of them, still to take
         self.python_steps = 0  # steps taken in Python so far
 
     def fusable(self) -> bool:
         """Whether steps may run in one compiled call (pdem.cycle), unless ``solve.fused`` is
-        off: runs without prescribed boundary motion or zoned blocks; on several ranks also
-        where the ranks spin while they wait (pdem.mpi.configure_waits), every halo
-        field is float64 (not with solve.inactive) and MPI can be called from compiled code
-        (pdem.parallel.native.link, collective on its first call)."""
+        off: runs without prescribed boundary motion; with zoned blocks, where each rank's
+        grids are of one constitutive table (one kernel call steps them,
+        :meth:`pdem.deformable.store.GridStore.one_run`) and without ``solve.inactive``; on
+        several ranks also where the ranks spin while they wait (pdem.mpi.configure_waits),
+        every halo field is float64 (not with solve.inactive) and MPI can be called from
+        compiled code (pdem.parallel.native.link, collective on its first call). Decided
+        alike on every rank."""
         st = self.stepper
         s = st.s
-        if not (s.scene.solve.fused and s.grids is None
-                and not (s.boundary is not None and s.boundary.active)):
+        if not (s.scene.solve.fused and not (s.boundary is not None and s.boundary.active)):
+            return False
+        if s.grids is not None and not (s.scene.solve.inactive is None
+                                        and s.grids.one_run(s.comm)):
             return False
         if s.comm.size == 1:
             return True
@@ -139,9 +146,32 @@ class CompiledRuns:
             self.net = (halo, net)
         return self.net[1]
 
+    def grid_net_for(self, halo):
+        """The compiled forward's record for the grids' halo plan
+        (:meth:`pdem.deformable.store.GridStore.plan_halo`; idle on one rank or without one)."""
+        comm = self.stepper.s.comm
+        if self.grid_net is None or self.grid_net[0] is not halo:
+            if comm.size == 1 or halo is None:
+                net = native.idle_net(6, STEP_FLAGS)
+            else:
+                net = native.make_net(comm, halo, STEP_FLAGS, GRID_HALO_TAG)
+            if net is None:
+                raise SimulationError("internal: the MPI functions went missing")
+            self.grid_net = (halo, net)
+        return self.grid_net[1]
+
+    def _drop_ir(self, loop) -> None:
+        """After a compiled loop's first call (loaded, or compiled and saved): its IR for
+        inlining is freed."""
+        if loop not in self.dropped_ir:
+            drop_linking_ir(loop)
+            return_freed_memory()
+            self.dropped_ir.add(loop)
+
     def run(self, max_steps: int, stop_step, stop_time, ratio_target):
-        """One compiled run of steps (pdem.cycle.fused_steps): (steps done, why it ended);
-        the contacts' columns are taken over when the loop updated them."""
+        """One compiled run of steps (pdem.cycle.fused_steps, or fused_grid_steps with zoned
+        blocks): (steps done, why it ended); the contacts' columns are taken over when the
+        loop updated them."""
         st = self.stepper
         s = st.s
         hold_fixed(s)
@@ -157,6 +187,8 @@ class CompiledRuns:
         if net is None and s.comm.size > 1:  # (fusable: only `still` is not float64)
             raise SimulationError("internal: a halo field is not a float64 array")
         st.stats[:] = 0.0
+        if s.grids is not None:
+            return self.run_grids(max_steps, stop_step, stop_time, ratio_target, net, columns)
         speed, sleep_steps, frac = inactive_args(s.scene)
         todo = np.empty(c.n, np.uint8)
         with s.timers.phase("fused"):
@@ -177,10 +209,7 @@ class CompiledRuns:
                     math.inf if stop_time is None else stop_time,
                     -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step,
                     todo, net, columns, 0.5 * r.margin)
-        if not self.dropped_ir:  # after its first call: loaded (or compiled and saved)
-            drop_linking_ir(fused_steps)
-            return_freed_memory()
-            self.dropped_ir = True
+        self._drop_ir(fused_steps)
         st.redetected += redetected
         if redetected:  # the loop updated contacts (pdem.contact.update): their new columns
             sub = sub_columns(subs)
@@ -189,4 +218,40 @@ class CompiledRuns:
             s.contacts = ContactStore(c.arrays, sub, start)
             if why == DROPS:  # the last update found contacts apart
                 s.contacts = st.kept(s.contacts, keep)
+        return steps, why
+
+    def run_grids(self, max_steps: int, stop_step, stop_time, ratio_target, net, columns):
+        """:meth:`run` with zoned blocks (pdem.cycle.fused_grid_steps): the owned grids'
+        one run of a constitutive table (:meth:`fusable`), their sync and halo arguments."""
+        st = self.stepper
+        s = st.s
+        b = s.blocks
+        n = s.n_owned
+        r = s.resolved
+        g = s.grids
+        runs = g.table_runs()
+        run = runs[0] if runs else g.any_run()
+        if columns is None:  # (fusable: not with solve.inactive)
+            raise SimulationError("internal: a halo field is not a float64 array")
+        m = motion_record(b, n)
+        with s.timers.phase("fused"):
+            steps, s.step, s.time, why, st.bad, st.u_mig_max, folded, g.ratio = \
+                fused_grid_steps(
+                    m._replace(fixed=g.rigid_fixed(m.fixed)), s.gravity, s.dt,
+                    s.damping_args(), s.scalar_inertia, st.stats, b.radius[:n], b.fixed[:n],
+                    b.u_acc, b.u_geo, b.u_mig[:n], b.q, b.R, st.bodies(), s.contacts.pairs(),
+                    s.contacts.subs(), s.joints.kernel_args, b.still,
+                    g.record(b, s.contacts), g.step_args(run, s.dt, s.alpha),
+                    g.sync_args(b), g.sync_args(b, ghosts=True),
+                    np.array(g.gids[:g.n_owned], np.int64), g.ref_force, g.ratio,
+                    REMAP_FRACTION * s.ctol, s.scene.contact.detect_every, r.speed_limit,
+                    r.speed_growth, s.step, s.time, max_steps,
+                    NO_STEP if stop_step is None else stop_step,
+                    math.inf if stop_time is None else stop_time,
+                    -1.0 if ratio_target is None else ratio_target, r.ref_force, s.max_step,
+                    net, columns, self.grid_net_for(g.halo), (g.nodes, g.vel), 0.5 * r.margin)
+        self._drop_ir(fused_grid_steps)
+        st.grid_bad = int(folded)
+        g.planes_moved(False)
+        g.planes_moved(True)
         return steps, why

@@ -37,7 +37,8 @@ from .contact.detect import refresh_contacts
 from .contact.forces import contact_forces
 from .contact.staleness import stale_contacts
 from .contact.update import begin_update, end_update, keeps_all
-from .deformable.contact import contact_forces_grid
+from .deformable.contact import contact_forces_grid, refresh_pieces
+from .deformable.motion import step_grids
 from .dynamics import motion
 from .dynamics.inactive import update_inactive
 from .dynamics.kinematics import rotation_matrices, world_vertices
@@ -223,7 +224,7 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u
                 break
             if net is not None:  # (always, here)
                 rebuild = m.x.shape[0] > 0 and u_mig_max > rebuild_at
-                if _reduce(net, stats[motion.STAT_MAX_FORCE], rebuild) != 0:
+                if _reduce(net, stats[motion.STAT_MAX_FORCE], rebuild, 0.0, 0.0) != 0:
                     why = MPI_FAILED
                     break
                 if _reduced_stop(net.reduced, ref_force, ratio_target):
@@ -262,21 +263,109 @@ def fused_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u
 
 
 @kernel
-def _reduce(net, max_force, rebuild):
+def fused_grid_steps(m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u_acc,
+                     u_geo, u_mig, q, R, bodies, pairs, subs, joints, still, grid, grid_step,
+                     own_sync, ghost_sync, gids, grid_ref, grid_ratio, remap_at, detect_every,
+                     speed_limit, speed_growth, step, time, max_steps, stop_step, stop_time,
+                     ratio_target, ref_force, max_step, net, columns, grid_net, grid_columns,
+                     rebuild_at):
+    """:func:`fused_steps` for a scene with zoned blocks: up to ``max_steps`` steps of the
+    stepper's first half with the grid step (pdem.stepper.Stepper.first_half's hooks, the
+    same kernels on the same arrays); returns ``(steps, step, time, why, bad, u_mig_max,
+    folded, grid_ratio)``: ``folded`` the gid of a zoned block whose grid folded in the last
+    step (-1: none), ``grid_ratio`` the grids' unbalanced-force ratio of the last step that
+    folded none (``grid_ratio`` as given before the first).
+
+    Between :func:`motion_phase`'s two parts the owned grids step
+    (:func:`pdem.deformable.motion.step_grids` with ``grid_step``, its arguments for one
+    constitutive table: :meth:`pdem.deformable.store.GridStore.step_args`) and move their
+    blocks (:func:`pdem.deformable.contact.refresh_pieces` with ``own_sync``); after the
+    blocks' halo the ghost grids' gridpoints come (``grid_net``, ``grid_columns``: the
+    gridpoints' positions and velocities) and move theirs (``ghost_sync``); then the forces
+    with the zoned blocks' ``grid`` (:class:`pdem.deformable.contact.Grid`). ``m``'s fixed
+    flags hold the zoned rows (the rigid integration leaves them to their grids).
+
+    Every periodic contact update, search and bad state returns to Python
+    (``NEEDS_PYTHON``): the regrid of a zoned block's sub-contacts is Python's
+    (pdem.deformable.subcontacts). ``gids``: the owned grids' block gids, ``grid_ref``
+    their ratio's scale. The other arguments and the ends of a run are :func:`fused_steps`'
+    (``net`` and ``columns`` as there, never None: ``solve.inactive`` does not fuse with
+    zones)."""
+    n_steps = 0
+    folded = -1
+    why = DONE
+    bad = -1
+    u_mig_max = 0.0
+    while True:
+        step, time, bad, u_mig_max = motion_phase(
+            MOTION, m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u_acc, u_geo,
+            u_mig, step, time, speed_limit, speed_growth, max_step)
+        d, big = step_grids(*grid_step)
+        if d >= 0:
+            folded = gids[d]
+        else:
+            grid_ratio = big / grid_ref
+        refresh_pieces(*own_sync)
+        step, time, bad, u_mig_max = motion_phase(
+            CLOCK, m, gravity, dt, damping, scalar_inertia, stats, radius, fixed, u_acc, u_geo,
+            u_mig, step, time, speed_limit, speed_growth, max_step)
+        n_steps += 1
+        single = net.single
+        if not single:  # the ghosts' rows, then their gridpoints, from their owners
+            rc = forward_halo(net, columns)
+            if rc == 0 and not grid_net.single:
+                rc = forward_halo(grid_net, grid_columns)
+            if rc != 0:
+                why, bad = MPI_FAILED, rc
+                break
+        refresh_pieces(*ghost_sync)
+        force_phase(dt, q, R, bodies, pairs, subs, joints, still, grid, None, gravity, radius,
+                    still, 0.0, 0, 0.0, ref_force)
+        own = bad >= 0 or folded >= 0 or step % detect_every == 0 or _remap_due(u_acc, remap_at)
+        done = n_steps >= max_steps or step >= stop_step or time >= stop_time
+        ratio = max(stats[motion.STAT_MAX_FORCE] / ref_force, grid_ratio)
+        if single:
+            if own:
+                why = NEEDS_PYTHON
+                break
+            if done or ratio <= ratio_target:
+                why = DONE
+                break
+        else:
+            if done:
+                why = DONE
+                break
+            if own:
+                why = NEEDS_PYTHON
+                break
+            rebuild = m.x.shape[0] > 0 and u_mig_max > rebuild_at
+            if _reduce(net, stats[motion.STAT_MAX_FORCE], rebuild, 0.0, grid_ratio) != 0:
+                why = MPI_FAILED
+                break
+            if _reduced_stop(net.reduced, ref_force, ratio_target):
+                why = REDUCED
+                break
+    return n_steps, step, time, why, bad, u_mig_max, folded, grid_ratio
+
+
+@kernel
+def _reduce(net, max_force, rebuild, folded, grid_ratio):
     """The step's reduction (pdem.stepper.Stepper.second_half's flags, with no bad state,
-    no block out of the model domain, no signal, no grid): 0 or MPI's error code."""
-    step_flags(net.flags, max_force, -1, rebuild, False, 0.0, 0.0, 0.0)
+    no block out of the model domain, no signal; ``folded`` and the grids' ratio as there):
+    0 or MPI's error code."""
+    step_flags(net.flags, max_force, -1, rebuild, False, 0.0, folded, grid_ratio)
     return allreduce_max(net)
 
 
 @kernel
 def _reduced_stop(red, ref_force, ratio_target):
     """Whether the reduced flags end the run of steps: a bad state, a migration, a block
-    out of the domain, a signal or a folded grid on some rank, or the ratio target."""
+    out of the domain, a signal or a folded grid on some rank, or the ratio target (the
+    rigid blocks' and the grids', as pdem.stepper.Stepper.second_half makes the ratio)."""
     for k in STOP_FLAGS:
         if red[k] != 0.0:
             return True
-    return red[FLAG_FORCE] / ref_force <= ratio_target
+    return max(red[FLAG_FORCE] / ref_force, red[FLAG_GRID_RATIO]) <= ratio_target
 
 
 @kernel

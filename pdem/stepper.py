@@ -68,7 +68,7 @@ class Stepper:
         # a pdem.signals.StopRequest (or None): polled every step, agreed in the flag reduction
         self.stop = None
         self.stop_signal = 0  # the agreed stop signal after the last step (0: go on)
-        self._grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
+        self.grid_bad = -1  # gid of a zoned block whose grid folded this step (-1: none)
         self.migrate_due = False  # the last step's reduction asked for a migration
         self.runs = CompiledRuns(self)  # the compiled runs of steps (pdem.compiled_runs)
         # contacts whose geometry was updated since the start (its own update included): a
@@ -270,7 +270,7 @@ class Stepper:
                     self.stats, b.radius[:n], b.fixed[:n], b.u_acc, b.u_geo, b.u_mig[:n],
                     s.step, s.time, r.speed_limit, r.speed_growth, s.max_step)
                 if parts == MOTION:
-                    self._grid_bad = g.step(s.dt, s.alpha)
+                    self.grid_bad = g.step(s.dt, s.alpha)
                     g.sync(b)
                 parts = CLOCK if parts == MOTION else 0
         with tm.phase("halo"):
@@ -323,7 +323,7 @@ class Stepper:
             if flags is None:  # (a compiled run of steps makes the same STEP_FLAGS)
                 mine = np.zeros(STEP_FLAGS)
                 step_flags(mine, self.stats[motion.STAT_MAX_FORCE], bad, rebuild, left,
-                           float(signum), float(self._grid_bad + 1),
+                           float(signum), float(self.grid_bad + 1),
                            s.grids.ratio if s.grids is not None else 0.0)
                 flags = mpi.allreduce_max_array(s.comm, mine)
         self.stop_signal = int(flags[FLAG_SIGNAL])

@@ -1,6 +1,7 @@
 """Undamped collapses for the energy budget (tests/verification/test_energy.py, issue 16):
 the semicircular masonry arch, a pile of random polyhedra dropped into a box, a row of
-toppling columns, a spinning block thrown at a wall.
+toppling columns, a spinning block thrown at a wall, a row of soft zoned and rigid cubes
+thrown at each other.
 
 Closed forms: with ``damping: none`` the budget must balance, kinetic + joint spring energy +
 energy dissipated in the joints = energy at the start + work of gravity (pdem.plugins.energy);
@@ -109,3 +110,31 @@ blocks:
      velocity: [5.0, 0.3, 0.0], angular_velocity: [3.0, 7.0, 30.0]}}
 solve: {{time: {time}, damping: none}}
 """
+
+
+# a row on a fixed floor: soft zoned cubes and rigid ones alternating, thrown at each other
+# (tests/mpi/test_deformable_mpi.py's zoned row, every zoned cube elastic): z0 spins and hits
+# r1, which turns and drifts 1.3 cm sideways, so when z2 catches r1 the row of z2's face
+# gridpoints along one edge lies just outside r1's outline while most of their cells lie under
+# r1's face, and r1's edge presses into z2's face there
+ZONED_ROW = """
+name: soft-row
+materials:
+  rock: {density: 2000}
+  soft: {density: 2000, young: 5.0e7, poisson: 0.25}
+joints: {default: {kn: 5.0e8, ks: 2.0e8, friction: 20.0}}
+blocks:
+  - {name: floor, box: {min: [-4, -1, -1], max: [4, 1, 0]}, material: rock, fixed: true}
+  - {name: z0, box: {min: [-2.56, -0.5, 0], max: [-1.56, 0.5, 1]}, material: soft,
+     zones: {size: 0.5}, velocity: [3, 0, 0], angular_velocity: [0, 0, 2]}
+  - {name: r1, box: {min: [-1.53, -0.5, 0], max: [-0.53, 0.5, 1]}, material: rock,
+     velocity: [-1, 0, 0]}
+  - {name: z2, box: {min: [-0.48, -0.5, 0], max: [0.52, 0.5, 1]}, material: soft,
+     zones: {size: 0.5}, velocity: [-2, 0, 0]}
+solve: {steps: STEPS, damping: none}
+"""
+
+
+def zoned_row_scene(steps: int = 240) -> str:
+    """The soft zoned row (above), undamped, for ``steps`` steps."""
+    return ZONED_ROW.replace("STEPS", str(int(steps)))

@@ -277,12 +277,14 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
 
 @kernel
 def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, dx, radius,
-                   piece_start, vert_start, verts_local):
+                   piece_start, vert_start, verts_local, dtheta, w, L):
     """After a grid step: each zoned block's row from its gridpoints (``x`` the mass-weighted
     centroid, ``v`` the mean velocity, ``dx`` the largest gridpoint motion of the step as a
-    vector, so that eq. 1's motion bound covers the deforming surface), its piece's vertices
-    in the identity frame and its radius. The piece's planes follow from the vertices when
-    they are read (:func:`piece_planes`)."""
+    vector, so that eq. 1's motion bound covers the deforming surface; no rotation: ``dtheta``,
+    ``w``, ``L`` zero), its piece's vertices in the identity frame and its radius. The piece's
+    planes follow from the vertices when they are read (:func:`piece_planes`). The stepper
+    and the compiled loop of steps (pdem.cycle) both call it
+    (:meth:`~pdem.deformable.store.GridStore.sync_args`)."""
     for d in range(rows.shape[0]):
         r = rows[d]
         a, e = node_start[d], node_start[d + 1]
@@ -322,6 +324,10 @@ def refresh_pieces(rows, node_start, surf_start, surf, nodes, vel, gmass, x, v, 
         x[r, 0], x[r, 1], x[r, 2] = cx, cy, cz
         v[r, 0], v[r, 1], v[r, 2] = vx / m, vy / m, vz / m
         dx[r, 0], dx[r, 1], dx[r, 2] = bx, by, bz
+        for i in range(3):
+            dtheta[r, i] = 0.0
+            w[r, i] = 0.0
+            L[r, i] = 0.0
         radius[r] = rad
 
 

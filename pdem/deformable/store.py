@@ -27,7 +27,7 @@ from ..mpi import allgather
 from ..parallel.halo import RowHalo
 from .body import DeformableBody
 from .columns import TRI, W
-from .constitutive import reduced_table
+from .constitutive import material, reduced_table
 from .contact import Grid, piece_planes, refresh_pieces
 from .motion import (
     GRID_DAMPING,
@@ -144,6 +144,7 @@ class GridStore:
         self._spin = np.empty((m, 3))
         self._sigma_p = np.zeros(m)
         self._runs = None  # the owned grids in runs of one constitutive table (_table_runs)
+        self._one_run = None  # whether every rank's are one run (one_run)
         self.gravity = np.asarray(gravity, float)
         self.rows = np.zeros(len(self.bodies), np.int64)
         self.dt = np.inf
@@ -226,6 +227,7 @@ class GridStore:
         for b in self.bodies:
             b.model = reduced_table(b.params, factor)
         self._runs = None
+        self._one_run = None
 
     def set_damping(self, mode: str, alpha: float) -> None:
         """The grids' damping: ``solve.damping.mode`` at the gridpoints (its form,
@@ -399,18 +401,27 @@ class GridStore:
         grid step) or of the ghosts (after their forward). Their pieces' planes (triangle
         normals and offsets, edge directions) are left behind the vertices until
         :meth:`fresh_planes`."""
-        part = slice(self.n_owned, None) if ghosts else slice(0, self.n_owned)
-        rows = self.rows[part]
-        if not len(rows):
+        args = self.sync_args(b, ghosts)
+        if not len(args[0]):
             return
+        refresh_pieces(*args)
+        self.planes_moved(ghosts)
+
+    def sync_args(self, b, ghosts: bool = False) -> tuple:
+        """:func:`~pdem.deformable.contact.refresh_pieces`' arguments for the owned grids
+        or the ghosts (:meth:`sync`; the compiled loop of steps calls it with them)."""
+        part = slice(self.n_owned, None) if ghosts else slice(0, self.n_owned)
         ends = slice(part.start, None if ghosts else self.n_owned + 1)
-        refresh_pieces(rows, self.node_start[ends], self.surf_start[ends], self.surf_flat,
-                       self.nodes, self.vel, self.gmass, b.x, b.v, b.dx, b.radius,
-                       b.piece_start, b.vert_start, b.verts_local)
+        return (self.rows[part], self.node_start[ends], self.surf_start[ends], self.surf_flat,
+                self.nodes, self.vel, self.gmass, b.x, b.v, b.dx, b.radius, b.piece_start,
+                b.vert_start, b.verts_local, b.dtheta, b.w, b.L)
+
+    def planes_moved(self, ghosts: bool) -> None:
+        """The owned (or ghost) pieces' vertices moved: their planes are made again before
+        they are next read (:meth:`fresh_planes`)."""
+        if (self.n_owned == len(self.bodies)) if ghosts else self.n_owned == 0:
+            return
         self._stale[int(ghosts)] = True
-        b.dtheta[rows] = 0.0
-        b.w[rows] = 0.0
-        b.L[rows] = 0.0
 
     def fresh_planes(self, b) -> None:
         """The planes of the pieces :meth:`sync` moved since they were last made, from their
@@ -489,25 +500,51 @@ class GridStore:
         masses raised where the step's contact springs need it (:func:`inertial_masses`).
         The table is a compile-time constant of the kernel (its model's update,
         pdem.deformable.constitutive): grids of several materials in turn are several calls."""
+        big = 0.0
+        for run in self.table_runs():
+            bad, top = step_grids(*self.step_args(run, dt, alpha))
+            if bad >= 0:
+                return self.gids[bad]
+            big = max(big, top)
+        self.ratio = big / self.ref_force
+        return -1
+
+    def table_runs(self) -> list:
+        """The owned grids as runs ``(d0, d1, table)`` of consecutive grids of one
+        constitutive table (:meth:`step`'s kernel calls; none when this rank owns no grid)."""
         if self._runs is None:
             self._runs = self._table_runs()
+        return self._runs
+
+    def step_args(self, run: tuple, dt: float, alpha: float) -> tuple:
+        """:func:`~pdem.deformable.motion.step_grids`' arguments for a run of grids
+        (:meth:`table_runs`) and the step ``dt`` (:meth:`step`; the compiled loop of steps
+        calls it with them)."""
+        d0, d1, table = run
         q = (dt / (2.0 * GRID_FRAC)) ** 2  # (scaled_masses' factor, as it makes it)
-        big = 0.0
         ap, gf, load, force, mid = self._nscratch
-        for d0, d1, table in self._runs:
-            bad, top = step_grids(
-                d0, d1, table, dt, q, self.gravity, self.adaptive, float(alpha), self.bloaded,
+        return (d0, d1, table, dt, q, self.gravity, self.adaptive, float(alpha), self.bloaded,
                 self.node_start, self.zone_start, self.scalars, self.moduli, self.work,
                 self.servo, self.unbalanced, self.nodes, self.vel, self.force, self.kc,
                 self.gmass, self.mass, self.emass, self.zstiff, self.applied, self.fixed,
                 self.fixed_vel, self.prev, self.bload, self.tets, self.grad, self.vol,
                 self.stress, self.plastic, ap, gf, load, force, mid, self._rate, self._spin,
                 self._sigma_p)
-            if bad >= 0:
-                return self.gids[bad]
-            big = max(big, top)
-        self.ratio = big / self.ref_force
-        return -1
+
+    def one_run(self, comm) -> bool:
+        """Whether every rank's owned grids step in at most one kernel call (one constitutive
+        table): then the compiled loop of steps steps them (pdem.compiled_runs); collective,
+        decided once per store and set of tables (:meth:`weaken` makes new ones)."""
+        if self._one_run is None:
+            self._one_run = all(allgather(comm, len(self.table_runs()) <= 1))
+        return self._one_run
+
+    def any_run(self) -> tuple:
+        """A run of no grid, for a rank owning none in a compiled loop of steps (the table of
+        a ghost grid, else an elastic one: it is not stepped)."""
+        if self.bodies:
+            return (0, 0, self.bodies[0].model)
+        return (0, 0, material({"density": 1.0, "young": 1.0, "poisson": 0.25})[1])
 
     def _table_runs(self) -> list:
         """The owned grids as runs ``(d0, d1, table)`` of consecutive grids of one

@@ -18,6 +18,7 @@ from ..mpi import wait_all
 # scene sends those of the features it uses (pdem.model.fields.halo_fields)
 ROW = row_width(HALO)
 HALO_TAG = 11  # the forward halo's messages (pdem.parallel.native sends the same)
+GRID_HALO_TAG = 12  # the zoned blocks' gridpoints' (RowHalo; the compiled loop's the same)
 
 
 @kernel
@@ -120,13 +121,13 @@ class RowHalo:
         the ghost rows (collective among neighbours)."""
         if not self.send and not self.recv:
             return
-        reqs = [self.comm.Irecv(buf, source=r, tag=12) for r, buf in self.rbuf.items()]
+        reqs = [self.comm.Irecv(buf, source=r, tag=GRID_HALO_TAG) for r, buf in self.rbuf.items()]
         for r, idx in self.send.items():
             c = 0
             for a in arrays:
                 self.sbuf[r][:, c:c + a.shape[1]] = a[idx]
                 c += a.shape[1]
-            reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=12))
+            reqs.append(self.comm.Isend(self.sbuf[r], dest=r, tag=GRID_HALO_TAG))
         wait_all(self.comm, reqs)
         for r, idx in self.recv.items():
             c = 0

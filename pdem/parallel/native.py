@@ -102,7 +102,9 @@ class Net(NamedTuple):
 
     ``single``: one rank, no MPI call is made (:func:`idle_net`); ``fn``: the addresses of
     :data:`FUNCTIONS`, in that order; ``wide``: 64-bit handles;
-    ``comm``, ``double``, ``op_max``: the handles; ``req_size``: bytes of an ``MPI_Request``;
+    ``comm``, ``double``, ``op_max``: the handles; ``tag``: the messages' tag (the blocks'
+    halo's, or the gridpoints': :data:`pdem.parallel.halo.GRID_HALO_TAG`); ``req_size``:
+    bytes of an ``MPI_Request``;
     ``requests``, ``statuses``: byte buffers for one of each per neighbour and direction;
     ``send_rank``/``recv_rank`` (int32) the neighbours, ``send_start``/``recv_start`` the
     CSR of their rows in ``send_rows``/``recv_rows`` and in the buffers ``sbuf``/``rbuf``
@@ -115,6 +117,7 @@ class Net(NamedTuple):
     comm: int
     double: int
     op_max: int
+    tag: int
     req_size: int
     requests: np.ndarray
     statuses: np.ndarray
@@ -143,7 +146,7 @@ def _post(net, fn, rows, peer, k):
     ``peer``, its request the ``k``-th; MPI's error code."""
     return _call7(net.fn[fn], net.wide, (
         _address(rows), np.int64(rows.size), net.double, np.int64(peer),
-        np.int64(HALO_TAG), net.comm, _address(net.requests) + k * net.req_size))
+        np.int64(net.tag), net.comm, _address(net.requests) + k * net.req_size))
 
 
 @kernel
@@ -214,9 +217,10 @@ def _rows_csr(plan: dict[int, np.ndarray]):
     return ranks, start, rows
 
 
-def make_net(comm, halo, n_flags: int) -> Net | None:
-    """The compiled calls' record for ``halo`` (a :class:`pdem.parallel.halo.Halo`) and a
-    reduction of ``n_flags`` float64; None if this MPI's functions are not found (this rank
+def make_net(comm, halo, n_flags: int, tag: int = HALO_TAG) -> Net | None:
+    """The compiled calls' record for ``halo`` (a :class:`pdem.parallel.halo.Halo`, or a
+    :class:`~pdem.parallel.halo.RowHalo` with its ``tag``) and a reduction of ``n_flags``
+    float64; None if this MPI's functions are not found (this rank
     only: :func:`link` agrees collectively)."""
     from mpi4py import MPI
 
@@ -233,7 +237,8 @@ def make_net(comm, halo, n_flags: int) -> Net | None:
     recv_rank, recv_start, recv_rows = _rows_csr(halo.recv)
     width = next(iter(halo.sbuf.values()), next(iter(halo.rbuf.values()), np.empty((0, 1))))
     width = width.shape[1]
-    return Net(False, fn, size == 8, _handle(comm), _handle(MPI.DOUBLE), _handle(MPI.MAX), req_size,
+    return Net(False, fn, size == 8, _handle(comm), _handle(MPI.DOUBLE), _handle(MPI.MAX),
+               int(tag), req_size,
                np.zeros(max(n_req, 1) * req_size, np.uint8),
                np.zeros(max(n_req, 1) * int(MPI._sizeof(MPI.Status)), np.uint8),
                send_rank, send_start, send_rows, np.empty((send_start[-1], width)),
@@ -245,7 +250,7 @@ def idle_net(width: int, n_flags: int) -> Net:
     """The record a serial run passes (``single``: nothing is sent or reduced): the same
     numba type as a rank's, so one compiled loop serves both."""
     no_rank, start, no_row = np.zeros(0, np.int32), np.zeros(1, np.int64), np.zeros(0, np.int64)
-    return Net(True, np.zeros(len(FUNCTIONS), np.int64), False, 0, 0, 0, 0,
+    return Net(True, np.zeros(len(FUNCTIONS), np.int64), False, 0, 0, 0, HALO_TAG, 0,
                np.zeros(1, np.uint8), np.zeros(1, np.uint8), no_rank, start, no_row,
                np.empty((0, width)), no_rank, start, no_row, np.empty((0, width)),
                np.zeros(n_flags), np.zeros(n_flags))

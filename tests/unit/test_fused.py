@@ -1,8 +1,9 @@
 """The compiled run of steps (pdem.cycle, ``solve.fused``) changes nothing but the speed: for
 scenes that exercise every Python-level event between steps (snapshots, histories sampled in
 model time, energy samples, checkpoints, contact searches and updates, blocks leaving the
-model domain, an excavation at a time, adaptive damping, a ratio end condition), the output
-files of a serial run are bitwise the same with it on and off."""
+model domain, an excavation at a time, adaptive damping, a ratio end condition), with and
+without zoned blocks, the output files of a serial run are bitwise the same with it on and
+off."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 import yaml
 from mpi4py import MPI
 
-from pdem.cases.collapse import ledge_scene, pile_scene
+from pdem.cases.collapse import ledge_scene, pile_scene, zoned_row_scene
 from pdem.cases.rock_mass import l_on_stack_scene
 from pdem.cases.stacks import cube_stack_scene
 from pdem.config import parse_scene
@@ -59,11 +60,38 @@ def adaptive_stack() -> str:
     return yaml.safe_dump(d)
 
 
+# zoned blocks (pdem.cycle.fused_grid_steps): soft zoned cubes and rigid ones thrown at each
+# other (contacts made and updated, grids strained, the energy budget sampled), and a zoned
+# column settling on a floor under adaptive damping to a ratio (the grids' ratio ends it)
+def zoned_row() -> str:
+    d = yaml.safe_load(zoned_row_scene(240))
+    d["blocks"][3]["force"] = [-2.0e4, 0.0, 0.0]  # z2 pushed: a load spread on its gridpoints
+    d["output"] = {"every_steps": 40, "every": None, "energy_every": 7}
+    return yaml.safe_dump(d)
+
+
+ZONED_SETTLE = """
+name: zoned-settle
+materials:
+  rock: {density: 2000}
+  soft: {density: 2000, young: 1.0e8, poisson: 0.25, model: mohr_coulomb, cohesion: 1.0e6,
+         friction: 30, tension: 1.0e5}
+joints: {default: {kn: 1.0e9, ks: 1.0e9, friction: 30}}
+blocks:
+  - {name: floor, box: {min: [-1, -1, -1], max: [1, 1, 0]}, material: rock, fixed: true}
+  - {name: col, box: {min: [-0.5, -0.5, 0], max: [0.5, 0.5, 2]}, material: soft,
+     zones: {size: 0.5}}
+solve: {ratio: 1.0e-3, max_steps: 5000, damping: {mode: adaptive}}
+output: {every_steps: 50, every: null}
+"""
+
 SCENES = {
     "pile-histories": pile_with_histories,
     "ledge-domain": lambda: ledge_scene(time=0.6),
     "excavation-at-time": lambda: l_on_stack_scene(time=0.25, excavate_at=0.1),
     "adaptive-ratio": adaptive_stack,
+    "zoned-row": zoned_row,
+    "zoned-settle-ratio": lambda: ZONED_SETTLE,
 }
 
 
@@ -75,6 +103,9 @@ def test_fused_output_is_bitwise_the_step_by_step_output(name, tmp_path):
     assert sim_a.state.step == sim_b.state.step > 100
     if name == "pile-histories":  # searches at step after step: some steps went to Python
         assert sim_b.stepper.python_steps > 0  # (Stepper.advance_many, PYTHON_RUN)
+    if name.startswith("zoned"):  # the grids stepped in the compiled loop
+        assert "fused" in sim_b.state.timers.report()
+        assert "fused" not in sim_a.state.timers.report()
     da, db = datasets(a), datasets(b)
     assert da.keys() == db.keys()
     bad = [k for k in da if not np.array_equal(da[k], db[k], equal_nan=da[k].dtype.kind == "f")]

@@ -26,7 +26,7 @@ checked at every sample against the energy put in so far.
 import numpy as np
 from mpi4py import MPI
 
-from pdem.cases.collapse import arch_scene
+from pdem.cases.collapse import arch_scene, zoned_row_scene
 from pdem.config import parse_scene
 from pdem.plugins.energy import balance, energy_totals
 from pdem.simulation import Simulation
@@ -231,29 +231,6 @@ def test_a_zoned_arch_collapsing_keeps_its_balance():
 
 
 # ------------------------------------------------------------------ a rim pressed past an edge
-# a row on a fixed floor: soft zoned cubes and rigid ones alternating, thrown at each other (the
-# zoned row of tests/mpi/test_deformable_mpi.py, every zoned cube elastic and soft): z0 spins
-# and hits r1, which turns and drifts 1.3 cm sideways, so when z2 catches r1 the row of z2's
-# face gridpoints along one edge lies just outside r1's outline while most of its gridpoints'
-# cells lie under r1's face, and r1's edge presses into z2's face there
-ROW = """
-name: soft-row
-materials:
-  rock: {density: 2000}
-  soft: {density: 2000, young: 5.0e7, poisson: 0.25}
-joints: {default: {kn: 5.0e8, ks: 2.0e8, friction: 20.0}}
-blocks:
-  - {name: floor, box: {min: [-4, -1, -1], max: [4, 1, 0]}, material: rock, fixed: true}
-  - {name: z0, box: {min: [-2.56, -0.5, 0], max: [-1.56, 0.5, 1]}, material: soft,
-     zones: {size: 0.5}, velocity: [3, 0, 0], angular_velocity: [0, 0, 2]}
-  - {name: r1, box: {min: [-1.53, -0.5, 0], max: [-0.53, 0.5, 1]}, material: rock,
-     velocity: [-1, 0, 0]}
-  - {name: z2, box: {min: [-0.48, -0.5, 0], max: [0.52, 0.5, 1]}, material: soft,
-     zones: {size: 0.5}, velocity: [-2, 0, 0]}
-solve: {steps: 240, damping: none}
-"""
-
-
 def test_a_rigid_edge_pressed_into_a_zoned_face_makes_no_energy():
     """The gridpoints of the zoned face along r1's edge bear r1 from the first touch (the
     part of their cells under r1's face), so no gridpoint joins the contact centimetres deep:
@@ -261,7 +238,7 @@ def test_a_rigid_edge_pressed_into_a_zoned_face_makes_no_energy():
     outside r1's outline by more than the touch tolerance; r1's edge sank 2.4 cm into z2's
     face beside it, and the update that took the row in created 5.1e3 J, 35 % of the energy
     put in (the run stopped on solve.energy_tolerance at step 180)."""
-    sim = simulation(ROW)
+    sim = simulation(zoned_row_scene(240))  # (pdem.cases.collapse: the scene and its story)
     s = sim.state
     e0 = start(sim)
     worst = made = 0.0
