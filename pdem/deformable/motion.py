@@ -241,8 +241,8 @@ def advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     passes them as ``*args``, which numba cannot inline). Scratch: ``force``, ``mid``
     (n, 3), ``rate`` (m, 6), ``spin`` (m, 3), ``sigma_p`` (m,). False if a zone inverted.
     Inlined into :func:`cycle` and :func:`step_grids`: the same arithmetic, so the same
-    bits, on either path (slicing a grid's ~25 arrays cost ~0.3 us a grid: 0.3 ms a step
-    of a rock mass of 1,000 zoned blocks, docs/deformable.md "Speed")."""
+    bits, on either path. Its loops index with unsigned integers (pdem.deformable.zones:
+    numba would wrap a signed index that may be negative around at every access)."""
     d, a, e, za, ze, loaded = where
     bulk, shear = moduli
     d1 = 1.0 - 0.5 * alpha * dt  # eq. 49's factors (VISCOUS)
