@@ -27,6 +27,12 @@ the efficiency against the last 1-rank row of the same ``--label`` in the csv:
 ``T1 / (ranks x T_ranks)`` from the CPU times and from the wall times. Not a test: the
 machines it ran on are shared and noisy (the csv says how).
 
+``--kernel``: instead, the grids' step kernel alone (``motion.step_grids``) on the arguments
+it had in the step after the warm steps, the best of ``--chunks`` chunks of ``--steps`` calls
+(each chunk from copies of them), and for the rock mass the same arrays as one grid (the
+cubes' tets renumbered into one grid: the same gridpoints, zones and arithmetic, one grid's
+loops): the per-grid cost of stepping many grids is the difference.
+
 ``--save`` appends the rows to bench/results/zoned_rock_mass.csv. Runs on main's tree too
 (``PYTHONPATH`` at it): the "before" rows.
 """
@@ -43,6 +49,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+import pdem.deformable.store as grid_store
 from pdem import stepper
 from pdem.config import parse_scene
 from pdem.deformable.store import GridStore
@@ -54,7 +61,8 @@ FIELDS = ["date", "host", "command", "quantity", "value", "unit", "note"]
 QUANTITIES = {"cpu_ms_step": "ms", "wall_ms_step": "ms", "zone_steps_per_s_core": "1/s",
               "grid_cpu_ms_step": "ms", "grid_zone_steps_per_s_core": "1/s",
               "forces_cpu_ms_step": "ms", "refresh_cpu_ms_step": "ms", "rest_cpu_ms_step": "ms",
-              "zones": "", "eff_cpu": "", "eff_wall": ""}
+              "zones": "", "eff_cpu": "", "eff_wall": "", "kernel_ms_step": "ms",
+              "kernel_one_grid_ms_step": "ms"}
 
 HEAD = """
 name: {name}
@@ -156,6 +164,53 @@ def timed(text: str, steps: int, warm: int, chunks: int, comm, fused: bool = Fal
             "setup_s": setup}
 
 
+def kernel_timed(text: str, steps: int, warm: int, chunks: int) -> dict:
+    """``--kernel`` (module doc): ms per call of ``step_grids`` on the scene's arguments."""
+    sim = Simulation(parse_scene(text), MPI.COMM_SELF, output=False)
+    g = sim.state.grids
+    for _ in range(warm):
+        sim.stepper.advance()
+    got, step_grids = [], grid_store.step_grids
+
+    def grab(*a):
+        got.append([x.copy() if isinstance(x, np.ndarray) else x for x in a])
+        return step_grids(*a)
+
+    grid_store.step_grids = grab
+    try:
+        sim.stepper.advance()
+    finally:
+        grid_store.step_grids = step_grids
+    assert len(got) == 1, "one constitutive table: one call"
+    args = got[0]
+
+    def best(a0) -> float:
+        out = np.inf
+        for _ in range(chunks):
+            a = [x.copy() if isinstance(x, np.ndarray) else x for x in a0]
+            step_grids(*a)
+            t0 = time.process_time()
+            for _ in range(steps):
+                step_grids(*a)
+            out = min(out, (time.process_time() - t0) / steps)
+        return 1e3 * out
+
+    zones = sum(len(b.tets) for b in g.bodies[:g.n_owned])
+    row = {"scene": sim.state.scene.name, "ranks": 1, "blocks": g.n_owned, "zones": zones,
+           "kernel_ms_step": best(args), "kernel_one_grid_ms_step": ""}
+    if g.n_owned > 1:  # the same arrays as one grid (positions in step_grids' signature)
+        one = list(args)
+        d1, ns, zs = one[1], one[9], one[10]
+        tets = one[29].copy()
+        for d in range(d1):
+            tets[zs[d]:zs[d + 1]] += ns[d]
+        one[1], one[9], one[10], one[29] = 1, ns[[0, d1]], zs[[0, d1]], tets
+        for k in (11, 12, 13, 14, 15):  # scalars, moduli, work, servo, unbalanced: row 0
+            one[k] = one[k][:1].copy()
+        row["kernel_one_grid_ms_step"] = best(one)
+    return row
+
+
 def quantity(scene: str, ranks: int, name: str) -> str:
     return f"{scene} {ranks}-rank {name}"
 
@@ -190,6 +245,8 @@ def main() -> None:
     ap.add_argument("--only", choices=("large", "rock_mass"), default=None)
     ap.add_argument("--label", default="", help="the tree measured (before/after)")
     ap.add_argument("--note", default="")
+    ap.add_argument("--kernel", action="store_true",
+                    help="time the grids' step kernel alone (module doc; one rank)")
     ap.add_argument("--save", action="store_true", help=f"append the rows to {CSV}")
     ap.add_argument("--fused", action="store_true",
                     help="step as a run does, in the compiled loop (the parts not probed)")
@@ -202,6 +259,16 @@ def main() -> None:
         scenes.append(rock_mass_text(args.n, args.zone))
     rows = []
     for text in scenes:
+        if args.kernel:
+            r = kernel_timed(text, args.steps, args.warm, args.chunks)
+            r.update(date=datetime.date.today().isoformat(), label=args.label, note=args.note)
+            rows.append(r)
+            one = r["kernel_one_grid_ms_step"]
+            print(f"{r['scene']:10s} {r['blocks']:5d} grids {r['zones']:7d} zones: step_grids "
+                  f"{r['kernel_ms_step']:.3f} ms/call"
+                  + (f"; the same arrays as one grid {one:.3f} ms" if one != "" else ""),
+                  flush=True)
+            continue
         r = timed(text, args.steps, args.warm, args.chunks, comm, args.fused)
         r.update(date=datetime.date.today().isoformat(), label=args.label, note=args.note)
         efficiency(r, args.label)
@@ -218,7 +285,7 @@ def main() -> None:
                   f"contact forces {r['forces_cpu_ms_step']:.2f}, piece refresh "
                   f"{r['refresh_cpu_ms_step']:.2f}, the rest {r['rest_cpu_ms_step']:.2f}",
                   flush=True)
-    if len(rows) == 2 and comm.rank == 0:
+    if len(rows) == 2 and comm.rank == 0 and not args.kernel:
         a, b = rows
         print(f"rock mass / large block, CPU per zone-step: scene "
               f"{a['zone_steps_per_s_core'] / b['zone_steps_per_s_core']:.2f}x, grids' step "
@@ -238,7 +305,8 @@ def main() -> None:
                 w.writeheader()
             for r in rows:
                 for name, unit in QUANTITIES.items():
-                    if r[name] == "" or (isinstance(r[name], float) and np.isnan(r[name])):
+                    v = r.get(name, "")
+                    if v == "" or (isinstance(v, float) and np.isnan(v)):
                         continue
                     v = r[name]
                     w.writerow({"date": r["date"], "host": "2-core shared machine",

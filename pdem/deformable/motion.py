@@ -56,8 +56,8 @@ import numpy as np
 from ..dynamics.damping import sign_of
 from ..jit import inline_kernel, kernel
 from .constitutive import SHEAR_NOW, SHEAR_PAST, TENSION_NOW, TENSION_PAST, update_stress
-from .nmd import nmd_strain_into, nmd_stress_into
-from .zones import add_zone_forces, rotate_stress, strain_rates, zone_geometry
+from .nmd import nmd_strain_in, nmd_stress_in
+from .zones import add_zone_forces_in, rotate_stress_in, strain_rates_in, zone_geometry_in
 
 # columns of a grid's energy accumulators (DeformableBody.work), booked by :func:`cycle`
 GW_GRAVITY = 0  # work of gravity
@@ -204,36 +204,58 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     rate = np.empty((n_zones, 6))
     spin = np.empty((n_zones, 3))
     sigma_p = np.zeros(n_zones)
+    # the grid's rows as :func:`advance` takes them (row 0 of step_grids' flat ones), copied
+    # back after the steps
+    servo_rows = np.empty((1, 2))
+    work_rows = np.empty((1, N_GW))
+    for k in range(2):
+        servo_rows[0, k] = servo[k]
+    for k in range(N_GW):
+        work_rows[0, k] = work[k]
+    where = (0, 0, n_nodes, 0, n_zones, load.shape[0] > 0)
+    done = n_steps
     for step in range(n_steps):
-        if not advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
-                       plastic, model, nmd, mode, alpha, prev, unbalanced, servo, gforce,
-                       contact, load, (bulk, shear), work, force, mid, rate, spin, sigma_p):
-            return step
-    return n_steps
+        if not advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol,
+                       stress, plastic, model, nmd, mode, alpha, prev, unbalanced, servo_rows,
+                       gforce, contact, load, (bulk, shear), work_rows, force, mid, rate, spin,
+                       sigma_p):
+            done = step
+            break
+    for k in range(2):
+        servo[k] = servo_rows[0, k]
+    for k in range(N_GW):
+        work[k] = work_rows[0, k]
+    return done
 
 
 @inline_kernel
-def advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress, plastic,
-            model, nmd, mode, alpha, prev, unbalanced, servo, gforce, contact, load, moduli, work,
-            force, mid, rate, spin, sigma_p):
-    """One step of :func:`cycle` (its arguments, ``moduli`` its ``(bulk, shear)``: fewer
-    than 31, or Python 3.11 passes them as ``*args``, which numba cannot inline), with the
-    scratch arrays ``force``, ``mid`` (n, 3),
-    ``rate`` (m, 6), ``spin`` (m, 3), ``sigma_p`` (m,). False if a zone inverted. Inlined into
-    :func:`cycle` and :func:`step_grids`: the same arithmetic, so the same bits, on either
-    path."""
-    n_nodes = nodes.shape[0]
-    n_zones = tets.shape[0]
-    loaded = load.shape[0] > 0
+def advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
+            plastic, model, nmd, mode, alpha, prev, unbalanced, servo, gforce, contact, load,
+            moduli, work, force, mid, rate, spin, sigma_p):
+    """One step of one grid of :func:`cycle` or :func:`step_grids` on the flat arrays of
+    :func:`step_grids` (a single grid's are those of one grid), without slicing them:
+    ``where = (d, a, e, za, ze, loaded)``: the grid's row ``d`` of ``unbalanced (k,)``,
+    ``servo (k, 2)``, ``work (k, N_GW)``, its gridpoints ``a <= n < e`` (its ``tets`` number
+    them from ``a``), its zones ``za <= z < ze``, and whether ``load`` has its rows (else it
+    is not read). ``moduli``: its ``(bulk, shear)`` (fewer than 31 arguments, or Python 3.11
+    passes them as ``*args``, which numba cannot inline). Scratch: ``force``, ``mid``
+    (n, 3), ``rate`` (m, 6), ``spin`` (m, 3), ``sigma_p`` (m,). False if a zone inverted.
+    Inlined into :func:`cycle` and :func:`step_grids`: the same arithmetic, so the same
+    bits, on either path. Its loops index with unsigned integers (pdem.deformable.zones:
+    numba would wrap a signed index that may be negative around at every access)."""
+    d, a, e, za, ze, loaded = where
     bulk, shear = moduli
     d1 = 1.0 - 0.5 * alpha * dt  # eq. 49's factors (VISCOUS)
     d2 = 1.0 / (1.0 + 0.5 * alpha * dt)
-    force[:] = applied
-    add_zone_forces(tets, grad, vol, stress, force)
+    # (unsigned indices: a signed one is wrapped around at every access, pdem.deformable.zones)
+    for n in range(np.uint64(a), np.uint64(e)):
+        for i in range(3):
+            force[n, i] = applied[n, i]
+    add_zone_forces_in(tets, grad, vol, stress, force, za, ze, a)
     big = 0.0
     wg = wa = wb = wd = wc = wz = 0.0
     dek = 0.0
-    for n in range(n_nodes):
+    for n in range(np.uint64(a), np.uint64(e)):
         c = dt / mass[n]
         f2 = 0.0
         e2 = 0.0
@@ -281,27 +303,27 @@ def advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, st
         for i in range(3):
             mid[n, i] = nodes[n, i] + 0.5 * vel[n, i] * dt
             nodes[n, i] += vel[n, i] * dt
-    unbalanced[0] = np.sqrt(big)
-    work[GW_GRAVITY] += wg * dt
-    work[GW_APPLIED] += wa * dt
-    work[GW_BOUNDARY] += wb * dt
-    work[GW_DAMPING] += wd * dt
-    servo[0] = wd
-    servo[1] = dek / dt
-    work[GW_CONTACT] += wc * dt
-    work[GW_ZONE] += wz * dt
+    unbalanced[d] = np.sqrt(big)
+    work[d, GW_GRAVITY] += wg * dt
+    work[d, GW_APPLIED] += wa * dt
+    work[d, GW_BOUNDARY] += wb * dt
+    work[d, GW_DAMPING] += wd * dt
+    servo[d, 0] = wd
+    servo[d, 1] = dek / dt
+    work[d, GW_CONTACT] += wc * dt
+    work[d, GW_ZONE] += wz * dt
     # strain rates on the mid-step geometry: for a rigid rotation over the step the
     # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
-    if zone_geometry(mid, tets, grad, vol) <= 0.0:
+    if zone_geometry_in(mid, tets, grad, vol, za, ze, a) <= 0.0:
         return False
-    strain_rates(vel, tets, grad, rate, spin)
-    if nmd:  # (scratch: ``mid``, read above, and ``sigma_p``, written below)
-        nmd_strain_into(tets, vol, rate, mid, sigma_p)
-    if zone_geometry(nodes, tets, grad, vol) <= 0.0:  # forces of the next step at t + dt
+    strain_rates_in(vel, tets, grad, rate, spin, za, ze, a)
+    if nmd:  # (scratch: ``mid``, read above)
+        nmd_strain_in(tets, vol, rate, mid, za, ze, a, e)
+    if zone_geometry_in(nodes, tets, grad, vol, za, ze, a) <= 0.0:  # forces at t + dt
         return False
-    rotate_stress(stress, spin, dt)
+    rotate_stress_in(stress, spin, dt, za, ze)
     wp = 0.0
-    for z in range(n_zones):
+    for z in range(np.uint64(za), np.uint64(ze)):
         de = (rate[z, 0] * dt, rate[z, 1] * dt, rate[z, 2] * dt, rate[z, 3] * dt,
               rate[z, 4] * dt, rate[z, 5] * dt)
         s0 = (stress[z, 0], stress[z, 1], stress[z, 2], stress[z, 3], stress[z, 4],
@@ -315,9 +337,9 @@ def advance(dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, st
         if plastic[z] & TENSION_NOW:
             past |= TENSION_PAST
         plastic[z] = past | bits
-    work[GW_PLASTIC] += wp
-    if nmd:  # (scratch: ``mid`` and ``spin``, read above)
-        nmd_stress_into(tets, vol, sigma_p, stress, mid, spin[:, 0])
+    work[d, GW_PLASTIC] += wp
+    if nmd:  # (scratch: ``mid``, read above)
+        nmd_stress_in(tets, vol, sigma_p, stress, mid, za, ze, a, e)
     return True
 
 
@@ -327,18 +349,18 @@ def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zo
                emass, zstiff, applied, fixed, fixed_vel, prev, bload, tets, grad, vol, stress,
                plastic, ap, gf, load, force, mid, rate, spin, sigma_p):
     """One step of the grids ``d0 <= d < d1`` of a :class:`~pdem.deformable.store.GridStore`
-    (all of the constitutive table ``model``), each as :func:`cycle`'s step on its slices of
+    (all of the constitutive table ``model``), each as :func:`cycle`'s step on its ranges of
     the flat arrays (CSR by ``node_start``, ``zone_start``; ``tets`` hold each grid's own
-    gridpoint numbers), in order; a grid whose row of ``scalars`` (``SC_*``) says inactive
-    is skipped. Per grid, before its step: with ``adaptive`` its damping becomes ``alpha``;
-    its inertial masses ``emass`` are ``mass`` raised where the contact stiffness ``kc`` with
-    the zones' ``zstiff`` needs it (``q = (dt / (2 GRID_FRAC))^2``: the store's
-    ``inertial_masses``); its applied forces ``contact + m_g g (+ applied) (+ bload)`` and
-    loads ``(bload) (+ applied)`` into the scratch ``ap``, ``load`` (gravity's ``gf``), each
-    sum in the order the per-grid numpy made it. ``moduli (k, 2)``: bulk and shear moduli;
-    ``work``, ``servo``, ``unbalanced``: the grids' rows. Returns the first grid that folded
-    (-1: none; the grids after it are not stepped) and the largest unbalanced gridpoint
-    force of the grids stepped."""
+    gridpoint numbers, offset by its ``node_start``; no array is sliced), in order; a grid
+    whose row of ``scalars`` (``SC_*``) says inactive is skipped. Per grid, before its step:
+    with ``adaptive`` its damping becomes ``alpha``; its inertial masses ``emass`` are
+    ``mass`` raised where the contact stiffness ``kc`` with the zones' ``zstiff`` needs it
+    (``q = (dt / (2 GRID_FRAC))^2``: the store's ``inertial_masses``); its applied forces
+    ``contact + m_g g (+ applied) (+ bload)`` and loads ``(bload) (+ applied)`` into the
+    scratch ``ap``, ``load`` (gravity's ``gf``), each sum in the order the per-grid numpy
+    made it. ``moduli (k, 2)``: bulk and shear moduli; ``work``, ``servo``, ``unbalanced``:
+    the grids' rows. Returns the first grid that folded (-1: none; the grids after it are
+    not stepped) and the largest unbalanced gridpoint force of the grids stepped."""
     big = 0.0
     for d in range(d0, d1):
         if scalars[d, SC_ACTIVE] == 0.0:  # taken out of the model
@@ -351,7 +373,7 @@ def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zo
         loaded = scalars[d, SC_LOADED] != 0.0
         a, e = node_start[d], node_start[d + 1]
         za, ze = zone_start[d], zone_start[d + 1]
-        for n in range(a, e):
+        for n in range(np.uint64(a), np.uint64(e)):  # (unsigned: advance)
             need = (1.0 + sa) * (zstiff[n] + kc[n]) * q
             emass[n] = need if need > mass[n] else mass[n]
             for i in range(3):
@@ -367,15 +389,10 @@ def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zo
                     load[n, i] = applied[n, i]
                 ap[n, i] = f
         nmd = scalars[d, SC_NMD] != 0.0
-        # (no load: no rows, as cycle's; control flow stays out of the call, for numba)
-        ld = load[a:e] if loaded or bloaded else load[a:a]
-        moduli_d = (moduli[d, 0], moduli[d, 1])
-        if not advance(dt, nodes[a:e], vel[a:e], emass[a:e], ap[a:e], fixed[a:e],
-                       fixed_vel[a:e], tets[za:ze], grad[za:ze], vol[za:ze], stress[za:ze],
-                       plastic[za:ze], model, nmd, mode, damping,
-                       prev[a:e], unbalanced[d:d + 1], servo[d], gf[a:e], contact[a:e],
-                       ld, moduli_d, work[d],
-                       force[a:e], mid[a:e], rate[za:ze], spin[za:ze], sigma_p[za:ze]):
+        if not advance(dt, (d, a, e, za, ze, loaded or bloaded), nodes, vel, emass, ap, fixed,
+                       fixed_vel, tets, grad, vol, stress, plastic, model, nmd, mode, damping,
+                       prev, unbalanced, servo, gf, contact, load,
+                       (moduli[d, 0], moduli[d, 1]), work, force, mid, rate, spin, sigma_p):
             return d, big
         if unbalanced[d] > big:
             big = unbalanced[d]

@@ -17,63 +17,76 @@ import numpy as np
 from ..jit import inline_kernel, kernel
 
 
+@inline_kernel
+def _clear_sums(nodal, a, e):
+    """Zero the gridpoint sums of :func:`_nodal_sums` of the gridpoints ``a <= n < e``."""
+    for n in range(np.uint64(a), np.uint64(e)):  # (unsigned: pdem.deformable.zones)
+        nodal[n, 0] = 0.0
+        nodal[n, 1] = 0.0
+
+
+@inline_kernel
+def _nodal_sums(tets, z, off, value, v, nodal):
+    """Add zone ``z``'s ``value * V`` and ``V`` to its gridpoints' sums (``nodal[:, 0]``,
+    ``nodal[:, 1]``; gridpoints ``tets[z] + off``)."""
+    for a in range(4):
+        n = np.uint64(tets[z, a] + off)
+        nodal[n, 0] += value * v
+        nodal[n, 1] += v
+
+
+@inline_kernel
+def _zone_mean(tets, z, off, nodal):
+    """The mean over zone ``z``'s 4 gridpoints of their volume-weighted means
+    ``nodal[:, 0] / nodal[:, 1]`` (eqs. 69-71)."""
+    acc = 0.0
+    for a in range(4):
+        n = np.uint64(tets[z, a] + off)
+        acc += nodal[n, 0] / nodal[n, 1]
+    return 0.25 * acc
+
+
 @kernel
-def nmd_strain_into(tets, vol, rate, nodal, ev_bar):
-    """Replace every zone's volumetric strain rate ``ev`` by its nodal average (eqs. 68-71),
-    in place: per zone, the mean over its 4 nodes of the volume-weighted nodal mean of
-    ``ev``. ``nodal`` (n_nodes, >= 2) and ``ev_bar`` (n_zones,): scratch the caller owns
-    (the grid step's: a small grid's step allocated its own, ~1,000 allocations a step in a
-    rock mass of zoned blocks)."""
-    for z in range(tets.shape[0]):
-        ev_bar[z] = (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
-    volume_average(tets, vol, ev_bar, nodal, ev_bar)
-    for z in range(tets.shape[0]):
-        d = ev_bar[z] - (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
+def nmd_strain_in(tets, vol, rate, nodal, za, ze, a, e):
+    """Replace the volumetric strain rate ``ev`` of every zone ``za <= z < ze`` (gridpoints
+    ``tets + a``, which are ``a <= n < e``) by its nodal average (eqs. 68-71), in place: per
+    zone, the mean over its 4 gridpoints of the volume-weighted nodal mean of ``ev``.
+    ``nodal`` (>= e, >= 2): scratch the caller owns (the grid step's: a small grid's step
+    allocating its own made ~1,000 allocations a step in a rock mass of zoned blocks); each
+    zone's ``ev`` is made where it is used, read whole before any rate is changed."""
+    _clear_sums(nodal, a, e)
+    for z in range(np.uint64(za), np.uint64(ze)):
+        _nodal_sums(tets, z, a, (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0, vol[z], nodal)
+    for z in range(np.uint64(za), np.uint64(ze)):
+        d = _zone_mean(tets, z, a, nodal) - (rate[z, 0] + rate[z, 1] + rate[z, 2]) / 3.0
         rate[z, 0] += d
         rate[z, 1] += d
         rate[z, 2] += d
 
 
 @kernel
-def nmd_stress_into(tets, vol, sigma_p, stress, nodal, bar):
-    """Substitute the nodal average of ``sigma_p`` (as :func:`nmd_strain_into` averages)
-    for each zone's own (eq. 76), in place; ``nodal``, ``bar``: the caller's scratch."""
-    volume_average(tets, vol, sigma_p, nodal, bar)
-    for z in range(tets.shape[0]):
-        d = sigma_p[z] - bar[z]
+def nmd_stress_in(tets, vol, sigma_p, stress, nodal, za, ze, a, e):
+    """Substitute the nodal average of ``sigma_p`` (as :func:`nmd_strain_in` averages) for
+    each zone's own (eq. 76), in place, for the zones ``za <= z < ze`` (gridpoints as
+    :func:`nmd_strain_in`'s); ``nodal``: the caller's scratch."""
+    _clear_sums(nodal, a, e)
+    for z in range(np.uint64(za), np.uint64(ze)):
+        _nodal_sums(tets, z, a, sigma_p[z], vol[z], nodal)
+    for z in range(np.uint64(za), np.uint64(ze)):
+        d = sigma_p[z] - _zone_mean(tets, z, a, nodal)
         stress[z, 0] += d
         stress[z, 1] += d
         stress[z, 2] += d
 
 
-@inline_kernel
-def volume_average(tets, vol, value, nodal, out):
-    """Per zone, the mean over its 4 nodes of the volume-weighted nodal mean of the zones'
-    ``value`` (eqs. 69-71), into ``out`` (``value`` itself may be ``out``: it is read whole
-    before ``out`` is written); ``nodal`` (n_nodes, >= 2): scratch."""
-    for n in range(nodal.shape[0]):
-        nodal[n, 0] = 0.0
-        nodal[n, 1] = 0.0
-    for z in range(tets.shape[0]):
-        for a in range(4):
-            nodal[tets[z, a], 0] += value[z] * vol[z]
-            nodal[tets[z, a], 1] += vol[z]
-    for z in range(tets.shape[0]):
-        acc = 0.0
-        for a in range(4):
-            n = tets[z, a]
-            acc += nodal[n, 0] / nodal[n, 1]
-        out[z] = 0.25 * acc
-
-
 @kernel
 def nmd_strain(tets, vol, rate, n_nodes):
-    """:func:`nmd_strain_into` with scratch of its own."""
-    nmd_strain_into(tets, vol, rate, np.empty((n_nodes, 2)), np.empty(tets.shape[0]))
+    """:func:`nmd_strain_in` of a whole grid, with scratch of its own."""
+    nmd_strain_in(tets, vol, rate, np.empty((n_nodes, 2)), 0, tets.shape[0], 0, n_nodes)
 
 
 @kernel
 def nmd_stress(tets, vol, sigma_p, stress, n_nodes):
-    """:func:`nmd_stress_into` with scratch of its own."""
-    nmd_stress_into(tets, vol, sigma_p, stress, np.empty((n_nodes, 2)),
-                    np.empty(tets.shape[0]))
+    """:func:`nmd_stress_in` of a whole grid, with scratch of its own."""
+    nmd_stress_in(tets, vol, sigma_p, stress, np.empty((n_nodes, 2)), 0, tets.shape[0], 0,
+                  n_nodes)

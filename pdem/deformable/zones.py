@@ -24,9 +24,11 @@ from ..jit import inline_kernel, kernel
 
 
 @inline_kernel
-def _tet_gradients(x, t, out):
-    """Fill ``out (4, 3)`` with dN_a/dx of tet ``t`` at positions ``x``; return its volume."""
-    i0, i1, i2, i3 = t[0], t[1], t[2], t[3]
+def _tet_gradients(x, tets, z, off, grad):
+    """Fill ``grad[z] (4, 3)`` with dN_a/dx of tet ``z`` (gridpoints ``tets[z] + off``) at
+    positions ``x``; return its volume."""
+    i0, i1 = np.uint64(tets[z, 0] + off), np.uint64(tets[z, 1] + off)
+    i2, i3 = np.uint64(tets[z, 2] + off), np.uint64(tets[z, 3] + off)
     ax, ay, az = x[i1, 0] - x[i0, 0], x[i1, 1] - x[i0, 1], x[i1, 2] - x[i0, 2]
     bx, by, bz = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1], x[i2, 2] - x[i0, 2]
     cx, cy, cz = x[i3, 0] - x[i0, 0], x[i3, 1] - x[i0, 1], x[i3, 2] - x[i0, 2]
@@ -37,11 +39,31 @@ def _tet_gradients(x, t, out):
     det = ax * bc[0] + ay * bc[1] + az * bc[2]
     inv = 1.0 / det
     for j in range(3):
-        out[1, j] = bc[j] * inv
-        out[2, j] = ca[j] * inv
-        out[3, j] = ab[j] * inv
-        out[0, j] = -(out[1, j] + out[2, j] + out[3, j])
+        grad[z, 1, j] = bc[j] * inv
+        grad[z, 2, j] = ca[j] * inv
+        grad[z, 3, j] = ab[j] * inv
+        grad[z, 0, j] = -(grad[z, 1, j] + grad[z, 2, j] + grad[z, 3, j])
     return det / 6.0
+
+
+# Each kernel below has a ``_in`` form over the zones ``za <= z < ze`` of flat arrays whose
+# tets hold gridpoint numbers counted from ``off`` (a grid of pdem.deformable.store.GridStore,
+# stepped without slicing its arrays: pdem.deformable.motion.step_grids) and a plain form
+# over a whole grid (``za, ze, off = 0, m, 0``): the same arithmetic, so the same bits.
+# Indices are unsigned (np.uint64): numba wraps a negative signed index around (a compare
+# and select at every access, which also keeps LLVM from vectorizing the loop) unless LLVM
+# proves it non-negative, which it cannot for a range from a start it does not know or for
+# a gridpoint number read from ``tets``.
+
+
+@kernel
+def zone_geometry_in(nodes, tets, grad, vol, za, ze, off):
+    """:func:`zone_geometry` of the zones ``za <= z < ze`` (gridpoints ``tets + off``)."""
+    vmin = np.inf
+    for z in range(np.uint64(za), np.uint64(ze)):
+        vol[z] = _tet_gradients(nodes, tets, z, off, grad)
+        vmin = min(vmin, vol[z])
+    return vmin
 
 
 @kernel
@@ -50,23 +72,16 @@ def zone_geometry(nodes, tets, grad, vol):
 
     Returns the smallest volume (<= 0 means a zone inverted: the caller must stop).
     """
-    vmin = np.inf
-    for z in range(tets.shape[0]):
-        vol[z] = _tet_gradients(nodes, tets[z], grad[z])
-        vmin = min(vmin, vol[z])
-    return vmin
+    return zone_geometry_in(nodes, tets, grad, vol, 0, tets.shape[0], 0)
 
 
 @kernel
-def strain_rates(vel, tets, grad, rate, spin):
-    """Strain rate ``rate (m, 6)`` and spin ``spin (m, 3)`` (W_xy, W_yz, W_zx) per zone (eq. 58).
-
-    Exact for a linear velocity field (the patch test): ``L_ij = sum_a v_ai dN_a/dx_j``.
-    """
-    for z in range(tets.shape[0]):
+def strain_rates_in(vel, tets, grad, rate, spin, za, ze, off):
+    """:func:`strain_rates` of the zones ``za <= z < ze`` (gridpoints ``tets + off``)."""
+    for z in range(np.uint64(za), np.uint64(ze)):
         lxx = lyy = lzz = lxy = lyx = lyz = lzy = lzx = lxz = 0.0
         for a in range(4):
-            n = tets[z, a]
+            n = np.uint64(tets[z, a] + off)
             gx, gy, gz = grad[z, a, 0], grad[z, a, 1], grad[z, a, 2]
             vx, vy, vz = vel[n, 0], vel[n, 1], vel[n, 2]
             lxx += vx * gx
@@ -90,18 +105,33 @@ def strain_rates(vel, tets, grad, rate, spin):
 
 
 @kernel
-def add_zone_forces(tets, grad, vol, stress, force):
-    """Add ``f_a = -V sigma . dN_a/dx`` of every zone to its gridpoints (eq. 55)."""
-    for z in range(tets.shape[0]):
+def strain_rates(vel, tets, grad, rate, spin):
+    """Strain rate ``rate (m, 6)`` and spin ``spin (m, 3)`` (W_xy, W_yz, W_zx) per zone (eq. 58).
+
+    Exact for a linear velocity field (the patch test): ``L_ij = sum_a v_ai dN_a/dx_j``.
+    """
+    strain_rates_in(vel, tets, grad, rate, spin, 0, tets.shape[0], 0)
+
+
+@kernel
+def add_zone_forces_in(tets, grad, vol, stress, force, za, ze, off):
+    """:func:`add_zone_forces` of the zones ``za <= z < ze`` (gridpoints ``tets + off``)."""
+    for z in range(np.uint64(za), np.uint64(ze)):
         sxx, syy, szz = stress[z, 0], stress[z, 1], stress[z, 2]
         sxy, syz, szx = stress[z, 3], stress[z, 4], stress[z, 5]
         v = vol[z]
         for a in range(4):
-            n = tets[z, a]
+            n = np.uint64(tets[z, a] + off)
             gx, gy, gz = grad[z, a, 0], grad[z, a, 1], grad[z, a, 2]
             force[n, 0] -= v * (sxx * gx + sxy * gy + szx * gz)
             force[n, 1] -= v * (sxy * gx + syy * gy + syz * gz)
             force[n, 2] -= v * (szx * gx + syz * gy + szz * gz)
+
+
+@kernel
+def add_zone_forces(tets, grad, vol, stress, force):
+    """Add ``f_a = -V sigma . dN_a/dx`` of every zone to its gridpoints (eq. 55)."""
+    add_zone_forces_in(tets, grad, vol, stress, force, 0, tets.shape[0], 0)
 
 
 @kernel
@@ -126,14 +156,15 @@ def gravity_forces(mass, g):
 
 
 @kernel
-def rotate_stress(stress, spin, dt):
+def rotate_stress_in(stress, spin, dt, za, ze):
     """Jaumann correction of every zone's stress: ``sigma += (W sigma - sigma W) dt``.
 
     ``W`` is the spin of eq. 58 (``W_ij = (v_i,j - v_j,i) / 2``), so a rigid rotation carries
     the stress with the material instead of straining it (the large-strain update of the
-    reference: positions move every step, stresses turn with the zone).
+    reference: positions move every step, stresses turn with the zone); of the zones
+    ``za <= z < ze``.
     """
-    for z in range(stress.shape[0]):
+    for z in range(np.uint64(za), np.uint64(ze)):
         wxy, wyz, wzx = spin[z, 0], spin[z, 1], spin[z, 2]
         sxx, syy, szz = stress[z, 0], stress[z, 1], stress[z, 2]
         sxy, syz, szx = stress[z, 3], stress[z, 4], stress[z, 5]
@@ -150,6 +181,12 @@ def rotate_stress(stress, spin, dt):
         stress[z, 3] += dxy * dt
         stress[z, 4] += dyz * dt
         stress[z, 5] += dzx * dt
+
+
+@kernel
+def rotate_stress(stress, spin, dt):
+    """Jaumann correction of every zone's stress (:func:`rotate_stress_in`)."""
+    rotate_stress_in(stress, spin, dt, 0, stress.shape[0])
 
 
 @kernel
