@@ -133,10 +133,36 @@ def estimated_stiffness(specs, joints, gids=None) -> np.ndarray:
         return kmax * surf / 3.0
 
 
+def zoned_rows(scene, specs, gid) -> np.ndarray | None:
+    """Whether each block of ``gid`` is zoned (None for a scene without ``zones``): by its
+    scene entry, the same on every rank and in a restart's replay."""
+    entries = np.array([b.zones is not None for b in scene.blocks], bool)
+    if not entries.any():
+        return None
+    gid = np.asarray(gid, np.int64)
+    entry = np.asarray(specs.entry)[gid] if hasattr(specs, "volume") \
+        else np.array([specs[g].entry for g in gid], np.int64)
+    return entries[entry]
+
+
+def _rigid_fixed(scene, rows, zoned):
+    """The ``fixed`` flags the rigid estimate reads: without mass scaling a zoned block
+    counts as fixed (it is no rigid block: its grid bounds its own step, eq. 84 with its
+    joint springs, pdem.deformable.store.GridStore); with mass scaling as it is (the grids
+    are scaled to the rigid step, which counts them as blocks)."""
+    if zoned is None or scene.solve.mass_scaling:
+        return rows.fixed
+    return np.where(zoned, 1, rows.fixed).astype(rows.fixed.dtype)
+
+
 def scene_timestep(scene, rows, k, names=None, key: str = "solve.mass_scaling.timestep",
-              comm=LOCAL, n: int | None = None) -> float:
+                   comm=LOCAL, n: int | None = None, zoned: np.ndarray | None = None) -> float:
     """The step (eq. 87 + rotational bound); with mass scaling, sets ``rows.mscale`` (eq. 89;
     partial: only the blocks whose own critical step is below ``timestep``).
+
+    ``zoned``: which rows are zoned blocks (:func:`zoned_rows`; None: a scene without
+    zones). Without mass scaling the step is the rigid blocks' alone (the grids' own step is
+    taken with it by pdem.deformable.store.GridStore), ``inf`` when no rigid block is free.
 
     ``rows``: the per-block fields (gid, mass, inertia, radius, fixed, mscale) of the blocks
     this rank holds, ``k`` their stiffness estimates (:func:`estimated_stiffness`, from the
@@ -163,9 +189,12 @@ def scene_timestep(scene, rows, k, names=None, key: str = "solve.mass_scaling.ti
     elif ts.dt is not None:
         dt = ts.dt
     else:
+        fixed = _rigid_fixed(scene, rows, zoned)
         dt = timestep_from_extremes(ts.frac, allreduce_max_array(comm, timestep_extremes(
-            rows.mass[:n], k[:n], rows.inertia[:n], rows.radius[:n], rows.fixed[:n],
+            rows.mass[:n], k[:n], rows.inertia[:n], rows.radius[:n], fixed[:n],
             rows.mscale[:n])))
+        if zoned is not None:
+            return float(dt)  # inf: no free rigid block, the grids' step alone
     if not math.isfinite(dt):
         raise UserError("solve.timestep: no free block, cannot choose a timestep; give dt")
     return float(dt)
@@ -234,15 +263,17 @@ def mass_scaling_summary(rows, comm=LOCAL, n: int | None = None) -> dict:
 
 
 def timestep_report(scene, rows, k, dt: float, names, comm=LOCAL,
-                    n: int | None = None) -> list[str]:
+                    n: int | None = None, zoned: np.ndarray | None = None) -> list[str]:
     """The start-up log lines about the step: which block limits it and by how much (no mass
     scaling or a fixed dt), or the inertia partial mass scaling added. ``rows``, ``k``,
-    ``comm``, ``n``: as :func:`scene_timestep`'s (the median of the blocks' critical steps by an
-    exact distributed selection, pdem.mpi.kth_smallest)."""
+    ``comm``, ``n``, ``zoned``: as :func:`scene_timestep`'s (the median of the blocks' critical
+    steps by an exact distributed selection, pdem.mpi.kth_smallest). In a scene with zones the
+    block named is the rigid blocks' (the grids' step has its own line, GridStore.resolve)."""
     ts = scene.solve.timestep
     ms = scene.solve.mass_scaling
     n = len(rows.mass) if n is None else n
-    free = rows.fixed[:n] == 0
+    fixed = _rigid_fixed(scene, rows, zoned)
+    free = fixed[:n] == 0
     if not _count(comm, free) or not (math.isfinite(dt) and dt > 0.0):
         return []  # refused by preflight.check_derived, naming the joint
     if isinstance(ms, MassScaling):
@@ -264,7 +295,7 @@ def timestep_report(scene, rows, k, dt: float, names, comm=LOCAL,
     own = own[np.isfinite(own)]
     n_own = _count(comm, np.ones(len(own), bool))
     k_max = float(allreduce_max_array(comm, np.array([kk[free].max(initial=-np.inf)]))[0])
-    local = limiting_block(mass, kk, ts.frac, inertia, radius, rows.fixed[:n], msc, k_max)
+    local = limiting_block(mass, kk, ts.frac, inertia, radius, fixed[:n], msc, k_max)
     if local is not None:  # its own critical step rides along
         local = (local[0], int(rows.gid[local[1]]), float(steps[local[1]]))
     found = first_extreme(comm, local)
@@ -274,11 +305,12 @@ def timestep_report(scene, rows, k, dt: float, names, comm=LOCAL,
     median = kth_smallest(comm, own, n_own // 2)
     if not mine > 0.0:
         return []
+    what = "the step" if zoned is None else "the rigid blocks' step"
     if ts.dt is None:
-        line = f"block {_name(names, g)} limits the step: its critical step {mine:.3g} s"
+        line = f"block {_name(names, g)} limits {what}: its critical step {mine:.3g} s"
     else:
         line = (f"solve.timestep.dt = {dt:.3g} s; block {_name(names, g)} has the smallest "
-                f"critical step, {mine:.3g} s")
+                f"critical step{'' if zoned is None else ' of the rigid blocks'}, {mine:.3g} s")
     if median >= 2.0 * mine:
         line += (" is" if ts.dt is None else ",") + \
             f" {median / mine:.3g} x below the median {median:.3g} s"
@@ -343,8 +375,9 @@ def resolve(scene, comm_size: int, specs, glob, joints, verts_max: float | None 
     k = estimated_stiffness(specs, joints, rows.gid if hasattr(specs, "surface") else None)
     # a SpecTable's names column (read by index, in messages), or a list's
     names = specs.names if hasattr(specs, "names") else [sp.name for sp in specs]
-    dt = scene_timestep(scene, rows, k, names, comm=comm)
-    for line in timestep_report(scene, rows, k, dt, names, comm):
+    zoned = zoned_rows(scene, specs, rows.gid)
+    dt = scene_timestep(scene, rows, k, names, comm=comm, zoned=zoned)
+    for line in timestep_report(scene, rows, k, dt, names, comm, zoned=zoned):
         log.info("%s", line)
     # Runaway threshold: no block can honestly move faster than its start speed plus a fall
     # across the whole model (or what gravity and applied loads add over time); ten times

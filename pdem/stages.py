@@ -127,23 +127,30 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     alike; a restart replays this (:func:`replay_stages`), so they need no checkpoint."""
     rows, n = timestep_rows(s)
     rows.mscale[:] = 1.0
-    if s.grids is not None:  # a zoned block held at its gridpoints still steps its grid
-        rows.fixed = np.where(zoned_mask(s, rows.gid), 0, rows.fixed).astype(rows.fixed.dtype)
+    zoned = zoned_mask(s, rows.gid) if s.grids is not None else None
+    if zoned is not None and staged.solve.mass_scaling:
+        # the grids are scaled to the rigid step, which counts a zoned block as a free
+        # block (held at its gridpoints it still steps its grid); without mass scaling the
+        # rigid step leaves the zoned blocks out (pdem.resolve.scene_timestep)
+        rows.fixed = np.where(zoned, 0, rows.fixed).astype(rows.fixed.dtype)
     stiffness = estimated_stiffness(s.specs, s.joints, rows.gid)
     names = s.specs.names  # read by index, in messages
     st = s.scene.stages[k].solve
     key = s.scene.at("stages", k, "solve", "mass_scaling", "timestep") \
         if st is not None and st.mass_scaling is not None else "solve.mass_scaling.timestep"
-    s.dt = scene_timestep(staged, rows, stiffness, names, key, s.comm, n)
+    s.dt = scene_timestep(staged, rows, stiffness, names, key, s.comm, n, zoned)
     if report:
-        for line in timestep_report(staged, rows, stiffness, s.dt, names, s.comm, n):
+        for line in timestep_report(staged, rows, stiffness, s.dt, names, s.comm, n, zoned):
             log.info("stage %d: %s", k + 1, line)
     d = staged.solve.damping
     s.damping = DAMPING[d.mode]
     default = DAMPING[d.mode].default_alpha
     s.alpha = d.alpha if d.alpha is not None else (default if default is not None else s.alpha)
     if s.grids is not None:  # the grids' damping, masses and step for the stage
-        s.dt = s.grids.restage(staged, s.dt, s.alpha, s.comm)
+        rigid = s.dt
+        s.dt = s.grids.restage(staged, rigid, s.alpha, s.comm)
+        if report and s.dt < rigid and s.comm.rank == 0:
+            log.info("stage %d: %s", k + 1, s.grids.limit_line(rigid))
 
 
 def run_stages(run) -> list[dict]:

@@ -85,6 +85,7 @@ class GridStore:
         # stiffness they count (:meth:`restage`)
         self.kc = np.zeros(n)
         self.kjoint = 0.0
+        self.kn = 0.0  # the joint normal stiffness of the step's bound (:meth:`resolve`)
         self.gmass = np.empty(n)
         self.mass = np.empty(n)  # the stage's inertial masses (scale_masses)
         self.emass = np.empty(n)  # the last step's (inertial_masses)
@@ -292,9 +293,12 @@ class GridStore:
     def restage(self, scene, dt: float, alpha: float, comm) -> float:
         """A stage's settings on the grids (``scene``: the scene as the stage has it): its
         damping, its mass scaling to the rigid step ``dt``, and the model step, as
-        :meth:`resolve` makes them at the start (collective). Returns the step."""
+        :meth:`resolve` makes them at the start (collective). Returns the step. ``dt``:
+        without mass scaling the rigid blocks' step alone (``inf`` when none is free,
+        pdem.resolve.scene_timestep), with it the rigid estimate the grids are scaled to."""
         self.set_damping(scene.solve.damping.mode, alpha)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.kn = kn
         self.kjoint = joint_stiffness(scene)
         self.scale_masses(kn, dt if scene.solve.mass_scaling else None)
         grid_dt = min(allgather(comm, GRID_FRAC * self.timestep(kn, owned=True)))
@@ -308,11 +312,15 @@ class GridStore:
         stiffness at the surface gridpoints, times ``GRID_FRAC``; the smallest over the ranks'
         build shares), the smaller; the grids' damping from ``solve.damping``. Not the
         scene's ``timestep.frac`` (0.1 by default): that is the rigid estimate's margin, the
-        Gershgorin step is a bound."""
+        Gershgorin step is a bound. Without mass scaling ``resolved.dt`` is the rigid
+        blocks' step alone (``inf`` when none is free): a zoned block's mass against its
+        contacts' stiffness says nothing its grid's bound does not (that bound holds its
+        joint springs); with it, the rigid estimate the grids are scaled to."""
         import dataclasses
 
         self.set_damping(scene.solve.damping.mode, resolved.alpha)
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
+        self.kn = kn
         self.kjoint = joint_stiffness(scene)
         if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
             self.scale_masses(kn, resolved.dt)
@@ -323,10 +331,17 @@ class GridStore:
         if self.dt < resolved.dt and comm.rank == 0:
             import logging
 
-            logging.getLogger("pdem").info(
-                "the zoned blocks' grids limit the step: %.3g s (%.2f of their Gershgorin "
-                "bound with kn %.3g; the rigid step %.3g s)", self.dt, GRID_FRAC, kn, resolved.dt)
+            logging.getLogger("pdem").info("%s", self.limit_line(resolved.dt))
         return dataclasses.replace(resolved, dt=min(resolved.dt, self.dt))
+
+    def limit_line(self, rigid: float) -> str:
+        """The log line of a model step the grids limit (``self.dt``, below the rigid
+        blocks' step ``rigid``; inf: no free rigid block), after :meth:`resolve` or
+        :meth:`restage`."""
+        other = "no free rigid block" if not math.isfinite(rigid) \
+            else f"the rigid blocks' step {rigid:.3g} s"
+        return (f"the zoned blocks' grids limit the step: {self.dt:.3g} s ({GRID_FRAC:.2f} of "
+                f"their Gershgorin bound with kn {self.kn:.3g}; {other})")
 
     def force_scale(self, scene, comm) -> float:
         """``solve.ratio``'s scale for the grids (collective): the larger of the mean

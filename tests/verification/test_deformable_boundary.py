@@ -149,7 +149,7 @@ def test_gridpoints_follow_a_velocity_history():
     np.testing.assert_allclose(b.vel[top, 2], 0.2 * t_mid[-1] / T, rtol=1e-9)
     assert not (b.nodes - b.nodes0)[b.nodes0[:, 2] < 1e-9].any()  # the base: all components
     # the top's other components are free: the bar (nu = 0) hardly moves sideways (the
-    # unstructured zones couple the pull's wave a little into them: 0.3 % measured)
+    # unstructured zones couple the pull's wave a little into them: 0.73 % measured, 9 steps)
     assert np.abs((b.nodes - b.nodes0)[top, :2]).max() < 1e-2 * expect
 
 

@@ -8,7 +8,7 @@ on the gridpoints, and the joints of zoned contacts (docs/deformable.md, "Energy
   in is the boundary work ``rho c A int v^2 dt`` of a 1-D rod; the travelling pulse holds half
   as kinetic and half as strain energy, all kinetic when it reflects at the free top (stress
   cancels), all strain when it reflects at the held base (velocity cancels). No contacts: the
-  balance closes to round-off (measured 2.6e-15 of the energy put in);
+  balance closes to round-off (measured 1.5e-15 of the energy put in);
 - a zoned cube sliding on a rigid floor under tilted gravity (40 deg against a 30 deg joint
   friction): the joints dissipate ``tan(phi) m g cos(theta)`` times the slide, ``1/2 a t^2``
   with ``a = g (sin theta - cos theta tan phi)`` (two thirds of gravity's work);
@@ -94,17 +94,17 @@ def test_a_pulse_in_a_zoned_column_exchanges_kinetic_and_strain_energy():
     print(f"wave: {s.step} steps; boundary work {at[2.25]['boundary_work'] / put:.4f} of "
           f"rho c A int v^2; (kinetic, zone strain) / it at t c / L: {summary}; balance "
           f"{worst:.2e} of the energy put in")
-    # measured 0.9869: the grid's reaction to the driven base is not quite the 1-D rod's
+    # measured 0.9845: the grid's reaction to the driven base is not quite the 1-D rod's
     # (the pulse's dispersion on 0.2 x 0.235 m lattice boxes, size 0.35, the lumped masses;
     # at size 0.5, boxes of 1/3 m, six per half sine, the dispersed tail leaves 0.8975
     # kinetic at the top's reflection and 0.827 strain at the base's)
     assert abs(at[2.25]["boundary_work"] / put - 1.0) < 0.03
-    for k in (0.5, 0.75):  # travelling: half and half (measured 0.494, 0.493)
+    for k in (0.5, 0.75):  # travelling: half and half (measured 0.494, 0.491)
         assert abs(at[k]["kinetic"] / put - 0.5) < 0.03
         assert abs(at[k]["zone_strain"] / put - 0.5) < 0.03
-    # reflecting at the free top: all kinetic (measured 0.956 kinetic, 0.031 strain)
+    # reflecting at the free top: all kinetic (measured 0.966 kinetic, 0.019 strain)
     assert at[1.25]["kinetic"] > 0.9 * put and at[1.25]["zone_strain"] < 0.08 * put
-    # reflecting at the held base: all strain (measured 0.911 strain, 0.076 kinetic)
+    # reflecting at the held base: all strain (measured 0.926 strain, 0.058 kinetic)
     assert at[2.25]["zone_strain"] > 0.85 * put and at[2.25]["kinetic"] < 0.12 * put
     assert at[2.25]["strain"] == 0.0 and at[2.25]["plastic_work"] == 0.0
     assert worst < 1e-9  # no contacts: the leap-frog's own balance, to round-off
@@ -148,11 +148,11 @@ def test_a_zoned_cube_sliding_dissipates_its_friction_work():
           f"1/2 a t^2); joint dissipation {t['joint_dissipation'] / friction:.4f} of mu N d "
           f"({t['joint_dissipation'] / put_in:.3f} of the energy put in); balance {worst:.2e}")
     # the cube starts unloaded on the floor and rings on its joint springs: its mean normal
-    # force is 2 % under m g cos(theta) (measured: slide 1.058, dissipation 0.981)
+    # force is 2 % under m g cos(theta) (measured: slide 1.056, dissipation 0.974)
     assert abs(slid / (0.5 * a * s.time ** 2) - 1.0) < 0.08
     assert abs(t["joint_dissipation"] / friction - 1.0) < 0.03
     assert t["joint_dissipation"] > 0.6 * put_in  # tan 30 / tan 40 of gravity's work
-    assert worst < 1e-2  # issue 40's bound, at every sample (measured 5.9e-5)
+    assert worst < 1e-2  # issue 40's bound, at every sample (measured 1.4e-4)
 
 
 # ------------------------------------------------------------------ a stack collapsing
@@ -197,10 +197,10 @@ def test_a_zoned_stack_collapsing_keeps_its_balance():
           f"{t['zone_strain'] / put_in:.2e} of the energy put in; balance {worst:.2e}; "
           f"gravity's work less the potential drop {drift:.2e}")
     assert top[:, 2].mean() < 1.1  # it fell off the lower block (from 1.5)
-    assert t["joint_dissipation"] > 1e-3 * put_in  # it slid on the zoned block (2.9e-3)
-    assert worst < 1e-2  # issue 40's bound, at every sample (measured 1.2e-3)
+    assert t["joint_dissipation"] > 1e-3 * put_in  # it slid on the zoned block (4.0e-3)
+    assert worst < 1e-2  # issue 40's bound, at every sample (measured 1.5e-3)
     # gravity's work over the steps' mean velocities is the drop of the gridpoints'
-    # potential energy but for half a step's motion (measured 4.8e-4)
+    # potential energy but for half a step's motion (measured 1.5e-3)
     assert drift < 2e-3
 
 
@@ -227,7 +227,7 @@ def test_a_zoned_arch_collapsing_keeps_its_balance():
           f"of the energy put in; balance {worst:.2e}")
     assert fell > 0.1  # it collapsed (measured 0.24 m)
     assert t["joint_dissipation"] > 0.0
-    assert worst < 1e-2  # issue 40's bound, at every sample (measured 4.4e-4)
+    assert worst < 1e-2  # issue 40's bound, at every sample (measured 5.3e-4)
 
 
 # ------------------------------------------------------------------ a rim pressed past an edge
