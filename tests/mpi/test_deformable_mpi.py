@@ -117,7 +117,7 @@ def test_zoned_row_is_bitwise_the_one_rank_run(tmp_path, split):
     # the zones took energy in the collisions, z2's plastically (its tension and cohesion),
     # and the balance holds (issue 40: 1 % of the energy put in; measured 3.6e-4 with z0
     # and z4 Mohr-Coulomb, 1.7e-4 elastic), the contact updates creating next to nothing
-    # (3.6e-4 and 1.6e-4; 3.9e-2 before the rim gridpoints bore their covered cells:
+    # (3.8e-4 and 1.6e-4; 3.9e-2 before the rim gridpoints bore their covered cells:
     # docs/deformable.md, "Energy")
     assert budget["zone_strain"].max() > 0.0 and budget["plastic_work"][-1] > 0.0, budget
     put_in = np.abs(budget["kinetic"][0] + budget["strain"][0] + budget["gravity_work"]
