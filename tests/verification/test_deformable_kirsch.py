@@ -14,8 +14,8 @@ axisymmetric Lame terms and the four ``cos 2 theta`` terms fitted to the two bou
 
 Tolerances, and what limits them: CST zones of the lattice at size 0.25 (boxes of 0.177 m in
 the plane, two layers through the slice; ~5,400 zones), a polygonal hole and outer boundary,
-and the glued joints' compliance (the crown, where the cut leaves a sliver piece, moves 8.5 %
-(hydrostatic) of the scale more than the closed form; the springline 1 % less; softer joints
+and the glued joints' compliance (the crown, where the cut leaves a sliver piece, moves 7.4 %
+(hydrostatic) of the scale more than the closed form; the springline 1.5 % less; softer joints
 move both more). The wall's radial
 displacement within 10 % of the hydrostatic scale ``p a / 2G`` at the springline and the
 crown; the zones' radial and hoop stresses, averaged in bands along the axes between 1.5 a
