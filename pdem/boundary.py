@@ -36,7 +36,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import ConfigError
-from .config.schema import CONDITION_MODELS, BoundaryStress, BoundaryVelocity, Selection
+from .config.schema import (
+    CONDITION_MODELS,
+    BoundaryQuiet,
+    BoundaryStress,
+    BoundaryVelocity,
+    Selection,
+)
 from .deformable.conditions import (
     GridConditions,
     gridpoints,
@@ -416,15 +422,21 @@ def _zoned_velocity(boundary, s, cond, t0, motion_too, at) -> int:
 
 
 def _add_stress(boundary, s, cond, gids, t0, motion_too):
+    if cond.wave is not None:
+        return ("a wave is put in through zoned blocks' faces (a rigid block has no wave "
+                "speed: prescribe the base's velocity, boundary.velocity)")
     if not boundary.add_stress(s, cond, gids):
         return "the selected blocks have no exposed face"
     return None
 
 
 def _zoned_stress(boundary, s, cond, t0, motion_too, at) -> int:
-    """A boundary stress on the exposed surface faces of the zoned blocks it selects."""
-    return boundary.grid.add_stress(s, cond, cond.sigma(),
-                                    lambda gids: exposed_face_rows(s.glob, gids, s.ctol))
+    """A boundary stress (or a wave) on the exposed surface faces of the zoned blocks it
+    selects."""
+    exposed = lambda gids: exposed_face_rows(s.glob, gids, s.ctol)  # noqa: E731
+    if cond.wave is not None:
+        return boundary.grid.add_wave(s, cond, cond.wave, t0, exposed)
+    return boundary.grid.add_stress(s, cond, cond.sigma(), exposed)
 
 
 def _prescribe(boundary, s):
@@ -434,7 +446,23 @@ def _prescribe(boundary, s):
 
 def _tractions(boundary, s):
     boundary.tractions(s)
-    boundary.grid.tractions(s)
+    boundary.grid.tractions(s, history_velocity)
+
+
+def _add_quiet(boundary, s, cond, gids, t0, motion_too):
+    return ("quiet boundaries act on zoned blocks' faces (a rigid boundary block is driven "
+            "by its prescribed velocity; docs/dynamics.md)")
+
+
+def _zoned_quiet(boundary, s, cond, t0, motion_too, at) -> int:
+    """Dashpots on the exposed surface faces of the zoned blocks it selects."""
+    return boundary.grid.add_quiet(s, cond, "normal" in cond.directions,
+                                   "shear" in cond.directions,
+                                   lambda gids: exposed_face_rows(s.glob, gids, s.ctol))
+
+
+def _dashpots(boundary, s):
+    boundary.grid.dashpots(s)
 
 
 BOUNDARY_KINDS: Registry[BoundaryKind] = Registry("boundary condition")
@@ -443,7 +471,11 @@ BOUNDARY_KINDS.register("velocity", BoundaryKind(
     BoundaryVelocity, _add_velocity, lambda b: bool(b.histories or b.grid.histories),
     _prescribe, zoned=_zoned_velocity))
 BOUNDARY_KINDS.register("stress", BoundaryKind(
-    BoundaryStress, _add_stress, lambda b: len(b.f_gid) > 0 or len(b.grid.t_gid) > 0,
+    BoundaryStress, _add_stress,
+    lambda b: len(b.f_gid) > 0 or len(b.grid.t_gid) > 0 or len(b.grid.w_gid) > 0,
     _tractions, at_start=_tractions, whole_scene=True, zoned=_zoned_stress))
+BOUNDARY_KINDS.register("quiet", BoundaryKind(
+    BoundaryQuiet, _add_quiet, lambda b: len(b.grid.q_gid) > 0, _dashpots, at_start=_dashpots,
+    whole_scene=True, zoned=_zoned_quiet))
 # the scene grammar's keys follow the kinds: one registration here, from anywhere, is a kind
 CONDITION_MODELS.follow(BOUNDARY_KINDS, lambda kind: kind.condition)

@@ -327,14 +327,24 @@ def _round_down(x: float) -> float:
     return math.floor(x / unit) * unit
 
 
-def _alpha(scene) -> float:
-    d = scene.solve.damping
+def damping_alpha(d, current: float | None = None) -> float:
+    """The damping constant of ``solve.damping`` ``d``: Rayleigh's mass-proportional
+    constant, the given ``alpha``, the mode's default, or (a stage's viscous damping without
+    alpha) the ``current`` one."""
+    if d.mode == "rayleigh":
+        return d.rayleigh[0]
     if d.alpha is not None:
         return d.alpha
     default = DAMPING[d.mode].default_alpha
-    if default is None:
+    if default is not None:
+        return default
+    if current is None:
         raise UserError(f"solve.damping.alpha: {d.mode} damping needs alpha (1/s)")
-    return default
+    return current
+
+
+def _alpha(scene) -> float:
+    return damping_alpha(scene.solve.damping)
 
 
 def contact_tolerance(scene, specs) -> float:

@@ -25,7 +25,7 @@ from .domain import DELETED, remove_blocks
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
 from .plugins.checkpoints import stage_checkpoint
-from .resolve import estimated_stiffness, scene_timestep, timestep_report
+from .resolve import damping_alpha, estimated_stiffness, scene_timestep, timestep_report
 from .selection import selected, set_block_fields, timestep_rows
 from .strength import factor_of_safety
 
@@ -144,8 +144,7 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
             log.info("stage %d: %s", k + 1, line)
     d = staged.solve.damping
     s.damping = DAMPING[d.mode]
-    default = DAMPING[d.mode].default_alpha
-    s.alpha = d.alpha if d.alpha is not None else (default if default is not None else s.alpha)
+    s.alpha = damping_alpha(d, s.alpha)
     if s.grids is not None:  # the grids' damping, masses and step for the stage
         rigid = s.dt
         s.dt = s.grids.restage(staged, rigid, s.alpha, s.comm)

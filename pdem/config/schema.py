@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated, Literal, Union
 
@@ -435,11 +436,40 @@ DampingMode = _names(DAMPING)
 
 class Damping(Strict):
     """``alpha``: local/combined coefficient (eq. 79, default 0.8), viscous constant in 1/s
-    (eq. 44), or the adaptive servo's starting constant. ``ratio``: adaptive target (eq. 77)."""
+    (eq. 44), or the adaptive servo's starting constant. ``ratio``: adaptive target (eq. 77).
+    ``rayleigh`` (dynamic analysis, docs/dynamics.md): ``fraction`` of critical damping at
+    the centre ``frequency`` (Hz), its minimum (3DEC's form): mass-proportional constant
+    ``alpha = fraction omega`` and stiffness-proportional ``beta = fraction / omega``,
+    ``omega = 2 pi frequency``."""
 
     mode: DampingMode = "none"
     alpha: NonNegativeFloat | None = None
     ratio: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.5
+    fraction: Annotated[float, Field(gt=0.0, lt=1.0)] | None = None
+    frequency: Annotated[float, Field(gt=0.0, le=1e6)] | None = None
+
+    @model_validator(mode="after")
+    def _rayleigh_keys(self):
+        given = [k for k in ("fraction", "frequency") if getattr(self, k) is not None]
+        if self.mode == "rayleigh":
+            missing = [k for k in ("fraction", "frequency") if getattr(self, k) is None]
+            if missing:
+                raise ValueError(f"rayleigh damping needs {' and '.join(missing)} (the "
+                                 "fraction of critical damping at a centre frequency in Hz)")
+            if self.alpha is not None:
+                raise ValueError("rayleigh damping takes fraction and frequency, not alpha")
+        elif given:
+            raise ValueError(f"{', '.join(given)}: only with mode: rayleigh")
+        return self
+
+    @property
+    def rayleigh(self) -> tuple[float, float]:
+        """``(alpha, beta)``: the mass- (1/s) and stiffness-proportional (s) constants; (0, 0)
+        for every other mode."""
+        if self.mode != "rayleigh":
+            return 0.0, 0.0
+        omega = 2.0 * math.pi * self.frequency
+        return self.fraction * omega, self.fraction / omega
 
 
 class Inactive(Strict):
@@ -635,17 +665,20 @@ class BoundaryStress(Selection):
     pushes on the face) or ``tensor`` (Pa, world frame, ``[sxx, syy, szz, sxy, syz, szx]`` or
     a symmetric 3x3 list; compression negative, as in 3DEC). Face traction ``t = sigma n``
     (outward normal ``n``; a pressure is ``sigma = -p I``), applied as the force ``t A`` at
-    the face centroid, which moves and turns with the block."""
+    the face centroid, which moves and turns with the block. ``wave``: instead, a wave put in
+    through a quiet boundary (docs/dynamics.md): the traction ``2 rho (Cp (v.n) n + Cs (v -
+    (v.n) n))`` of the history's particle velocity ``v`` (zoned blocks' faces)."""
 
     pressure: Stress | None = None
     tensor: tuple[Stress, Stress, Stress, Stress, Stress, Stress] | \
         tuple[tuple[Stress, Stress, Stress], tuple[Stress, Stress, Stress],
               tuple[Stress, Stress, Stress]] | None = None
+    wave: VelocityHistory | None = None
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.pressure is None) == (self.tensor is None):
-            raise ValueError("give exactly one of pressure, tensor")
+        if sum(v is not None for v in (self.pressure, self.tensor, self.wave)) != 1:
+            raise ValueError("give exactly one of pressure, tensor, wave")
         if self.tensor is not None and isinstance(self.tensor[0], tuple):
             t = self.tensor
             for i, j in ((0, 1), (1, 2), (0, 2)):
@@ -656,7 +689,9 @@ class BoundaryStress(Selection):
         return self
 
     def sigma(self):
-        """The stress tensor as a 3x3 nested tuple (Pa)."""
+        """The stress tensor as a 3x3 nested tuple (Pa; zero for a ``wave``)."""
+        if self.wave is not None:
+            return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         if self.pressure is not None:
             p = -self.pressure
             return ((p, 0.0, 0.0), (0.0, p, 0.0), (0.0, 0.0, p))
@@ -667,6 +702,23 @@ class BoundaryStress(Selection):
         return ((sxx, sxy, szx), (sxy, syy, syz), (szx, syz, szz))
 
 
+class BoundaryQuiet(Selection):
+    """A quiet (viscous) boundary on the exposed faces of the selected blocks (whose centroid
+    lies in ``range``): Lysmer and Kuhlemeyer's dashpots ``rho Cp`` normal and ``rho Cs``
+    shear per area, which absorb the waves that reach it (docs/dynamics.md).
+    ``directions``: which of the two."""
+
+    directions: Annotated[list[Literal["normal", "shear"]],
+                          Field(min_length=1, max_length=2)] = ["normal", "shear"]
+
+    @field_validator("directions")
+    @classmethod
+    def _once(cls, v):
+        if len(set(v)) != len(v):
+            raise ValueError(f"repeated in {v}")
+        return v
+
+
 # The boundary-condition kinds' condition models by scene key (``boundary.<key>`` and a
 # stage's ``<key>``: lists of conditions, each a Selection of the blocks it acts on), in the
 # order the kinds apply: the grammar's own registry, which follows pdem.boundary.BOUNDARY_KINDS
@@ -675,6 +727,7 @@ class BoundaryStress(Selection):
 CONDITION_MODELS: Registry[type[Selection]] = Registry("boundary condition")
 CONDITION_MODELS.register("velocity", BoundaryVelocity)
 CONDITION_MODELS.register("stress", BoundaryStress)
+CONDITION_MODELS.register("quiet", BoundaryQuiet)
 
 
 def _condition_fields() -> dict[str, FieldInfo]:

@@ -18,10 +18,12 @@ from .motion import (
     N_GW,
     N_SC,
     SC_ACTIVE,
+    SC_BETA,
     SC_DAMPING,
     SC_LOADED,
     SC_MODE,
     SC_NMD,
+    SC_QUIET,
     critical_timestep,
     cycle,
     nodal_stiffness,
@@ -138,6 +140,24 @@ class DeformableBody:
     def damping(self, alpha: float) -> None:
         self.scalars[SC_DAMPING] = float(alpha)
 
+    @property
+    def rayleigh_beta(self) -> float:
+        """Rayleigh damping's stiffness-proportional constant (s; 0: none)."""
+        return float(self.scalars[SC_BETA])
+
+    @rayleigh_beta.setter
+    def rayleigh_beta(self, beta: float) -> None:
+        self.scalars[SC_BETA] = float(beta)
+
+    @property
+    def quieted(self) -> bool:
+        """Some gridpoint has a quiet boundary's dashpots (GridStore.quiet)."""
+        return bool(self.scalars[SC_QUIET])
+
+    @quieted.setter
+    def quieted(self, on: bool) -> None:
+        self.scalars[SC_QUIET] = bool(on)
+
     # --- setup -----------------------------------------------------------------------------
     def stiffness(self) -> np.ndarray:
         return nodal_stiffness(self.tets, self.grad, self.vol, self.params.bulk,
@@ -153,7 +173,8 @@ class DeformableBody:
         """The zone term of eq. 88 for the current geometry and inertial masses."""
         if self.mass_scaling:
             return 1.0
-        return critical_timestep(self.stiffness(), self.mass, self.stability_alpha())
+        return critical_timestep(self.stiffness(), self.mass, self.stability_alpha(),
+                                 self.rayleigh_beta)
 
     def stability_alpha(self) -> float:
         """The damping's factor on the critical step (pdem.deformable.motion.stability_alpha)."""

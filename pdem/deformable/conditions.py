@@ -18,6 +18,8 @@ from the triangles' current positions: the traction deforms with the face).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..mpi import allgather
@@ -89,6 +91,17 @@ class GridConditions:
         self.t_vert = np.zeros((0, 3), np.int64)  # its piece's vertices (outward order),
         self.t_sigma = np.zeros((0, 3, 3))  # the stress (world, tension positive)
         self._map = None  # (grid store, flat gridpoints of each owned triangle, rows)
+        # quiet boundaries: triangles (block gid, vertices) with dashpots normal and/or shear
+        self.q_gid = np.zeros(0, np.int64)
+        self.q_vert = np.zeros((0, 3), np.int64)
+        self.q_on = np.zeros((0, 2), bool)
+        self._qmap = None  # the grid store whose ``quiet`` holds them
+        # wave input (sigma = 2 rho C v on a quiet face): triangles and their history's index
+        self.waves: list[tuple] = []  # (VelocityHistory, t0)
+        self.w_gid = np.zeros(0, np.int64)
+        self.w_vert = np.zeros((0, 3), np.int64)
+        self.w_hist = np.zeros(0, np.int64)
+        self._wmap = None
 
     # ---------------------------------------------------------------- velocities
     def fix(self, hits, dofs, value, motion_too: bool, history=None, t0: float = 0.0,
@@ -149,53 +162,87 @@ class GridConditions:
         takes (centroid in ``range``); ``exposed(gids)``: (gid, face rows) of the exposed
         faces of blocks ``gids`` of the scene's store (pdem.boundary.exposed_face_rows).
         Returns the triangles taken."""
-        g = s.glob
-        gids = zoned_gids(s)
-        gids = gids[s.specs.matching(gids, sel.names, sel.groups)]
-        gids = gids[g.out[gids] == 0]
-        gid, rows = exposed(gids)
-        verts, keep = [], []
-        for b, f in zip(gid, rows, strict=True):
-            p = g.piece_start[b]
-            v = g.face_verts[g.fvert_start[f]:g.fvert_start[f + 1]]
-            x = g.verts_local[v] + g.x[b]
-            if sel.range is not None and not _in_box(x.mean(axis=0)[None], sel)[0]:
-                keep.append(False)
-                verts.append((0, 0, 0))
-                continue
-            area = np.cross(x[1] - x[0], x[2] - x[0])
-            if np.dot(area, g.normals_local[f]) < 0.0:
-                v = v[[0, 2, 1]]
-            keep.append(True)
-            verts.append(tuple(v - g.vert_start[p]))
-        keep = np.array(keep, bool)
-        n = int(keep.sum())
-        self.t_gid = np.concatenate([self.t_gid, gid[keep]])
-        self.t_vert = np.concatenate([self.t_vert, np.array(verts, np.int64).reshape(-1, 3)[keep]])
+        gid, vert = exposed_triangles(s, sel, exposed)
+        self.t_gid = np.concatenate([self.t_gid, gid])
+        self.t_vert = np.concatenate([self.t_vert, vert])
         self.t_sigma = np.concatenate([self.t_sigma,
-                                       np.repeat(np.asarray(sigma, float)[None], n, axis=0)])
+                                       np.repeat(np.asarray(sigma, float)[None], len(gid), 0)])
         self._map = None
-        return n
+        return len(gid)
 
-    def tractions(self, s) -> None:
+    def add_quiet(self, s, sel, normal: bool, shear: bool, exposed) -> int:
+        """Dashpots (a quiet boundary, :meth:`dashpots`) on the exposed surface triangles of
+        the zoned blocks the selection takes (as :meth:`add_stress`); returns their count."""
+        gid, vert = exposed_triangles(s, sel, exposed)
+        self.q_gid = np.concatenate([self.q_gid, gid])
+        self.q_vert = np.concatenate([self.q_vert, vert])
+        self.q_on = np.concatenate([self.q_on, np.tile([normal, shear], (len(gid), 1))])
+        self._qmap = None
+        return len(gid)
+
+    def add_wave(self, s, sel, history, t0: float, exposed) -> int:
+        """A wave put in through the exposed surface triangles the selection takes (as
+        :meth:`add_stress`): the traction ``2 rho (Cp (v.n) n + Cs (v - (v.n) n))`` of the
+        history's particle velocity ``v`` (:meth:`tractions`); returns their count."""
+        gid, vert = exposed_triangles(s, sel, exposed)
+        self.waves.append((history, float(t0)))
+        self.w_gid = np.concatenate([self.w_gid, gid])
+        self.w_vert = np.concatenate([self.w_vert, vert])
+        self.w_hist = np.concatenate([self.w_hist, np.full(len(gid), len(self.waves) - 1)])
+        self._wmap = None
+        return len(gid)
+
+    def dashpots(self, s) -> None:
+        """The owned grids' dashpot matrices (``GridStore.quiet``) from the quiet triangles,
+        made again when the store is new (after a distribution): each triangle's area ``A``
+        and unit normal ``n`` on the block's reference (build) positions (the same matrices
+        on any rank count and after a restart) give each of its three gridpoints
+        ``A/3 rho (Cp n n^T + Cs (I - n n^T))`` (the directions not chosen left out):
+        Lysmer and Kuhlemeyer's viscous boundary, ``rho`` and the wave speeds ``Cp =
+        sqrt((K + 4G/3)/rho)``, ``Cs = sqrt(G/rho)`` of the block's material."""
+        g = s.grids
+        if g is None or (self._qmap is g) or not len(self.q_gid):
+            return
+        g.quiet[:] = 0.0
+        for d in range(g.n_owned):
+            g.bodies[d].quieted = False
+        for d, rows, tri in owned_triangles(g, self.q_gid, self.q_vert):
+            body = g.bodies[d]
+            x = body.nodes0[g.surf[d][self.q_vert[rows]]]
+            area, n = _area_normal(x)
+            cp, cs = wave_impedances(body.params)
+            a = area / 3.0 * cp * self.q_on[rows, 0]
+            b = area / 3.0 * cs * self.q_on[rows, 1]
+            # a nn^T + b (I - nn^T), upper triangle: xx yy zz xy yz zx
+            c = np.empty((len(rows), 6))
+            for k, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))):
+                c[:, k] = (a - b) * n[:, i] * n[:, j] + (b if i == j else 0.0)
+            for k in range(3):
+                np.add.at(g.quiet, tri[:, k], c)
+            body.quieted = True
+        self._qmap = g
+
+    def tractions(self, s, velocity_at) -> None:
         """The owned grids' boundary loads (``GridStore.bload``) from the triangles under
         stress at their positions at t: ``sigma . (area vector)`` shared by its three
-        gridpoints."""
+        gridpoints; and the waves' tractions (:meth:`add_wave`) at t, their histories'
+        velocities ``velocity_at(history, t)``."""
         g = s.grids
         if g is None:
             return
         g.bload[:] = 0.0
-        g.bloaded = bool(len(self.t_gid))
+        g.bloaded = bool(len(self.t_gid) or len(self.w_gid))
         if not g.bloaded:
             return
+        self._stress_loads(g)
+        self._wave_loads(s, g, velocity_at)
+
+    def _stress_loads(self, g) -> None:
         if self._map is None or self._map[0] is not g:
-            d_of = {gid: d for d, gid in enumerate(g.gids[:g.n_owned])}
-            rows = np.array([i for i, gid in enumerate(self.t_gid) if int(gid) in d_of], np.int64)
-            tri = np.zeros((len(rows), 3), np.int64)
-            for j, i in enumerate(rows):
-                d = d_of[int(self.t_gid[i])]
-                tri[j] = g.node_start[d] + g.surf[d][self.t_vert[i]]
-            self._map = (g, tri, rows)
+            tri = [(rows, t) for _, rows, t in owned_triangles(g, self.t_gid, self.t_vert)]
+            rows = np.concatenate([r for r, _ in tri]) if tri else np.zeros(0, np.int64)
+            flat = np.concatenate([t for _, t in tri]) if tri else np.zeros((0, 3), np.int64)
+            self._map = (g, flat, rows)
         _, tri, rows = self._map
         if not len(rows):
             return
@@ -204,6 +251,79 @@ class GridConditions:
         f = np.einsum("tij,tj->ti", self.t_sigma[rows], area) / 3.0
         for k in range(3):
             np.add.at(g.bload, tri[:, k], f)
+
+    def _wave_loads(self, s, g, velocity_at) -> None:
+        if not len(self.w_gid):
+            return
+        if self._wmap is None or self._wmap[0] is not g:
+            self._wmap = (g, owned_triangles(g, self.w_gid, self.w_vert))
+        v_of = [velocity_at(h, s.time - t0) for h, t0 in self.waves]
+        for d, rows, tri in self._wmap[1]:
+            x = g.nodes[tri]
+            area, n = _area_normal(x)
+            cp, cs = wave_impedances(g.bodies[d].params)
+            v = np.array([v_of[h] for h in self.w_hist[rows]]).reshape(-1, 3)
+            vn = np.einsum("ti,ti->t", v, n)[:, None]
+            f = 2.0 * (area / 3.0)[:, None] * (cp * vn * n + cs * (v - vn * n))
+            for k in range(3):
+                np.add.at(g.bload, tri[:, k], f)
+
+
+
+def exposed_triangles(s, sel, exposed) -> tuple[np.ndarray, np.ndarray]:
+    """``(gid, vertices (k, 3))`` of the exposed surface triangles of the zoned blocks the
+    selection's names and groups take whose centroid lies in its ``range`` (the vertices
+    numbered in the block's piece, in outward order); ``exposed(gids)``: (gid, face rows)
+    of the exposed faces of blocks ``gids`` of the scene's store."""
+    g = s.glob
+    gids = zoned_gids(s)
+    gids = gids[s.specs.matching(gids, sel.names, sel.groups)]
+    gids = gids[g.out[gids] == 0]
+    gid, rows = exposed(gids)
+    verts, keep = [], []
+    for b, f in zip(gid, rows, strict=True):
+        p = g.piece_start[b]
+        v = g.face_verts[g.fvert_start[f]:g.fvert_start[f + 1]]
+        x = g.verts_local[v] + g.x[b]
+        if sel.range is not None and not _in_box(x.mean(axis=0)[None], sel)[0]:
+            keep.append(False)
+            verts.append((0, 0, 0))
+            continue
+        area = np.cross(x[1] - x[0], x[2] - x[0])
+        if np.dot(area, g.normals_local[f]) < 0.0:
+            v = v[[0, 2, 1]]
+        keep.append(True)
+        verts.append(tuple(v - g.vert_start[p]))
+    keep = np.array(keep, bool)
+    return gid[keep], np.array(verts, np.int64).reshape(-1, 3)[keep]
+
+
+def owned_triangles(g, gid: np.ndarray, vert: np.ndarray) -> list:
+    """``(d, rows, flat gridpoints (k, 3))`` per owned grid ``d`` of the triangles
+    ``(gid, vert)`` on it (a condition's list, every rank alike), in grid order."""
+    d_of = {int(b): d for d, b in enumerate(g.gids[:g.n_owned])}
+    out = []
+    on = np.array([int(b) in d_of for b in gid], bool)
+    for b in np.unique(gid[on]):
+        d = d_of[int(b)]
+        rows = np.nonzero(gid == b)[0]
+        out.append((d, rows, g.node_start[d] + g.surf[d][vert[rows]]))
+    out.sort(key=lambda r: r[0])
+    return out
+
+
+def _area_normal(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Areas (k,) and unit outward normals (k, 3) of triangles ``x (k, 3, 3)``."""
+    c = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    norm = np.linalg.norm(c, axis=1)
+    return 0.5 * norm, c / norm[:, None]
+
+
+def wave_impedances(params) -> tuple[float, float]:
+    """``(rho Cp, rho Cs)`` of a zone material: ``sqrt(rho (K + 4G/3))``, ``sqrt(rho G)``."""
+    rho = params.density
+    return (math.sqrt(rho * (params.bulk + 4.0 * params.shear / 3.0)),
+            math.sqrt(rho * params.shear))
 
 
 def _book_switch(body, idx, k: int, sign: float) -> None:

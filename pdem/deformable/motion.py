@@ -57,7 +57,13 @@ from ..dynamics.damping import sign_of
 from ..jit import inline_kernel, kernel
 from .constitutive import SHEAR_NOW, SHEAR_PAST, TENSION_NOW, TENSION_PAST, update_stress
 from .nmd import nmd_strain_in, nmd_stress_in
-from .zones import add_zone_forces_in, rotate_stress_in, strain_rates_in, zone_geometry_in
+from .zones import (
+    add_viscous_forces_in,
+    add_zone_forces_in,
+    rotate_stress_in,
+    strain_rates_in,
+    zone_geometry_in,
+)
 
 # columns of a grid's energy accumulators (DeformableBody.work), booked by :func:`cycle`
 GW_GRAVITY = 0  # work of gravity
@@ -67,17 +73,21 @@ GW_DAMPING = 3  # dissipated by damping
 GW_CONTACT = 4  # work of the contact forces (diagnostic: the joints book their side)
 GW_ZONE = 5  # work done on the zones (held and dissipated in them)
 GW_PLASTIC = 6  # of which dissipated by the zones' plastic flow
-N_GW = 7
+GW_QUIET = 7  # absorbed by quiet (viscous) boundaries
+N_GW = 8
 
 # columns of a grid's scalar row (DeformableBody.scalars; the store's rows, read by
 # :func:`step_grids`): stepped (0: taken out of the model), a load in ``applied``, NMD, the
-# damping form and its coefficient
+# damping form and its coefficient, Rayleigh damping's stiffness-proportional constant (s),
+# whether some gridpoint has a quiet boundary's dashpots
 SC_ACTIVE = 0
 SC_LOADED = 1
 SC_NMD = 2
 SC_MODE = 3
 SC_DAMPING = 4
-N_SC = 5
+SC_BETA = 5
+SC_QUIET = 6
+N_SC = 7
 
 # gridpoint damping forms (:func:`cycle`'s ``mode``; module doc)
 LOCAL = 0
@@ -85,7 +95,8 @@ COMBINED = 1
 VISCOUS = 2
 # solve.damping.mode -> (form, whether alpha is kept: none is the local form with alpha 0)
 GRID_DAMPING = {"none": (LOCAL, False), "local": (LOCAL, True), "combined": (COMBINED, True),
-                "viscous": (VISCOUS, True), "adaptive": (VISCOUS, True)}
+                "viscous": (VISCOUS, True), "adaptive": (VISCOUS, True),
+                "rayleigh": (VISCOUS, True)}
 
 
 def stability_alpha(mode: int, alpha: float) -> float:
@@ -154,24 +165,46 @@ def nodal_stiffness_3dec(nodes, tets, vol, bulk, shear):
     return out
 
 
-def critical_timestep(stiffness: np.ndarray, mass: np.ndarray, alpha: float = 0.0) -> float:
+def critical_timestep(stiffness: np.ndarray, mass: np.ndarray, alpha: float = 0.0,
+                      beta: float = 0.0) -> float:
     """Eq. 84: ``2 min sqrt(m_i / k_i)``, reduced by ``sqrt(1 + alpha)`` under local damping
-    (and combined; ``alpha``: :func:`stability_alpha`).
+    (and combined; ``alpha``: :func:`stability_alpha`), and for Rayleigh damping's
+    stiffness-proportional constant ``beta`` (s) by ``sqrt(1 + xi^2) - xi``, ``xi = beta
+    omega_max / 2`` the damping fraction it gives the highest frequency (the central-difference
+    limit with a viscous stiffness term, Belytschko's ``omega dt <= 2 (sqrt(1 + xi^2) - xi)``).
 
     Local damping subtracts ``alpha |F| sgn(v)``: when the force opposes the velocity (every
     half cycle of an oscillation) it *adds* ``alpha |F|`` to it, so the effective stiffness is
     up to ``(1 + alpha) k``; without this factor a damped grid at the undamped limit diverges
     (found: alpha = 0.8 with mass scaling at 0.9 of the undamped limit blew up in 30 steps).
     """
-    return float(2.0 * np.sqrt(np.min(mass / ((1.0 + alpha) * stiffness))))
+    dt0 = float(2.0 * np.sqrt(np.min(mass / ((1.0 + alpha) * stiffness))))
+    return rayleigh_limit(dt0, beta)
+
+
+def rayleigh_limit(dt0: float, beta: float) -> float:
+    """The stable step of a grid whose undamped limit is ``dt0`` under Rayleigh damping's
+    stiffness term ``beta`` (:func:`critical_timestep`; ``omega_max = 2 / dt0``)."""
+    if beta <= 0.0 or not np.isfinite(dt0):
+        return dt0
+    xi = beta / dt0
+    return float(dt0 * (np.sqrt(1.0 + xi * xi) - xi))
+
+
+def undamped_limit(dt: float, beta: float) -> float:
+    """The undamped limit ``dt0`` whose :func:`rayleigh_limit` is ``dt``:
+    ``sqrt(dt^2 + 2 dt beta)`` (mass scaling for a step under Rayleigh damping)."""
+    if beta <= 0.0:
+        return dt
+    return float(np.sqrt(dt * dt + 2.0 * dt * beta))
 
 
 def scaled_masses(stiffness: np.ndarray, dt: float = 1.0, frac: float = 0.9,
-                  alpha: float = 0.0) -> np.ndarray:
+                  alpha: float = 0.0, beta: float = 0.0) -> np.ndarray:
     """Inertial masses making ``dt`` a ``frac`` of the critical step (with local damping
-    ``alpha``) at every gridpoint: 3DEC's density scaling for static solutions (gravity keeps
-    the true masses)."""
-    return (1.0 + alpha) * stiffness * (dt / (2.0 * frac)) ** 2
+    ``alpha``, Rayleigh damping's ``beta``) at every gridpoint: 3DEC's density scaling for
+    static solutions (gravity keeps the true masses)."""
+    return (1.0 + alpha) * stiffness * (undamped_limit(dt / frac, beta) / 2.0) ** 2
 
 
 @kernel
@@ -204,6 +237,7 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     rate = np.empty((n_zones, 6))
     spin = np.empty((n_zones, 3))
     sigma_p = np.zeros(n_zones)
+    no_quiet = np.zeros((0, 6))
     # the grid's rows as :func:`advance` takes them (row 0 of step_grids' flat ones), copied
     # back after the steps
     servo_rows = np.empty((1, 2))
@@ -216,9 +250,9 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     done = n_steps
     for step in range(n_steps):
         if not advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol,
-                       stress, plastic, model, nmd, mode, alpha, prev, unbalanced, servo_rows,
-                       gforce, contact, load, (bulk, shear), work_rows, force, mid, rate, spin,
-                       sigma_p):
+                       stress, plastic, model, nmd, (mode, alpha, 0.0, False), prev, unbalanced,
+                       servo_rows, gforce, contact, load, (bulk, shear), work_rows, no_quiet,
+                       (force, mid, rate, spin, sigma_p)):
             done = step
             break
     for k in range(2):
@@ -230,55 +264,76 @@ def cycle(n_steps, dt, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
 
 @inline_kernel
 def advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, vol, stress,
-            plastic, model, nmd, mode, alpha, prev, unbalanced, servo, gforce, contact, load,
-            moduli, work, force, mid, rate, spin, sigma_p):
+            plastic, model, nmd, damp, prev, unbalanced, servo, gforce, contact, load, moduli,
+            work, quiet, scratch):
     """One step of one grid of :func:`cycle` or :func:`step_grids` on the flat arrays of
     :func:`step_grids` (a single grid's are those of one grid), without slicing them:
     ``where = (d, a, e, za, ze, loaded)``: the grid's row ``d`` of ``unbalanced (k,)``,
     ``servo (k, 2)``, ``work (k, N_GW)``, its gridpoints ``a <= n < e`` (its ``tets`` number
     them from ``a``), its zones ``za <= z < ze``, and whether ``load`` has its rows (else it
-    is not read). ``moduli``: its ``(bulk, shear)`` (fewer than 31 arguments, or Python 3.11
-    passes them as ``*args``, which numba cannot inline). Scratch: ``force``, ``mid``
-    (n, 3), ``rate`` (m, 6), ``spin`` (m, 3), ``sigma_p`` (m,). False if a zone inverted.
+    is not read). ``moduli``: its ``(bulk, shear)``; ``damp = (mode, alpha, beta, quieted)``:
+    the damping form and coefficient, Rayleigh damping's stiffness-proportional constant
+    (0: none) and whether some gridpoint has dashpots (``quiet (n, 6)``: each gridpoint's
+    symmetric dashpot matrix ``C``, xx yy zz xy yz zx, N s/m; read only then). Scratch
+    ``(force, mid, rate, spin, sigma_p)``: ``(n, 3)`` twice, ``(m, 6)``, ``(m, 3)``, ``(m,)``
+    (fewer than 31 arguments, or Python 3.11 passes them as ``*args``, which numba cannot
+    inline). False if a zone inverted.
+
+    Rayleigh's stiffness term adds the viscous stresses ``beta D : eps_dot`` of the velocities
+    at ``t - dt/2`` to the zones' forces (:func:`~pdem.deformable.zones.add_viscous_forces_in`;
+    not kept in the stresses) and books their work as damping. A gridpoint with dashpots
+    moves by the centred balance ``m (v+ - v-) / dt = F - C (v+ + v-) / 2`` (with the
+    damping form's), solved for ``v+`` in its free components (a prescribed component keeps
+    its velocity): stable for any dashpot, and what ``C`` absorbs, ``C vb . vb dt`` at the
+    mean velocity ``vb``, is the kinetic energy's loss to the step's round-off
+    (``GW_QUIET``).
+
     Inlined into :func:`cycle` and :func:`step_grids`: the same arithmetic, so the same
     bits, on either path. Its loops index with unsigned integers (pdem.deformable.zones:
     numba would wrap a signed index that may be negative around at every access)."""
     d, a, e, za, ze, loaded = where
     bulk, shear = moduli
+    mode, alpha, beta, quieted = damp
+    force, mid, rate, spin, sigma_p = scratch
     d1 = 1.0 - 0.5 * alpha * dt  # eq. 49's factors (VISCOUS)
     d2 = 1.0 / (1.0 + 0.5 * alpha * dt)
+    h = 0.5 * alpha * dt if mode == VISCOUS else 0.0
     # (unsigned indices: a signed one is wrapped around at every access, pdem.deformable.zones)
     for n in range(np.uint64(a), np.uint64(e)):
         for i in range(3):
             force[n, i] = applied[n, i]
     add_zone_forces_in(tets, grad, vol, stress, force, za, ze, a)
+    viscous = beta > 0.0
+    if viscous:  # Rayleigh's stiffness term, in ``mid`` (read below before it is rewritten)
+        for n in range(np.uint64(a), np.uint64(e)):
+            for i in range(3):
+                mid[n, i] = 0.0
+        add_viscous_forces_in(vel, tets, grad, vol, beta, bulk - 2.0 * shear / 3.0, shear, mid,
+                              za, ze, a)
+    # per gridpoint: velocity at t - dt/2 and t + dt/2, force after the damping form's
+    # (rows 0-2), and a dashpot gridpoint's system (rows 3-5: matrix; 6: right-hand side)
+    tmp = np.empty((7, 3))
     big = 0.0
-    wg = wa = wb = wd = wc = wz = 0.0
+    wg = wa = wb = wd = wc = wz = wq = 0.0
     dek = 0.0
     for n in range(np.uint64(a), np.uint64(e)):
         c = dt / mass[n]
         f2 = 0.0
         e2 = 0.0
         for i in range(3):
-            ft = force[n, i]
-            fz = ft - applied[n, i]  # the zone forces' part
+            fv = mid[n, i] if viscous else 0.0
+            ft = force[n, i] + fv if viscous else force[n, i]
             dfdt = ft - prev[n, i]
             prev[n, i] = ft
+            v = vel[n, i]
+            tmp[0, i] = v
             if fixed[n, i]:
-                vp = fixed_vel[n, i]
-                vel[n, i] = vp
-                # the prescribed motion strains the zones and the joints: it puts in the
-                # work of their forces on the gridpoint (their reactions)
-                wz -= fz * vp
-                wb -= (fz + contact[n, i]) * vp
+                tmp[1, i] = fixed_vel[n, i]
                 continue
             f = ft
             f2 += f * f
-            v = vel[n, i]
             if mode == VISCOUS:
                 v1 = (d1 * v + f * c) * d2
-                vb = 0.5 * (v + v1)
-                fd = alpha * mass[n] * vb  # eq. 49 solved for its force
             else:
                 if mode == COMBINED:  # (sgn(v) - sgn(dF/dt)) / 2
                     sg = 0.5 * (sign_of(v) - sign_of(dfdt))
@@ -288,8 +343,35 @@ def advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
                 elif v < 0.0:
                     f += alpha * abs(f)
                 v1 = v + f * c
-                vb = 0.5 * (v + v1)
-                fd = ft - f
+            tmp[1, i] = v1
+            tmp[2, i] = f
+        dash = quieted and quiet[n, 0] + quiet[n, 1] + quiet[n, 2] > 0.0
+        if dash:
+            _dashpot_velocity(quiet, n, mass[n] / dt, h, fixed, fixed_vel, tmp)
+        for i in range(3):
+            fv = mid[n, i] if viscous else 0.0
+            fz = force[n, i] - applied[n, i]  # the zone forces' part (elastic)
+            if fixed[n, i]:
+                vp = tmp[1, i]
+                vel[n, i] = vp
+                # the prescribed motion strains the zones and the joints: it puts in the
+                # work of their forces on the gridpoint (their reactions), and of the
+                # viscous stresses, which dissipate it
+                wz -= fz * vp
+                wb -= (fz + contact[n, i] + fv) * vp
+                wd -= fv * vp
+                continue
+            v = tmp[0, i]
+            v1 = tmp[1, i]
+            vb = 0.5 * (v + v1)
+            if mode == VISCOUS:
+                fd = alpha * mass[n] * vb  # eq. 49 solved for its force
+            else:
+                fd = (force[n, i] + fv if viscous else force[n, i]) - tmp[2, i]
+            if viscous:
+                fd -= fv
+            if dash:
+                wq += _dashpot_force(quiet, n, i, tmp) * vb
             vel[n, i] = v1
             e2 += v1 * v1 - v * v
             wg += gforce[n, i] * vb
@@ -312,6 +394,8 @@ def advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     servo[d, 1] = dek / dt
     work[d, GW_CONTACT] += wc * dt
     work[d, GW_ZONE] += wz * dt
+    if quieted:
+        work[d, GW_QUIET] += wq * dt
     # strain rates on the mid-step geometry: for a rigid rotation over the step the
     # velocity gradient is then exactly skew (a Cayley transform), so it strains nothing
     if zone_geometry_in(mid, tets, grad, vol, za, ze, a) <= 0.0:
@@ -343,11 +427,66 @@ def advance(dt, where, nodes, vel, mass, applied, fixed, fixed_vel, tets, grad, 
     return True
 
 
+@inline_kernel
+def _quiet_entry(quiet, n, i, j):
+    """``C_ij`` of gridpoint ``n``'s dashpot matrix (``quiet`` rows: xx yy zz xy yz zx)."""
+    if i == j:
+        return quiet[n, i]
+    k = i + j  # (0, 1): xy, (1, 2): yz, (0, 2): zx
+    if k == 1:
+        return quiet[n, 3]
+    if k == 3:
+        return quiet[n, 4]
+    return quiet[n, 5]
+
+
+@inline_kernel
+def _dashpot_force(quiet, n, i, tmp):
+    """Component ``i`` of the dashpots' force ``C vb`` at the step's mean velocity (``tmp``
+    rows 0 and 1: the velocities at t - dt/2 and t + dt/2, :func:`advance`)."""
+    out = 0.0
+    for j in range(3):
+        out += _quiet_entry(quiet, n, i, j) * 0.5 * (tmp[0, j] + tmp[1, j])
+    return out
+
+
+@inline_kernel
+def _dashpot_velocity(quiet, n, mdt, h, fixed, fixed_vel, tmp):
+    """The velocity at t + dt/2 (into ``tmp`` row 1) of gridpoint ``n`` with dashpots
+    (:func:`advance`): ``(mdt (1 + h) I + C / 2) v+ = mdt (1 - h) v- - C v- / 2 + f`` on its
+    free components (``mdt = m / dt``; ``h``: half the viscous form's ``alpha dt``, else 0;
+    ``v-`` in row 0, ``f`` the force after the damping form's in row 2), ``v+`` the
+    prescribed velocity on the others; by Cramer's rule (the matrix is diagonally dominant)."""
+    for i in range(3):
+        if fixed[n, i]:
+            for j in range(3):
+                tmp[3 + i, j] = 1.0 if i == j else 0.0
+            tmp[6, i] = fixed_vel[n, i]
+            continue
+        r = mdt * (1.0 - h) * tmp[0, i] + tmp[2, i]
+        for j in range(3):
+            cij = 0.5 * _quiet_entry(quiet, n, i, j)
+            tmp[3 + i, j] = cij + mdt * (1.0 + h) if i == j else cij
+            r -= cij * tmp[0, j]
+        tmp[6, i] = r
+    a00, a01, a02 = tmp[3, 0], tmp[3, 1], tmp[3, 2]
+    a10, a11, a12 = tmp[4, 0], tmp[4, 1], tmp[4, 2]
+    a20, a21, a22 = tmp[5, 0], tmp[5, 1], tmp[5, 2]
+    b0, b1, b2 = tmp[6, 0], tmp[6, 1], tmp[6, 2]
+    c00 = a11 * a22 - a12 * a21
+    c01 = a12 * a20 - a10 * a22
+    c02 = a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    tmp[1, 0] = (b0 * c00 + a01 * (a12 * b2 - b1 * a22) + a02 * (b1 * a21 - a11 * b2)) / det
+    tmp[1, 1] = (a00 * (b1 * a22 - a12 * b2) + b0 * c01 + a02 * (a10 * b2 - b1 * a20)) / det
+    tmp[1, 2] = (a00 * (a11 * b2 - b1 * a21) + a01 * (b1 * a20 - a10 * b2) + b0 * c02) / det
+
+
 @kernel
 def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zone_start,
                scalars, moduli, work, servo, unbalanced, nodes, vel, contact, kc, gmass, mass,
-               emass, zstiff, applied, fixed, fixed_vel, prev, bload, tets, grad, vol, stress,
-               plastic, ap, gf, load, force, mid, rate, spin, sigma_p):
+               emass, zstiff, applied, fixed, fixed_vel, prev, bload, quiet, tets, grad, vol,
+               stress, plastic, ap, gf, load, force, mid, rate, spin, sigma_p):
     """One step of the grids ``d0 <= d < d1`` of a :class:`~pdem.deformable.store.GridStore`
     (all of the constitutive table ``model``), each as :func:`cycle`'s step on its ranges of
     the flat arrays (CSR by ``node_start``, ``zone_start``; ``tets`` hold each grid's own
@@ -359,8 +498,11 @@ def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zo
     ``contact + m_g g (+ applied) (+ bload)`` and loads ``(bload) (+ applied)`` into the
     scratch ``ap``, ``load`` (gravity's ``gf``), each sum in the order the per-grid numpy
     made it. ``moduli (k, 2)``: bulk and shear moduli; ``work``, ``servo``, ``unbalanced``:
-    the grids' rows. Returns the first grid that folded (-1: none; the grids after it are
-    not stepped) and the largest unbalanced gridpoint force of the grids stepped."""
+    the grids' rows; ``quiet (n, 6)``: the gridpoints' dashpots (:func:`advance`; read in the
+    grids whose ``SC_QUIET`` is set). Under Rayleigh damping (``SC_BETA``) the masses are
+    raised for the step its stiffness term allows (:func:`undamped_limit`). Returns the
+    first grid that folded (-1: none; the grids after it are not stepped) and the largest
+    unbalanced gridpoint force of the grids stepped."""
     big = 0.0
     for d in range(d0, d1):
         if scalars[d, SC_ACTIVE] == 0.0:  # taken out of the model
@@ -370,11 +512,16 @@ def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zo
         mode = int(scalars[d, SC_MODE])
         damping = scalars[d, SC_DAMPING]
         sa = 0.0 if mode == VISCOUS else damping  # stability_alpha
+        beta = scalars[d, SC_BETA]
+        qd = q
+        if beta > 0.0:  # undamped_limit's square over 4, of dt / GRID_FRAC = 2 sqrt(q)
+            r = 2.0 * np.sqrt(q)
+            qd = 0.25 * (r * r + 2.0 * r * beta)
         loaded = scalars[d, SC_LOADED] != 0.0
         a, e = node_start[d], node_start[d + 1]
         za, ze = zone_start[d], zone_start[d + 1]
         for n in range(np.uint64(a), np.uint64(e)):  # (unsigned: advance)
-            need = (1.0 + sa) * (zstiff[n] + kc[n]) * q
+            need = (1.0 + sa) * (zstiff[n] + kc[n]) * qd
             emass[n] = need if need > mass[n] else mass[n]
             for i in range(3):
                 gi = gmass[n] * g[i]
@@ -390,9 +537,10 @@ def step_grids(d0, d1, model, dt, q, g, adaptive, alpha, bloaded, node_start, zo
                 ap[n, i] = f
         nmd = scalars[d, SC_NMD] != 0.0
         if not advance(dt, (d, a, e, za, ze, loaded or bloaded), nodes, vel, emass, ap, fixed,
-                       fixed_vel, tets, grad, vol, stress, plastic, model, nmd, mode, damping,
-                       prev, unbalanced, servo, gf, contact, load,
-                       (moduli[d, 0], moduli[d, 1]), work, force, mid, rate, spin, sigma_p):
+                       fixed_vel, tets, grad, vol, stress, plastic, model, nmd,
+                       (mode, damping, beta, scalars[d, SC_QUIET] != 0.0), prev, unbalanced,
+                       servo, gf, contact, load, (moduli[d, 0], moduli[d, 1]), work, quiet,
+                       (force, mid, rate, spin, sigma_p)):
             return d, big
         if unbalanced[d] > big:
             big = unbalanced[d]

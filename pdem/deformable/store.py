@@ -108,6 +108,9 @@ class GridStore:
         # boundary stresses on the owned grids' faces this step (pdem.deformable.conditions)
         self.bload = np.zeros((n, 3))
         self.bloaded = False
+        # quiet boundaries' dashpots at the owned grids' gridpoints (symmetric 3 x 3: xx yy zz
+        # xy yz zx, N s/m; pdem.deformable.conditions.GridConditions.dashpots)
+        self.quiet = np.zeros((n, 6))
         for d, (b, z) in enumerate(zip(self.bodies, grids, strict=True)):
             a, e = self.node_start[d], self.node_start[d + 1]
             za, ze = self.zone_start[d], self.zone_start[d + 1]
@@ -230,15 +233,17 @@ class GridStore:
         self._runs = None
         self._one_run = None
 
-    def set_damping(self, mode: str, alpha: float) -> None:
+    def set_damping(self, mode: str, alpha: float, beta: float = 0.0) -> None:
         """The grids' damping: ``solve.damping.mode`` at the gridpoints (its form,
         pdem.deformable.motion's module doc) with coefficient ``alpha`` (none: 0; adaptive:
-        the servo's, followed every step)."""
+        the servo's, followed every step; rayleigh: its mass-proportional constant) and
+        Rayleigh damping's stiffness-proportional constant ``beta`` (s; 0 for the others)."""
         form, keep = GRID_DAMPING[mode]
         self.adaptive = mode == "adaptive"
         for b in self.bodies:
             b.damping_mode = form
             b.damping = float(alpha) if keep else 0.0
+            b.rayleigh_beta = float(beta)
 
     def _zone_stiffness(self, d: int) -> np.ndarray:
         """Grid ``d``'s Gershgorin gridpoint stiffness of its zones (eq. 84), on its reference
@@ -274,7 +279,8 @@ class GridStore:
         dt = np.inf
         for d in range(self.n_owned if owned else len(self.bodies)):
             b = self.bodies[d]
-            dt = min(dt, critical_timestep(self._stiffness(d, kn), b.mass, b.stability_alpha()))
+            dt = min(dt, critical_timestep(self._stiffness(d, kn), b.mass, b.stability_alpha(),
+                                           b.rayleigh_beta))
         return float(dt)
 
     def scale_masses(self, kn: float, dt: float | None) -> None:
@@ -287,7 +293,8 @@ class GridStore:
             if dt is None:
                 b.mass[:] = b.emass[:] = b.gravity_mass
                 continue
-            need = scaled_masses(self._stiffness(d, kn), dt, GRID_FRAC, b.stability_alpha())
+            need = scaled_masses(self._stiffness(d, kn), dt, GRID_FRAC, b.stability_alpha(),
+                                 b.rayleigh_beta)
             b.mass[:] = b.emass[:] = np.maximum(b.gravity_mass, need)
 
     def restage(self, scene, dt: float, alpha: float, comm) -> float:
@@ -296,7 +303,7 @@ class GridStore:
         :meth:`resolve` makes them at the start (collective). Returns the step. ``dt``:
         without mass scaling the rigid blocks' step alone (``inf`` when none is free,
         pdem.resolve.scene_timestep), with it the rigid estimate the grids are scaled to."""
-        self.set_damping(scene.solve.damping.mode, alpha)
+        self.set_damping(scene.solve.damping.mode, alpha, scene.solve.damping.rayleigh[1])
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
         self.kn = kn
         self.kjoint = joint_stiffness(scene)
@@ -318,7 +325,8 @@ class GridStore:
         joint springs); with it, the rigid estimate the grids are scaled to."""
         import dataclasses
 
-        self.set_damping(scene.solve.damping.mode, resolved.alpha)
+        self.set_damping(scene.solve.damping.mode, resolved.alpha,
+                         scene.solve.damping.rayleigh[1])
         kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
         self.kn = kn
         self.kjoint = joint_stiffness(scene)
@@ -542,7 +550,7 @@ class GridStore:
                 self.node_start, self.zone_start, self.scalars, self.moduli, self.work,
                 self.servo, self.unbalanced, self.nodes, self.vel, self.force, self.kc,
                 self.gmass, self.mass, self.emass, self.zstiff, self.applied, self.fixed,
-                self.fixed_vel, self.prev, self.bload, self.tets, self.grad, self.vol,
+                self.fixed_vel, self.prev, self.bload, self.quiet, self.tets, self.grad, self.vol,
                 self.stress, self.plastic, ap, gf, load, force, mid, self._rate, self._spin,
                 self._sigma_p)
 

@@ -129,6 +129,39 @@ def add_zone_forces_in(tets, grad, vol, stress, force, za, ze, off):
 
 
 @kernel
+def add_viscous_forces_in(vel, tets, grad, vol, beta, lam, shear, force, za, ze, off):
+    """Add the forces of Rayleigh damping's stiffness-proportional term of the zones
+    ``za <= z < ze`` (gridpoints ``tets + off``): the viscous stress ``beta D : eps_dot``
+    (``D`` the elastic stiffness, Lame ``lam`` and ``shear``; ``eps_dot`` the strain rate of
+    ``vel`` on the geometry ``grad``), as :func:`add_zone_forces_in` adds a zone's stress. It
+    is not kept in the zone's stress: it damps, it is not held."""
+    for z in range(np.uint64(za), np.uint64(ze)):
+        exx = eyy = ezz = exy = eyz = ezx = 0.0
+        for a in range(4):
+            n = np.uint64(tets[z, a] + off)
+            gx, gy, gz = grad[z, a, 0], grad[z, a, 1], grad[z, a, 2]
+            vx, vy, vz = vel[n, 0], vel[n, 1], vel[n, 2]
+            exx += vx * gx
+            eyy += vy * gy
+            ezz += vz * gz
+            exy += vx * gy + vy * gx
+            eyz += vy * gz + vz * gy
+            ezx += vz * gx + vx * gz
+        bl = beta * lam * (exx + eyy + ezz)
+        b2 = 2.0 * beta * shear
+        sxx, syy, szz = bl + b2 * exx, bl + b2 * eyy, bl + b2 * ezz
+        bs = beta * shear  # (2 G times the tensor shear rates, half the sums above)
+        sxy, syz, szx = bs * exy, bs * eyz, bs * ezx
+        v = vol[z]
+        for a in range(4):
+            n = np.uint64(tets[z, a] + off)
+            gx, gy, gz = grad[z, a, 0], grad[z, a, 1], grad[z, a, 2]
+            force[n, 0] -= v * (sxx * gx + sxy * gy + szx * gz)
+            force[n, 1] -= v * (sxy * gx + syy * gy + syz * gz)
+            force[n, 2] -= v * (szx * gx + syz * gy + szz * gz)
+
+
+@kernel
 def add_zone_forces(tets, grad, vol, stress, force):
     """Add ``f_a = -V sigma . dN_a/dx`` of every zone to its gridpoints (eq. 55)."""
     add_zone_forces_in(tets, grad, vol, stress, force, 0, tets.shape[0], 0)

@@ -38,6 +38,10 @@ DAMPING.register("local", DampingMode(LocalDamping, 0.8))
 DAMPING.register("combined", DampingMode(CombinedDamping, 0.8))
 DAMPING.register("viscous", DampingMode(ViscousDamping, None))
 DAMPING.register("adaptive", DampingMode(ViscousDamping, 0.0, adaptive=True))
+# dynamic analysis: its mass-proportional part is the viscous form with alpha = fraction
+# omega (pdem.config.schema.Damping.rayleigh); the stiffness-proportional part acts in the
+# zones (pdem.deformable.motion)
+DAMPING.register("rayleigh", DampingMode(ViscousDamping, None))
 
 
 @inline_kernel

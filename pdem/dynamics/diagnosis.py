@@ -84,7 +84,8 @@ def explain(state, totals: dict | None, start: tuple[float, float] | None, gid: 
     # (the zoned blocks' zones take work as the joints do: what was done on them)
     integ = t["kinetic"] - ke0 - (t["gravity_work"] + t["applied_work"] + t["contact_work"]
                                   + t["boundary_work"] - t["damping_dissipation"]
-                                  - t["zone_strain"] - t["plastic_work"])
+                                  - t["zone_strain"] - t["plastic_work"]
+                                  - t.get("quiet_absorbed", 0.0))
     err = integ + t["contact_work"] + (t["strain"] - strain0) + t["joint_dissipation"] \
         + t["removed"]
     made = t["geometry_created"]  # measured at each contact geometry update

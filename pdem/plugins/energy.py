@@ -18,6 +18,7 @@ from ..deformable.motion import (
     GW_DAMPING,
     GW_GRAVITY,
     GW_PLASTIC,
+    GW_QUIET,
     GW_ZONE,
 )
 from ..dynamics import motion
@@ -32,7 +33,8 @@ log = logging.getLogger("pdem")
 
 COLUMNS = ("kinetic", "strain", "gravity_work", "applied_work", "boundary_work",
            "joint_dissipation", "damping_dissipation", "contact_work", "joint_created",
-           "geometry_created", "removed", "zone_strain", "plastic_work", "balance_error")
+           "geometry_created", "removed", "zone_strain", "plastic_work", "quiet_absorbed",
+           "balance_error")
 # the accumulated works of COLUMNS[2:-1], as columns of the block field ``work``
 WORK_COLUMNS = np.array([motion.WORK_GRAVITY, motion.WORK_APPLIED, motion.WORK_BOUNDARY,
                          motion.WORK_JOINT, motion.WORK_DAMPING, motion.WORK_CONTACT,
@@ -86,6 +88,7 @@ def energy_totals(state) -> dict[str, float]:
             per_block[rows, col] += gw[:, k]
         per_block[rows, 11] = gw[:, GW_ZONE] - gw[:, GW_PLASTIC]
         per_block[rows, 12] = gw[:, GW_PLASTIC]
+        per_block[rows, 13] = gw[:, GW_QUIET]
     sums = exact_sum(state.comm, per_block)
     return dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
 
@@ -95,7 +98,7 @@ def balance(t: dict[str, float], e0: float) -> tuple[float, float]:
     there at the start and what was put in. Zero for an exact scheme."""
     put_in = e0 + t["gravity_work"] + t["applied_work"] + t["boundary_work"]
     held = t["kinetic"] + t["strain"] + t["joint_dissipation"] + t["damping_dissipation"] \
-        + t["removed"] + t["zone_strain"] + t["plastic_work"]
+        + t["removed"] + t["zone_strain"] + t["plastic_work"] + t["quiet_absorbed"]
     return held - put_in, put_in
 
 
@@ -121,8 +124,8 @@ class EnergyBudget(Plugin):
             self.writer.add_history("energy", len(COLUMNS), {
                 "columns": ",".join(COLUMNS), "units": "J",
                 "balance": "kinetic + strain + joint_dissipation + damping_dissipation + "
-                           "removed + zone_strain + plastic_work - (kinetic + strain at start) "
-                           "- gravity_work - applied_work - boundary_work"})
+                           "removed + zone_strain + plastic_work + quiet_absorbed - (kinetic "
+                           "+ strain at start) - gravity_work - applied_work - boundary_work"})
         self.times: list[float] = []
         self.rows: list[np.ndarray] = []
         self.last = None
