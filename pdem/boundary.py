@@ -456,9 +456,14 @@ def _add_quiet(boundary, s, cond, gids, t0, motion_too):
 
 def _zoned_quiet(boundary, s, cond, t0, motion_too, at) -> int:
     """Dashpots on the exposed surface faces of the zoned blocks it selects."""
-    return boundary.grid.add_quiet(s, cond, "normal" in cond.directions,
-                                   "shear" in cond.directions,
+    n = boundary.grid.add_quiet(s, cond, "normal" in cond.directions,
+                                "shear" in cond.directions,
+                                lambda gids: exposed_face_rows(s.glob, gids, s.ctol))
+    if cond.release:
+        # (a restart's replay frees them alike; their loads come with its checkpoint)
+        boundary.grid.release_held(s, cond, motion_too,
                                    lambda gids: exposed_face_rows(s.glob, gids, s.ctol))
+    return n
 
 
 def _dashpots(boundary, s):

@@ -706,10 +706,14 @@ class BoundaryQuiet(Selection):
     """A quiet (viscous) boundary on the exposed faces of the selected blocks (whose centroid
     lies in ``range``): Lysmer and Kuhlemeyer's dashpots ``rho Cp`` normal and ``rho Cs``
     shear per area, which absorb the waves that reach it (docs/dynamics.md).
-    ``directions``: which of the two."""
+    ``directions``: which of the two. ``release``: the static stage's support handed over to
+    the dashpots (as 3DEC and FLAC3D do when a fixed boundary becomes quiet): every held
+    degree of freedom of the gridpoints it takes is freed and keeps, from then on, the force
+    that held it (its reaction when the condition is applied) as a constant load."""
 
     directions: Annotated[list[Literal["normal", "shear"]],
                           Field(min_length=1, max_length=2)] = ["normal", "shear"]
+    release: bool = False
 
     @field_validator("directions")
     @classmethod
@@ -869,11 +873,26 @@ class Parallel(Strict):
 
 
 class History(Strict):
-    """Record ``quantity`` of block ``block`` every ``every`` model seconds (or every step)."""
+    """Record ``quantity`` of block ``block`` every ``every`` model seconds (or every step),
+    or at a recording station ``point``: the zoned blocks' gridpoint nearest to it (on their
+    reference positions) where a zoned block's box holds it, else the rigid block whose
+    centroid is nearest (docs/dynamics.md). ``acceleration``: the velocity's change over the
+    step before the sample, over the step."""
 
-    block: str
-    quantity: Literal["displacement", "velocity", "position", "angular_velocity"]
+    block: str | None = None
+    point: Vec3 | None = None
+    quantity: Literal["displacement", "velocity", "position", "angular_velocity",
+                      "acceleration"]
     every: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.block is None) == (self.point is None):
+            raise ValueError("give exactly one of block, point")
+        if self.point is not None and self.quantity == "angular_velocity":
+            raise ValueError("angular_velocity: of a block (a station records a point's "
+                             "motion)")
+        return self
 
 
 # The zoned blocks' series a scene may choose (pdem.io.zones.ZONE_FIELDS, the same names in
@@ -1110,7 +1129,7 @@ class Scene(Strict):
                     errors.append(f"cuts[{i}].groups: no block has group {g!r} "
                                   f"(groups: {', '.join(sorted(groups))})")
         for i, h in enumerate(self.output.histories):
-            if h.block not in names and not _is_family_member(h.block, names):
+            if h.block is not None and h.block not in names and not _is_family_member(h.block, names):
                 errors.append(f"output.histories[{i}].block: unknown block {h.block!r}")
         if errors:
             raise ValueError("\n".join(errors))

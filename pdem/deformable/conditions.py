@@ -24,6 +24,7 @@ import numpy as np
 
 from ..mpi import allgather
 from .motion import GW_BOUNDARY
+from .zones import add_zone_forces
 
 
 def zoned_entries(scene) -> np.ndarray:
@@ -179,6 +180,35 @@ class GridConditions:
         self.q_on = np.concatenate([self.q_on, np.tile([normal, shear], (len(gid), 1))])
         self._qmap = None
         return len(gid)
+
+    def release_held(self, s, sel, loads: bool, exposed) -> None:
+        """Free every held degree of freedom of the owned grids' gridpoints on the exposed
+        triangles the selection takes and, with ``loads``, give each the force that held it
+        as a constant load (``applied``): minus the zone, contact, gravity and applied forces
+        on it now (a restart's replay frees them alone: the loads are in its checkpoint)."""
+        g = s.grids
+        gid, vert = exposed_triangles(s, sel, exposed)
+        if g is None or not len(gid):
+            return
+        for d, _rows, tri in owned_triangles(g, gid, vert):
+            body = g.bodies[d]
+            idx = np.unique(tri.ravel()) - g.node_start[d]
+            held = body.fixed[idx]
+            if not held.any():
+                continue
+            if loads:
+                zone = np.zeros((len(body.nodes), 3))
+                add_zone_forces(body.tets, body.grad, body.vol, body.stress, zone)
+                a = g.node_start[d]
+                total = (zone[idx] + g.force[a + idx] + np.outer(body.gravity_mass[idx], g.gravity)
+                         + body.applied[idx])
+                body.applied[idx] -= np.where(held, total, 0.0)
+                body.loaded = True
+            elif body.applied[idx].any():
+                body.loaded = True
+            body.fixed[idx] = False
+            body.fixed_vel[idx] = 0.0
+            body.vhist[idx] = -1
 
     def add_wave(self, s, sel, history, t0: float, exposed) -> int:
         """A wave put in through the exposed surface triangles the selection takes (as

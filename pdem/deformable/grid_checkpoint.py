@@ -25,6 +25,8 @@ def checkpoint_rows(grids, comm, parallel: bool):
     arrays["stress"] = [grids.bodies[d].stress for d in own]
     arrays["plastic"] = [grids.bodies[d].plastic for d in own]
     arrays["prev"] = [grids.bodies[d].prev_force for d in own]
+    # applied loads (a stage's force, a released quiet boundary's reactions)
+    arrays["applied"] = [grids.bodies[d].applied for d in own]
     if not parallel and comm.size > 1:  # one writer: every grid to it
         parts = gather(comm, (mine, arrays))
         if comm.rank != 0:
@@ -38,7 +40,8 @@ def write(f, rows, rank: int) -> None:
     """The grids' state (:func:`checkpoint_rows`) into group ``grids`` of an open
     checkpoint file, in gid order over all ranks: gid, gridpoint and zone counts,
     gridpoint positions, velocities, contact forces, contact stiffness (``kc``: the next
-    step's masses) and last total forces (``prev``: combined damping's), zone stresses and
+    step's masses), last total forces (``prev``: combined damping's) and applied loads
+    (``applied``: a stage's force, a released quiet boundary's reactions), zone stresses and
     plastic bits, the
     grids' energy accumulators (``work``, pdem.deformable.motion.GW_*; the sub-contacts' grid
     columns are in ``subcontacts/sc_grid``)."""
@@ -58,8 +61,8 @@ def write(f, rows, rank: int) -> None:
     d = g.create_dataset("work", (len(order), N_GW), dtype=np.float64)
     if rank == 0:
         d[:] = allt["work"][order]
-    shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "kc": (), "prev": (3,), "stress": (6,),
-              "plastic": ()}
+    shapes = {"nodes": (3,), "vel": (3,), "force": (3,), "kc": (), "prev": (3,), "applied": (3,),
+              "stress": (6,), "plastic": ()}
     for k, shape in shapes.items():
         zones = k in ("stress", "plastic")
         off = zone_off if zones else node_off
@@ -103,5 +106,10 @@ def load(grids, path) -> None:
             # (a checkpoint without them: combined damping's dF/dt starts from nil)
             b.prev_force[:] = g["prev"][node_off[i]:node_off[i + 1]] if "prev" in g else 0.0
             # (a checkpoint without them: the budget's grid works start over)
-            b.work[:] = g["work"][i] if "work" in g else 0.0
+            work = g["work"][i] if "work" in g else np.zeros(0)
+            b.work[:] = 0.0
+            b.work[:len(work)] = work  # (a checkpoint before quiet_absorbed: one column less)
+            if "applied" in g:
+                b.applied[:] = g["applied"][node_off[i]:node_off[i + 1]]
+                b.loaded = bool(b.applied.any())
             zone_geometry(b.nodes, b.tets, b.grad, b.vol)

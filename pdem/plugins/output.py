@@ -20,6 +20,7 @@ from ..io.surfaces import body_surfaces
 from ..io.writer import OutputWriter, quat_to_matrix
 from ..memory import mapping_large_blocks
 from ..model.fields import OUTPUT
+from ..mpi import allgather, allreduce_sum_array
 from ..resolve import mass_scaling_summary
 from ..selection import timestep_rows
 from .base import PLUGINS, Plugin, PluginEntry, interval_steps, next_multiple
@@ -271,8 +272,12 @@ class Snapshots(Plugin):
 
 
 class Histories(Plugin):
-    """``output.histories``: one block's quantity sampled every ``every`` model seconds (or
-    every step), buffered by the block's owner and written with the snapshots."""
+    """``output.histories``: a block's quantity, or a recording station's (a point: the
+    gridpoint or rigid block :func:`station` finds), sampled every ``every`` model seconds (or
+    every step), buffered by the owner and written with the snapshots. An ``acceleration``
+    is the velocity's change over the step before the sample over the step: its velocities
+    are followed every step on every rank (a sum over the ranks of the owner's, so the same
+    bits whoever owns it, and after a restart, which starts from the restored velocities)."""
 
     name = "histories"
     QUANTITIES = {
@@ -281,37 +286,83 @@ class Histories(Plugin):
         "velocity": lambda b, i: b.v[i],
         "angular_velocity": lambda b, i: b.w[i],
     }
+    NODE_QUANTITIES = {
+        "displacement": lambda g, i: g.nodes[i] - g.nodes0[i],
+        "position": lambda g, i: g.nodes[i],
+        "velocity": lambda g, i: g.vel[i],
+    }
 
     def __init__(self, state, snapshots: Snapshots):
         self.state = state
         self.writer = snapshots.writer
-        names = state.specs.names.positions(h.block for h in state.scene.output.histories)
+        hs = state.scene.output.histories
+        names = state.specs.names.positions(h.block for h in hs if h.block is not None)
         self.items = []
-        for h in state.scene.output.histories:
-            name = f"{h.block}.{h.quantity}"
-            self.writer.add_history(name, 3, {"block": h.block, "quantity": h.quantity})
-            self.items.append((name, names[h.block], h.quantity, h.every))
+        for k, h in enumerate(hs):
+            if h.block is not None:
+                name, where = f"{h.block}.{h.quantity}", ("block", names[h.block])
+                attrs = {"block": h.block, "quantity": h.quantity}
+            else:
+                where = station(state, h.point)
+                name = f"point-{k}.{h.quantity}"
+                attrs = {"point": np.asarray(h.point, float), "quantity": h.quantity,
+                         "at": ("gridpoint" if where[0] == "node" else "block"),
+                         "name": state.specs[where[1]].name}
+                if where[0] == "node":
+                    attrs["gridpoint"] = int(where[2])
+            self.writer.add_history(name, 3, attrs)
+            self.items.append((name, where, h.quantity, h.every))
         self.next_time = {it[0]: 0.0 for it in self.items}
         self.buffer = {it[0]: ([], []) for it in self.items}
+        # the velocities of the acceleration items at the last step (every rank alike)
+        self.accelerating = [it for it in self.items if it[2] == "acceleration"]
+        self.last_v = None
         self.restored = False
         snapshots.after_write.append(self.flush)
+
+    def _value(self, where, qty):
+        """This rank's value of ``qty`` at ``where`` (None: another rank owns it)."""
+        s = self.state
+        if where[0] == "block":
+            row = s.owned_row(where[1])
+            return None if row < 0 else self.QUANTITIES[qty](s.blocks, row).copy()
+        g = s.grids
+        d = g.gids.index(where[1]) if g is not None and where[1] in g.gids[:g.n_owned] else -1
+        if d < 0:
+            return None
+        return self.NODE_QUANTITIES[qty](g.bodies[d], where[2]).copy()
+
+    def _velocities(self) -> np.ndarray:
+        """The acceleration items' velocities now, on every rank (collective)."""
+        out = np.zeros((len(self.accelerating), 3))
+        for k, (_, where, _, _) in enumerate(self.accelerating):
+            v = self._value(where, "velocity")
+            if v is not None:
+                out[k] = v
+        return allreduce_sum_array(self.state.comm, out)
 
     def sample(self, force: bool = False):
         """Buffer the samples that are due."""
         s = self.state
         eps = 1e-9 * s.dt
-        for name, gid, qty, every in self.items:
+        acc = None
+        if self.accelerating:
+            v = self._velocities()
+            last = v if self.last_v is None else self.last_v
+            acc = {it[0]: (v[k] - last[k]) / s.dt for k, it in enumerate(self.accelerating)}
+            self.last_v = v
+        for name, where, qty, every in self.items:
             if not (force or every is None or s.time >= self.next_time[name] - eps):
                 continue
             if every is not None:
                 while self.next_time[name] <= s.time + eps:
                     self.next_time[name] += every
-            row = s.owned_row(gid)
-            if row < 0:
+            value = self._value(where, "velocity" if qty == "acceleration" else qty)
+            if value is None:
                 continue
             times, values = self.buffer[name]
             times.append(s.time)
-            values.append(self.QUANTITIES[qty](s.blocks, row).copy())
+            values.append(acc[name] if qty == "acceleration" else value)
 
     def flush(self):
         """Collective: the owner of each history's block writes its buffered rows."""
@@ -319,9 +370,9 @@ class Histories(Plugin):
             self._flush()
 
     def _flush(self):
-        for name, gid, _, _ in self.items:
+        for name, where, _, _ in self.items:
             times, values = self.buffer[name]
-            mine = self.state.owned_row(gid) >= 0
+            mine = self._value(where, "position") is not None
             self.writer.write_history(name, np.array(times), np.array(values).reshape(-1, 3)
                                       if mine else None)
             times.clear()
@@ -336,7 +387,7 @@ class Histories(Plugin):
 
     def horizon(self, run):
         s = self.state
-        if any(every is None for _, _, _, every in self.items):
+        if self.accelerating or any(every is None for _, _, _, every in self.items):
             return s.step + 1, None  # sampled every step
         eps = 1e-9 * s.dt  # as sample() decides what is due
         return None, min((self.next_time[name] - eps for name, *_ in self.items),
@@ -349,12 +400,50 @@ class Histories(Plugin):
         self.flush()
 
     def restart_state(self) -> dict:
-        return {"history_next_time": json.dumps(self.next_time)}
+        return {"history_next_time": json.dumps(self.next_time),
+                "history_stations": json.dumps({it[0]: list(it[1]) for it in self.items})}
 
     def restore(self, attrs: dict):
         if "history_next_time" in attrs:
             saved = json.loads(attrs["history_next_time"])
             self.next_time.update({k: v for k, v in saved.items() if k in self.next_time})
+        if "history_stations" in attrs:  # the straight run's stations
+            saved = json.loads(attrs["history_stations"])
+            self.items = [(n, tuple(saved.get(n, w)), q, e) for n, w, q, e in self.items]
+            self.accelerating = [it for it in self.items if it[2] == "acceleration"]
+
+
+def station(state, point) -> tuple:
+    """A recording station's target (collective, every rank alike): ``("node", gid, i)``, the
+    gridpoint ``i`` of zoned block ``gid`` nearest to ``point`` on the grids' reference
+    positions, among the zoned blocks whose reference box (padded by a thousandth of its
+    size) holds the point; else ``("block", gid)``, the rigid block whose centroid is nearest
+    now (at the run's start: a restart keeps the run's, :meth:`Histories.restore`). Ties go
+    to the lower gid."""
+    p = np.asarray(point, float)
+    g = state.grids
+    mine = []
+    if g is not None:
+        for d in range(g.n_owned):
+            x = g.bodies[d].nodes0
+            lo, hi = x.min(axis=0), x.max(axis=0)
+            pad = 1e-3 * float(np.linalg.norm(hi - lo))
+            if np.all(p >= lo - pad) and np.all(p <= hi + pad):
+                dist = np.linalg.norm(x - p, axis=1)
+                i = int(np.argmin(dist))
+                mine.append((float(dist[i]), int(g.gids[d]), i))
+    found = [c for part in allgather(state.comm, mine) for c in part]
+    if found:
+        _, gid, i = min(found)
+        return ("node", gid, i)
+    gl = state.glob
+    zoned = np.zeros(len(gl.x), bool)
+    if g is not None:
+        zoned[[gid for part in allgather(state.comm, list(g.gids[:g.n_owned]))
+               for gid in part]] = True
+    live = np.nonzero(~zoned)[0]
+    dist = np.linalg.norm(gl.x[live] - p, axis=1)
+    return ("block", int(live[int(np.argmin(dist))]))
 
 
 PLUGINS.register("snapshots", PluginEntry(

@@ -43,7 +43,7 @@ solve: {steps: 5}
 
 
 def test_every_kind_is_a_key_of_the_boundary_and_of_a_stage():
-    assert BOUNDARY_KINDS.names() == ("velocity", "stress")
+    assert BOUNDARY_KINDS.names() == ("velocity", "stress", "quiet")
     # the grammar's registry follows the kinds: the same keys, each kind's own model
     assert CONDITION_MODELS.names() == BOUNDARY_KINDS.names()
     for key, kind in BOUNDARY_KINDS.items():
@@ -52,8 +52,8 @@ def test_every_kind_is_a_key_of_the_boundary_and_of_a_stage():
             assert model.model_fields[key].annotation == list[kind.condition]
             assert model.model_fields[key].default == []
     # the scene-file contract: the keys where they always were
-    assert list(BoundaryConditions.model_fields) == ["velocity", "stress"]
-    assert list(Stage.model_fields)[4:8] == ["free", "velocity", "stress", "force"]
+    assert list(BoundaryConditions.model_fields) == ["velocity", "stress", "quiet"]
+    assert list(Stage.model_fields)[4:9] == ["free", "velocity", "stress", "quiet", "force"]
 
 
 def test_whole_scene_kinds_decide_what_set_up_keeps():

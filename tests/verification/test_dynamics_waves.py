@@ -168,3 +168,41 @@ def test_a_joint_transmits_pyrak_noltes_share_of_a_harmonic_wave(wave, frequency
     print(f"{wave} {frequency:g} Hz, omega Z / 2 kappa = {ratio:g}: |T| {got:.4f} against "
           f"{want:.4f} ({s.step} steps)")
     assert abs(got / want - 1.0) < 0.02
+
+
+# ------------------------------------------------------------------ recording stations
+def test_a_station_at_the_free_top_records_twice_the_incident_pulse(tmp_path):
+    """The free surface doubles a pulse's particle velocity: a station at the column's top
+    (its nearest gridpoint) records ``2 v0`` when the pulse's middle arrives, ``H / Cs +
+    duration / 2``; its acceleration is its velocity's change per step; a station in the
+    rigid cap records that block."""
+    import h5py
+
+    duration, v0 = 0.04, 0.1
+    text = column_scene("S", HEIGHT, 0.5, base="quiet", duration=duration, v0=v0,
+                        time=HEIGHT / WAVES["S"][2] + duration)
+    text = text.replace("output: {energy_every: 10}", f"""output:
+  file: {tmp_path / "out.h5"}
+  every: 1.0
+  histories:
+    - {{point: [0.5, 0.5, {HEIGHT + 0.01}], quantity: velocity}}
+    - {{point: [0.5, 0.5, {HEIGHT + 0.01}], quantity: acceleration}}
+    - {{point: [0.3, 0.2, 5.0], quantity: displacement, every: 0.01}}""")
+    sim = Simulation(parse_scene(text), MPI.COMM_SELF)
+    sim.run()
+    sim.close()
+    with h5py.File(tmp_path / "out.h5") as f:
+        h = f["histories"]
+        t = h["point-0.velocity/time"][()]
+        v = h["point-0.velocity/value"][:, 0]
+        a = h["point-1.acceleration/value"][:, 0]
+        assert h["point-0.velocity"].attrs["at"] == "gridpoint"
+        assert len(h["point-2.displacement/time"]) == int(round(t[-1] / 0.01)) + 1
+    peak = float(v.max())
+    when = float(t[np.argmax(v)])
+    want_t = HEIGHT / WAVES["S"][2] + 0.5 * duration
+    dt = float(np.diff(t).min())
+    print(f"top station: peak {peak / v0:.4f} v0 at {when:.5f} s (closed form {want_t:.5f} s)")
+    assert abs(peak / (2.0 * v0) - 1.0) < 0.02
+    assert abs(when - want_t) < 0.02 * want_t
+    np.testing.assert_allclose(a[1:], np.diff(v) / dt, rtol=1e-9, atol=1e-9 * abs(a).max())
