@@ -72,6 +72,8 @@ def history_velocity(h, t: float) -> np.ndarray:
         a = h.harmonic
         s = math.sin(2.0 * math.pi * a.frequency * t + math.radians(a.phase))
         return np.array(a.amplitude, float) * s
+    if h.record is not None:  # a history file, resolved once when the scene was validated
+        return h.record.at(t)
     tab = np.asarray(h.table, float)
     return np.array([np.interp(t, tab[:, 0], tab[:, k]) for k in (1, 2, 3)])
 

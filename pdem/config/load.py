@@ -147,18 +147,38 @@ def _yaml_problem(exc: yaml.YAMLError) -> str:
     return " ".join(str(problem).split()) + where
 
 
-def _anchor_files(data: dict, base: Path) -> None:
-    """Mesh files named relative to the scene file are read from beside it (made absolute, so
-    the scene stored in outputs and checkpoints still finds them)."""
-    blocks = data.get("blocks")
-    if not isinstance(blocks, list):  # not a list: validation names the key
+def _anchor(holder, base: Path) -> None:
+    """``holder['file']`` (a relative name) made absolute from ``base``."""
+    if isinstance(holder, dict) and isinstance(holder.get("file"), str):
+        f = Path(holder["file"])
+        if not f.is_absolute():
+            holder["file"] = str((base / f).resolve())
+
+
+def _anchor_conditions(conditions, base: Path) -> None:
+    """The history files of a ``boundary:`` mapping or a stage: ``velocity[].history.file``
+    and ``stress[].wave.file`` (a stress wave input takes the same history model)."""
+    if not isinstance(conditions, dict):  # not a mapping: validation names the key
         return
-    for b in blocks:
-        mesh = b.get("mesh") if isinstance(b, dict) else None
-        if isinstance(mesh, dict) and isinstance(mesh.get("file"), str):
-            f = Path(mesh["file"])
-            if not f.is_absolute():
-                mesh["file"] = str((base / f).resolve())
+    for kind, key in (("velocity", "history"), ("stress", "wave")):
+        entries = conditions.get(kind)
+        for c in entries if isinstance(entries, list) else ():
+            if isinstance(c, dict):
+                _anchor(c.get(key), base)
+
+
+def _anchor_files(data: dict, base: Path) -> None:
+    """Files named relative to the scene file (mesh files, history files) are read from
+    beside it (made absolute, so the scene stored in outputs and checkpoints still finds
+    them)."""
+    blocks = data.get("blocks")
+    for b in blocks if isinstance(blocks, list) else ():  # not a list: validation names it
+        if isinstance(b, dict):
+            _anchor(b.get("mesh"), base)
+    _anchor_conditions(data.get("boundary"), base)
+    stages = data.get("stages")
+    for st in stages if isinstance(stages, list) else ():
+        _anchor_conditions(st, base)
 
 
 def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> Scene:

@@ -20,6 +20,7 @@ from pydantic import (
     model_validator,
 )
 from pydantic.fields import FieldInfo
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..contact.algorithms import ALGORITHMS
 from ..contact.laws import JOINT_LAWS
@@ -27,6 +28,7 @@ from ..deformable.constitutive import ZONE_MODELS
 from ..dynamics.damping import DAMPING
 from ..registry import Registry
 from ..strict import Strict
+from . import records
 from .sizes import parse_bytes
 
 # Hard bounds where double precision, not physics, ends (docs/limits.md): products of a few
@@ -601,13 +603,35 @@ class Harmonic(Strict):
 class VelocityHistory(Strict):
     """A time history of the prescribed velocity: exactly one of ``table``
     (``[[t, vx, vy, vz], ...]``, times strictly increasing; linear between rows, the first
-    row's velocity before it and the last row's after it) or ``harmonic``.
+    row's velocity before it and the last row's after it), ``harmonic``, or ``file``.
     Its time is the model time since the condition was applied (the run's start for
-    ``boundary:``, the stage's start for a stage's ``velocity:``)."""
+    ``boundary:``, the stage's start for a stage's ``velocity:``).
+
+    ``file``: a history file (docs/dynamics.md "History files"; pdem.config.records): CSV
+    (time, value) or PEER NGA ``.AT2``, read once here and resolved to a velocity table like
+    ``table``'s (kept on the model, not in its dump: a restart reads the file again).
+    ``quantity``: what its values are (``velocity`` m/s, ``acceleration`` m/s2 integrated
+    from v = 0), times ``scale``, along ``direction`` (normalised); ``baseline``: subtract
+    ``c1 t + c2 t^2`` so that velocity and displacement end at zero (default: true for an
+    acceleration, false for a velocity)."""
 
     table: Annotated[list[tuple[Annotated[float, Field(ge=0.0, le=TIME_MAX)], Speed, Speed,
                                 Speed]], Field(min_length=1)] | None = None
     harmonic: Harmonic | None = None
+    file: Annotated[str, Field(min_length=1)] | None = None
+    quantity: Literal["velocity", "acceleration"] = "velocity"
+    direction: Vec3Speed | None = None
+    scale: Speed = 1.0
+    baseline: bool | None = None  # filled in with a file: true for an acceleration
+    # the file resolved (pdem.config.records.VelocityRecord), or None
+    _record = PrivateAttr(default=None)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _baseline_default(cls, data):
+        if isinstance(data, dict) and data.get("file") is not None and "baseline" not in data:
+            data = {**data, "baseline": data.get("quantity") == "acceleration"}
+        return data
 
     @field_validator("table")
     @classmethod
@@ -620,9 +644,50 @@ class VelocityHistory(Strict):
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.table is None) == (self.harmonic is None):
-            raise ValueError("give exactly one of table, harmonic")
+        given = [k for k in ("table", "harmonic", "file") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of table, harmonic, file"
+                             + (f" (got {', '.join(given)})" if given else ""))
+        if self.file is None:
+            extra = [k for k in _FILE_KEYS if k in self.model_fields_set]
+            if extra:
+                raise self._at(extra, "only with file")
+            return self
+        if self.direction is None:
+            raise self._at(["direction"], "needed with file (the values are along it)")
+        if not any(self.direction):
+            raise self._at(["direction"], "a zero vector has no direction")
+        try:
+            self._record = records.resolve(self.file, self.quantity, self.direction,
+                                           self.scale, self.baseline)
+        except records.RecordError as exc:
+            raise self._at(["file"], str(exc)) from None
         return self
+
+    def _at(self, keys: list[str], reason: str) -> ValidationError:
+        """The error ``reason`` at each of ``keys`` (a ValidationError raised in a validator
+        is placed under the model's location), so that the loader names ``history.file``
+        and its line, not the whole history."""
+        return ValidationError.from_exception_data(type(self).__name__, [InitErrorDetails(
+            type=PydanticCustomError("history_file", "{reason}", {"reason": reason}),
+            loc=(k,), input=self.model_dump()) for k in keys])
+
+    @model_serializer(mode="wrap")
+    def _drop_file_keys(self, handler):
+        # a table or harmonic history dumps as before history files existed
+        out = handler(self)
+        if self.file is None:
+            for k in ("file", *_FILE_KEYS):
+                out.pop(k, None)
+        return out
+
+    @property
+    def record(self) -> records.VelocityRecord | None:
+        """The history file resolved to a velocity table (None for a table or harmonic)."""
+        return self._record
+
+
+_FILE_KEYS = ("quantity", "direction", "scale", "baseline")
 
 
 class BoundaryVelocity(Selection):
