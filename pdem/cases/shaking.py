@@ -198,6 +198,7 @@ def rocking_constants() -> tuple[float, float, float]:
 
 
 def rocking_mass() -> float:
+    """The rocking block's mass, ``rho 8 b h d``."""
     return RHO * 8.0 * ROCK_B * ROCK_H * ROCK_D
 
 

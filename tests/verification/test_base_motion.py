@@ -9,7 +9,8 @@ rectangular base acceleration pulse ``A`` for ``T = 0.1`` s, then constant base 
   Newmark's ``d = V^2/(2 a_y) (1 - a_y/A)`` within 3 % (the rigid-plastic form ignores the
   elastic start of the shear spring, which adds 2.0 % and 0.35 % here, predicted by
   pdem.cases.shaking.newmark_elastic_displacement), and against that elastic-start form within
-  1e-3 (the stick time is resolved to a step, ``V dt / d`` ~ 2e-4); the slab has stuck
+  1e-3 (the slip's onset is resolved to a step: a relative velocity off by up to
+  ``(A - a_y) dt`` for ``t1``, ~4e-4 of ``d``; measured <= 5e-5); the slab has stuck
   again by the end (its slip changes by < 1e-5 m over the last 30 ms).
 * Horizontal base, ``A = 0.9 a_y``, ramped up over 20 ms (slow against the shear spring's
   2.8 ms period, so the load is quasi-static): no slip -- the relative displacement stays
@@ -27,7 +28,7 @@ Housner's rocking block (b = 0.2, h = 1.0, 0.4 m deep, alpha = 11.3 deg, frictio
   corner springs' rotational stiffness); to ``1.2 g tan(alpha)`` it rocks: the tilt at 1 s is
   > 100 times that elastic tilt and within 5 % of the rigid block's (the ODE of
   pdem.cases.shaking, from lift-off; the elastic tilt at lift-off grows with the rocking
-  instability: 2.8 % measured);
+  instability: 3.0 % measured);
 * free rocking from ``theta0 = alpha / 2`` at rest about a corner: the time to the first
   impact (the block upright again) within 0.5 % of the rigid pivot's (RK4 of the exact
   equation) and of Housner's small-angle ``(1/p) arccosh(1 / (1 - theta0/alpha))`` (the
@@ -73,7 +74,7 @@ from pdem.plugins.base import Plugin
 PULSE = 0.1  # s, the rectangular pulse's duration
 MARGIN = 0.05  # s run past Newmark's stick time
 TOL_NEWMARK = 0.03  # rigid-plastic form: the elastic start adds 2.0 % at A = 1.5 a_y
-TOL_ELASTIC = 1e-3  # with the elastic start: stick time to a step (V dt / d ~ 2e-4)
+TOL_ELASTIC = 1e-3  # with the elastic start: onset to a step, (A - a_y) dt t1 / d ~ 4e-4
 
 
 class Recorder(Plugin):
