@@ -1,5 +1,6 @@
 """Re-run the physics verification cases of tests/verification and plot numerical against
-closed-form results into docs/figures/*.png (the figures of docs/validation.md).
+closed-form results into docs/figures/*.png (the figures of docs/validation.md and
+docs/dynamics.md's base-motion.png).
 
 This is a documentation tool only: it needs matplotlib, which is *not* a dependency of pdem
 and is not installed by ``pip install -e .[test]``; nothing in pdem/ or tests/ imports it.
@@ -44,6 +45,7 @@ import numpy as np  # noqa: E402
 import pdem.cases.collapse as tco  # noqa: E402
 import pdem.cases.incline as tin  # noqa: E402
 import pdem.cases.oscillator as tos  # noqa: E402
+import pdem.cases.shaking as tsh  # noqa: E402
 import pdem.cases.static as tst  # noqa: E402
 import pdem.cases.tipping as tcp  # noqa: E402
 import pdem.cases.tumbling as ttu  # noqa: E402
@@ -630,9 +632,89 @@ def dip_convention(dip: float = 40.0, dd: float = 120.0):
     save(fig, "dip-convention.png")
 
 
+# --------------------------------------------------------------------------- base motion
+def base_motion():
+    print("rigid blocks under base motion (docs/dynamics.md)")
+    fig, (ax, ar) = plt.subplots(1, 2, figsize=(14, 5.5))
+    a_y = tsh.yield_acceleration()
+    for ratio, col in ((1.5, "C0"), (3.0, "C1")):
+        a = ratio * a_y
+        end = tsh.slip_time(a, 0.1, a_y) + 0.05
+        s = make_simulation(tsh.sliding_scene(a, 0.1, end))
+        b = s.blocks
+        x0 = b.x[:, 0].copy()
+        n = int(round(end / s.dt))
+        t, d = np.empty(n), np.empty(n)
+        for k in range(n):
+            s.advance()
+            t[k] = s.time
+            d[k] = (b.x[0, 0] - x0[0]) - (b.x[1, 0] - x0[1])
+        d_n = tsh.newmark_displacement(a, 0.1, a_y)
+        d_e = tsh.newmark_elastic_displacement(a, 0.1, a_y)
+        fin = float(d[t >= end - 0.03].mean())
+        print(f"  A = {ratio} a_y: slip {fin:.6f} m, Newmark {d_n:.6f} ({fin / d_n - 1:+.2e}), "
+              f"with elastic start {d_e:.6f} ({fin / d_e - 1:+.2e})")
+        ax.plot(t, 100 * d, color=col, lw=2.5, alpha=0.5,
+                label=f"pdem, A = {ratio} $a_y$: {100 * fin:.3f} cm")
+        ax.plot(t, 100 * tsh.newmark_slip(t, a, 0.1, a_y), "k--", lw=1,
+                label=f"Newmark rigid-plastic: {100 * d_n:.3f} cm ({100 * (fin / d_n - 1):+.1f} %)")
+    ax.axvline(0.1, color="0.6", ls=":", lw=1)
+    ax.set(xlabel="time (s)", ylabel="slip of the slab relative to the base (cm)",
+           title="Newmark's sliding block: pulse A for T = 0.1 s, $a_y = g\\tan 30°$\n"
+                 r"$d = \frac{(AT)^2}{2a_y}\left(1 - \frac{a_y}{A}\right)$"
+                 "; pdem's excess: the shear spring's elastic start")
+    ax.title.set_fontsize(10)
+    ax.legend(fontsize=8, loc="upper left")
+    ax.grid(alpha=0.3)
+
+    alpha, _, p = tsh.rocking_constants()
+    theta0 = 0.5 * alpha
+    s = make_simulation(tsh.tilted_scene(theta0, 0.7))
+    b = s.blocks
+    r0 = rotation_matrix(b.q[1])
+    n = int(round(0.7 / s.dt))
+    t, beta = np.empty(n), np.empty(n)
+    for k in range(n):
+        s.advance()
+        t[k] = s.time
+        beta[k] = theta0 + tsh.tilt_about_y(b.q[1], r0)
+    # the rigid pivot, theta'' = -p^2 sin(alpha - theta), to theta = 0 (RK4)
+    h, th, om, tr, thr = 1e-4, theta0, 0.0, [0.0], [theta0]
+    f = lambda x: -p * p * math.sin(alpha - x)  # noqa: E731
+    while th > 0.0:
+        k1t, k1o = om, f(th)
+        k2t, k2o = om + h / 2 * k1o, f(th + h / 2 * k1t)
+        k3t, k3o = om + h / 2 * k2o, f(th + h / 2 * k2t)
+        k4t, k4o = om + h * k3o, f(th + h * k3t)
+        th += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t)
+        om += h / 6 * (k1o + 2 * k2o + 2 * k3o + k4o)
+        tr.append(tr[-1] + h)
+        thr.append(th)
+    t_p, _ = tsh.pivot_impact_time(theta0)
+    t_h = tsh.housner_impact_time(theta0)
+    k = int(np.nonzero(beta <= 0.0)[0][0])
+    tc = t[k - 1] + (t[k] - t[k - 1]) * beta[k - 1] / (beta[k - 1] - beta[k])
+    print(f"  free rocking from alpha/2: impact {tc:.5f} s, rigid pivot {t_p:.5f} "
+          f"({tc / t_p - 1:+.2e}), Housner {t_h:.5f} ({tc / t_h - 1:+.2e})")
+    ar.plot(t, np.degrees(beta), color="C0", lw=2.5, alpha=0.5, label="pdem")
+    ar.plot(tr, np.degrees(thr), "k--", lw=1, label="rigid pivot (exact equation)")
+    ar.axvline(t_h, color="C3", ls=":", lw=1,
+               label=f"Housner $t = p^{{-1}}\\,\\mathrm{{arccosh}}(1/(1-\\theta_0/\\alpha))$ = {t_h:.4f} s")
+    ar.axhline(0.0, color="0.6", lw=0.8)
+    ar.set(xlabel="time (s)", ylabel=r"tilt $\theta$ (deg)",
+           title=f"Housner's rocking block (b/h = 0.2, α = {math.degrees(alpha):.1f}°) "
+                 f"released at θ₀ = α/2\nfirst impact {tc:.4f} s, rigid pivot {t_p:.4f} s "
+                 f"({100 * (tc / t_p - 1):+.2f} %); the elastic impact rocks on")
+    ar.title.set_fontsize(10)
+    ar.legend(fontsize=8, loc="lower left")
+    ar.grid(alpha=0.3)
+    fig.tight_layout()
+    save(fig, "base-motion.png")
+
+
 CASES = {"incline": incline, "oscillator": oscillator, "bounce": bounce, "tumbling": tumbling,
          "wedge": wedge, "tipping": tipping, "static": static, "arch-energy": arch_energy,
-         "dip-convention": dip_convention}
+         "dip-convention": dip_convention, "base-motion": base_motion}
 
 
 def main(argv):

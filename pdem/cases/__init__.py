@@ -14,6 +14,8 @@ closed forms the runs are checked against:
 * :mod:`pdem.cases.pebble` -- a 1 m block and a 1 cm pebble (partial mass scaling);
 * :mod:`pdem.cases.rock_mass` -- rock masses from ``cuts:``/``join:``/``excavate:`` (a wedge cut
   out of a slope by two joint sets, an L-shaped joined block, a tunnel excavated at a time);
+* :mod:`pdem.cases.shaking` -- rigid blocks under base motion: Newmark's sliding slab (flat and
+  on an incline) and Housner's rocking block;
 * :mod:`pdem.cases.runaway` -- solves to a ratio that cannot succeed (a block sliding off its
   base and falling, a block sliding for ever) and one that settles (``solve.no_progress_steps``).
 
