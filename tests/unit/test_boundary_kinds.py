@@ -82,6 +82,9 @@ def recording_stress():
     yield calls
     BOUNDARY_KINDS.unregister("stress")
     BOUNDARY_KINDS.register("stress", real)
+    # (re-registered last: the kinds after it go back behind it, in the shipped order)
+    quiet = BOUNDARY_KINDS.unregister("quiet")
+    BOUNDARY_KINDS.register("quiet", quiet)
 
 
 def test_a_kind_is_called_through_its_entry(recording_stress):
@@ -169,13 +172,14 @@ def push_kind():
 
 def test_before_it_is_registered_the_key_is_unknown():
     with pytest.raises(ConfigError, match=r"boundary\.push: unknown key; allowed: velocity, "
-                                          r"stress  \[line 9\]"):
+                                          r"stress, quiet  \[line 9\]"):
         parse_scene(PUSHED)
 
 
 def test_a_kind_from_outside_extends_the_grammar_and_goes_back(push_kind):
-    assert list(BoundaryConditions.model_fields) == ["velocity", "stress", "push"]
-    assert list(Stage.model_fields)[4:9] == ["free", "velocity", "stress", "push", "force"]
+    assert list(BoundaryConditions.model_fields) == ["velocity", "stress", "quiet", "push"]
+    assert list(Stage.model_fields)[4:10] == ["free", "velocity", "stress", "quiet", "push",
+                                              "force"]
     scene = parse_scene(PUSHED)
     assert scene.boundary.push == [Push(names=["cube"], force=(2.0e4, 0.0, 0.0))]
     assert Scene.model_fields["boundary"].default.push == []
@@ -188,7 +192,7 @@ def test_a_kind_from_outside_extends_the_grammar_and_goes_back(push_kind):
         parse_scene(STAGED.replace("push: [{names: [cube]", "push: [{groups: [nope]"))
     BOUNDARY_KINDS.unregister("push")
     try:
-        assert list(BoundaryConditions.model_fields) == ["velocity", "stress"]
+        assert list(BoundaryConditions.model_fields) == ["velocity", "stress", "quiet"]
         assert "push" not in Stage.model_fields and "push" not in CONDITION_MODELS
         with pytest.raises(ConfigError, match=r"boundary\.push: unknown key"):
             parse_scene(PUSHED)
@@ -229,7 +233,7 @@ def test_a_kind_whose_key_is_taken_or_model_is_not_a_selection_is_refused():
     with pytest.raises(ValueError, match="'force': already a key of Stage"):
         BOUNDARY_KINDS.register("force", PUSH)
     # refused, and undone: the registry and the grammar as they were
-    assert BOUNDARY_KINDS.names() == CONDITION_MODELS.names() == ("velocity", "stress")
-    assert list(Stage.model_fields)[4:8] == ["free", "velocity", "stress", "force"]
+    assert BOUNDARY_KINDS.names() == CONDITION_MODELS.names() == ("velocity", "stress", "quiet")
+    assert list(Stage.model_fields)[4:9] == ["free", "velocity", "stress", "quiet", "force"]
     with pytest.raises(TypeError, match="not a pdem.config.schema.Selection"):
         BoundaryKind(dict, _add_push, bool, _before_push)

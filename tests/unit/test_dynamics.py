@@ -414,7 +414,7 @@ def test_adaptive_alpha_update_rules():
     assert M.adaptive_alpha_update(1.0, 1.0, 0.0) == 1.0  # at rest: unchanged
     assert M.adaptive_alpha_update(0.0, 0.0, 1.0, alpha_min=1e-3) > 1e-3
     assert M.adaptive_alpha_update(999.0, 0.0, 1.0, dt=0.01) == 100.0
-    assert set(DAMPING) == {"none", "local", "combined", "viscous", "adaptive"}
+    assert set(DAMPING) == {"none", "local", "combined", "viscous", "adaptive", "rayleigh"}
 
 
 def test_local_damping_on_rotation():
