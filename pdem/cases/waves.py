@@ -134,3 +134,75 @@ boundary:
        wave: {{harmonic: {{amplitude: {amplitude}, frequency: {frequency}}}}}}}
 solve: {{time: {time}, damping: none}}
 """
+
+
+def released_column_scene(height: float, size: float, *, release: bool = True,
+                          time: float = 0.2) -> str:
+    """A zoned column under gravity on a held base, brought to equilibrium (local damping,
+    to a ratio), then made quiet at its base (``release``: its reactions kept as loads; else
+    the base freed with no load, the column sinking on its dashpots at ``g H / Cp``, a 1-D
+    column's terminal speed) and run undamped for ``time`` (a P column: x and y held)."""
+    bottom = "{box: {min: [-1, -1, -0.001], max: [2, 2, 0.001]}}"
+    second = f"    quiet: [{{range: {bottom}, release: true}}]" if release else \
+        f"    free: {{range: {bottom}}}\n    quiet: [{{range: {bottom}}}]"
+    return f"""
+name: released-column
+gravity: [0, 0, -9.81]
+materials:
+  rock: {{density: {RHO}, young: {YOUNG}, poisson: {POISSON}}}
+joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
+blocks:
+  - {{name: col, box: {{min: [0, 0, 0], max: [{WIDTH}, {WIDTH}, {height}]}}, material: rock,
+     zones: {{size: {size}}}}}
+boundary:
+  velocity:
+    - {{names: [col], components: [x, y]}}
+    - {{range: {bottom}}}
+solve: {{damping: local}}
+stages:
+  - name: equilibrium
+    solve: {{ratio: 1.0e-7, max_steps: 20000}}
+  - name: quiet
+{second}
+    reset_displacements: true
+    solve: {{time: {time}, damping: none}}
+"""
+
+
+def shaken_bars_text(out: str, checkpoint: str = "", *, settle: int = 60, shake: int = 120,
+                     every: int = 60) -> str:
+    """Two zoned bars (4 m each, joined by a cohesive joint) under gravity, settled on a held
+    base, then shaken: the base made quiet (``release``) and a harmonic wave put in through
+    it, the top quiet, Rayleigh damping, a recording station's acceleration at the top (the
+    1- and several-rank comparisons and the restart of tests/mpi/test_dynamics_mpi.py)."""
+    bottom = "{box: {min: [-1, -1, -0.001], max: [2, 2, 0.001]}}"
+    top = "{box: {min: [-1, -1, 7.999], max: [2, 2, 8.001]}}"
+    return f"""
+name: shaken-bars
+gravity: [0, 0, -9.81]
+materials:
+  rock: {{density: {RHO}, young: {YOUNG}, poisson: {POISSON}}}
+joints: {{default: {{kn: 5.0e8, ks: 5.0e8, friction: 45, cohesion: 1.0e6, tension: 1.0e6}}}}
+blocks:
+  - {{name: lower, box: {{min: [0, 0, 0], max: [1, 1, 4]}}, material: rock, zones: {{size: 0.5}}}}
+  - {{name: upper, box: {{min: [0, 0, 4], max: [1, 1, 8]}}, material: rock, zones: {{size: 0.5}}}}
+boundary:
+  velocity:
+    - {{names: [lower, upper], components: [y]}}
+    - {{range: {bottom}}}
+solve: {{damping: local}}
+stages:
+  - name: settle
+    solve: {{steps: {settle}}}
+  - name: shake
+    quiet: [{{range: {bottom}, release: true}}, {{range: {top}}}]
+    stress:
+      - {{range: {bottom}, wave: {{harmonic: {{amplitude: [0.01, 0, 0.005], frequency: 40}}}}}}
+    solve: {{steps: {shake}, damping: {{mode: rayleigh, fraction: 0.05, frequency: 40}}}}
+output:
+  file: {out}
+  every_steps: {every}
+  contacts: false
+  histories: [{{point: [0.5, 0.5, 8.0], quantity: acceleration}}]
+{checkpoint}
+"""
