@@ -1,6 +1,6 @@
 """Re-run the physics verification cases of tests/verification and plot numerical against
 closed-form results into docs/figures/*.png (the figures of docs/validation.md and
-docs/dynamics.md's base-motion.png).
+docs/dynamics.md's base-motion.png and waves.png).
 
 This is a documentation tool only: it needs matplotlib, which is *not* a dependency of pdem
 and is not installed by ``pip install -e .[test]``; nothing in pdem/ or tests/ imports it.
@@ -49,6 +49,7 @@ import pdem.cases.shaking as tsh  # noqa: E402
 import pdem.cases.static as tst  # noqa: E402
 import pdem.cases.tipping as tcp  # noqa: E402
 import pdem.cases.tumbling as ttu  # noqa: E402
+import pdem.cases.waves as twv  # noqa: E402
 import pdem.cases.wedge as twe  # noqa: E402
 from pdem.cases import (  # noqa: E402
     crossing_times,
@@ -712,9 +713,118 @@ def base_motion():
     save(fig, "base-motion.png")
 
 
+# --------------------------------------------------------------------------- waves
+def _column_energy(base: str, duration: float = 0.04):
+    """The S pulse in the 20 m column (test_dynamics_waves): times and the column's
+    energy over the pulse's ``rho C A int v^2 dt``."""
+    from pdem.plugins.energy import energy_totals
+
+    sim = make_simulation(twv.column_scene("S", 20.0, 0.5, base=base, duration=duration))
+    s = sim.state
+    pulse = twv.pulse_energy(0.1, duration, twv.RHO * twv.CS)
+    ts, es = [], []
+    while s.time < duration + 2.0 * 20.0 / twv.CS + 0.02:
+        sim.stepper.advance()
+        if s.step % 5 == 0:
+            t = energy_totals(s)
+            ts.append(s.time)
+            es.append((t["kinetic"] + t["zone_strain"]) / pulse)
+    return np.array(ts), np.array(es)
+
+
+def _transmitted(wave: str, frequency: float, ratio: float) -> float:
+    c = twv.WAVES[wave][2]
+    k = "xyz".index(twv.WAVES[wave][0])
+    omega, z = 2.0 * math.pi * frequency, twv.RHO * c
+    sim = make_simulation(twv.joint_bars_scene(wave, frequency, omega * z / (2.0 * ratio)))
+    s = sim.state
+    d = s.grids.names.index("upper")
+    body = s.grids.bodies[d]
+    zs = body.nodes0[:, 2]
+    probe = np.nonzero(np.abs(zs - zs[np.argmin(np.abs(zs - 15.0))]) < 1e-9)[0]
+    end = 15.0 / c + 5.0 / frequency
+    ts, vs = [], []
+    while s.time < end:
+        sim.stepper.advance()
+        ts.append(s.time)
+        vs.append(float(body.vel[probe, k].mean()))
+    v = np.array(vs)[np.array(ts) > end - 2.0 / frequency]
+    return 0.5 * (v.max() - v.min()) / 0.01
+
+
+def _decay(centre_over_f1: float):
+    height, fraction = 10.0, 0.05
+    f1 = twv.CS / (4.0 * height)
+    text = f"""
+name: decay
+gravity: [0, 0, 0]
+materials:
+  rock: {{density: {twv.RHO}, young: {twv.YOUNG}, poisson: {twv.POISSON}}}
+joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
+blocks:
+  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, {height}]}}, material: rock,
+     zones: {{size: 0.5}}, velocity: [0.1, 0, 0]}}
+boundary:
+  velocity:
+    - {{names: [col], components: [y, z]}}
+    - {{range: {{box: {{min: [-1, -1, -0.001], max: [2, 2, 0.001]}}}}}}
+solve: {{time: 10, damping: {{mode: rayleigh, fraction: {fraction}, frequency: {centre_over_f1 * f1}}}}}
+"""
+    sim = make_simulation(text)
+    s = sim.state
+    body = s.grids.bodies[0]
+    shape = np.sin(math.pi * body.nodes0[:, 2] / (2.0 * height))
+    m = body.gravity_mass
+    ts, qs = [], []
+    while s.time < 4.0 / f1:
+        sim.stepper.advance()
+        ts.append(s.time)
+        qs.append(float(np.sum(m * shape * (body.nodes[:, 0] - body.nodes0[:, 0]))
+                        / np.sum(m * shape * shape)))
+    omega = 2.0 * math.pi * f1
+    return np.array(ts), np.array(qs), twv.rayleigh_fraction(omega, fraction,
+                                                             centre_over_f1 * f1), omega
+
+
+def waves():
+    """docs/dynamics.md, Verification: waves in zoned blocks."""
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.4))
+    fig.subplots_adjust(wspace=0.3)
+    for base, style in (("quiet", "-"), ("held", "--")):
+        t, e = _column_energy(base)
+        ax[0].plot(t, e, style, label=f"{base} base")
+        print(f"  column, {base} base: held {e.max():.5f}, left {e[-1]:.3g} of the pulse")
+    ax[0].set(xlabel="t (s)", ylabel="energy in the column / ρ C A ∫v² dt",
+              title="S pulse: in through a quiet base, up, back, out")
+    ax[0].legend()
+    r = np.linspace(0.0, 4.0, 200)
+    ax[1].plot(r, 1.0 / np.sqrt(1.0 + r * r), "k-", label="Pyrak-Nolte 1/√(1+(ωZ/2κ)²)")
+    for wave, frequency, ratio, mark in (("P", 20.0, 0.5, "o"), ("P", 20.0, 1.0, "o"),
+                                         ("P", 40.0, 2.0, "o"), ("P", 40.0, 4.0, "o"),
+                                         ("S", 20.0, 1.0, "s"), ("S", 40.0, 2.0, "s")):
+        got = _transmitted(wave, frequency, ratio)
+        print(f"  {wave} {frequency:g} Hz, ωZ/2κ = {ratio:g}: |T| {got:.4f} "
+              f"(closed form {1 / math.sqrt(1 + ratio * ratio):.4f})")
+        ax[1].plot(ratio, got, mark, color="C0" if wave == "P" else "C1",
+                   label=f"{wave} wave" if ratio in (0.5, 1.0) and
+                   (wave == "P") == (ratio == 0.5) else None)
+    ax[1].set(xlabel="ωZ / 2κ", ylabel="|T|", title="a joint in the path: transmission")
+    ax[1].legend()
+    for centre, color in ((1.0, "C0"), (3.0, "C2")):
+        t, q, xi, omega = _decay(centre)
+        ax[2].plot(t, q / np.abs(q).max(), color=color, lw=0.8,
+                   label=f"centre {centre:g} f₁: ξ(f₁) = {xi:.4f}")
+        k = int(np.argmax(np.abs(q)))  # the first peak: the envelope through it
+        ax[2].plot(t, np.exp(-xi * omega * (t - t[k])), ":", color=color)
+    ax[2].set(xlabel="t (s)", ylabel="fundamental mode (normalised)",
+              title="Rayleigh damping: free decay, envelope exp(−ξωt)")
+    ax[2].legend()
+    save(fig, "waves.png")
+
+
 CASES = {"incline": incline, "oscillator": oscillator, "bounce": bounce, "tumbling": tumbling,
          "wedge": wedge, "tipping": tipping, "static": static, "arch-energy": arch_energy,
-         "dip-convention": dip_convention, "base-motion": base_motion}
+         "dip-convention": dip_convention, "base-motion": base_motion, "waves": waves}
 
 
 def main(argv):
