@@ -115,7 +115,7 @@ class Run:
         end_step, end_time, ratio_target, max_steps = self._end(time, steps, ratio, max_steps,
                                                                 no_progress)
         log.info("%s: %d blocks, %d contacts, dt=%.4g s, ctol=%.4g m, %s damping; %d steps",
-                 s.scene.name, s.glob.n, s.contacts.n, s.dt, s.ctol, s.scene.solve.damping.mode,
+                 s.scene.name, s.glob.n, s.contacts.n, s.dt, s.ctol, s.damping_name,
                  self.n_estimate)
         if s.comm.size > 1:
             log.info("decomposition: %s ranks, %s, ghost margin %.3g m",

@@ -144,6 +144,7 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
             log.info("stage %d: %s", k + 1, line)
     d = staged.solve.damping
     s.damping = DAMPING[d.mode]
+    s.damping_name = d.mode
     s.alpha = damping_alpha(d, s.alpha)
     if s.grids is not None:  # the grids' damping, masses and step for the stage
         rigid = s.dt

@@ -116,6 +116,7 @@ class ModelState:
         self.energy_start = None  # (kinetic, joint spring energy) at the start, see plugins.energy
         self.gravity = np.array(scene.gravity, float)
         self.damping = DAMPING[scene.solve.damping.mode]
+        self.damping_name = scene.solve.damping.mode  # (a stage's, once it starts)
         self.scalar_inertia = scene.solve.inertia == "scalar"
         self.algorithm = ALGORITHMS[scene.contact.algorithm](resolved.ctol, resolved.snap_tol)
         # the initial cuts from the build shares' centroids (or every block's, when every rank
