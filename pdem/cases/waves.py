@@ -101,16 +101,20 @@ def transmission(omega: float, impedance: float, kappa: float) -> float:
 
 
 def joint_bars_scene(wave: str, frequency: float, kappa: float, *, length: float = 10.0,
-                     size: float = 0.5, v0: float = 0.01, time: float = 0.3) -> str:
+                     size: float = 0.5, v0: float = 0.01, time: float = 0.3,
+                     other: float | None = None) -> str:
     """Two zoned bars of ``length`` stacked on z = 0 and joined at z = ``length`` by a joint
     of specific stiffness ``kappa`` (Pa/m; its normal stiffness for a P wave, shear for an
     S wave; strong enough not to slip or open), a harmonic ``wave`` of particle velocity
     ``v0 sin(2 pi frequency t)`` put in through the quiet base, the top quiet too: the upper
-    bar carries the transmitted wave alone (:func:`transmission`)."""
+    bar carries the transmitted wave alone (:func:`transmission`). ``other``: the joint's
+    other stiffness (shear for a P wave, normal for an S wave; default ``kappa``)."""
     moves, held, _ = WAVES[wave]
     amplitude = [0.0, 0.0, 0.0]
     amplitude["xyz".index(moves)] = v0
     kn = ks = kappa
+    if other is not None:
+        kn, ks = (kappa, other) if wave == "P" else (other, kappa)
     top = 2.0 * length
     return f"""
 name: joint-{wave}

@@ -304,9 +304,12 @@ class GridStore:
         without mass scaling the rigid blocks' step alone (``inf`` when none is free,
         pdem.resolve.scene_timestep), with it the rigid estimate the grids are scaled to."""
         self.set_damping(scene.solve.damping.mode, alpha, scene.solve.damping.rayleigh[1])
-        kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
-        self.kn = kn
+        # the stiffest joint spring, normal or shear: the one every sub-contact's Gershgorin
+        # row counts (:func:`joint_stiffness`); with the normal alone a joint whose shear is
+        # stiffer raised its gridpoints' masses every step instead (partial density scaling),
+        # which made the joint heavy and reflected waves (docs/dynamics.md)
         self.kjoint = joint_stiffness(scene)
+        kn = self.kn = self.kjoint
         self.scale_masses(kn, dt if scene.solve.mass_scaling else None)
         grid_dt = min(allgather(comm, GRID_FRAC * self.timestep(kn, owned=True)))
         if scene.solve.mass_scaling and grid_dt >= dt * (1.0 - 1e-9):
@@ -327,9 +330,12 @@ class GridStore:
 
         self.set_damping(scene.solve.damping.mode, resolved.alpha,
                          scene.solve.damping.rayleigh[1])
-        kn = max(float(getattr(j, "kn", 0.0)) for j in scene.joints.values())
-        self.kn = kn
+        # the stiffest joint spring, normal or shear: the one every sub-contact's Gershgorin
+        # row counts (:func:`joint_stiffness`); with the normal alone a joint whose shear is
+        # stiffer raised its gridpoints' masses every step instead (partial density scaling),
+        # which made the joint heavy and reflected waves (docs/dynamics.md)
         self.kjoint = joint_stiffness(scene)
+        kn = self.kn = self.kjoint
         if scene.solve.mass_scaling:  # the grids' masses are scaled to the rigid step
             self.scale_masses(kn, resolved.dt)
         self.dt = min(allgather(comm, GRID_FRAC * self.timestep(kn)))
@@ -349,7 +355,7 @@ class GridStore:
         other = "no free rigid block" if not math.isfinite(rigid) \
             else f"the rigid blocks' step {rigid:.3g} s"
         return (f"the zoned blocks' grids limit the step: {self.dt:.3g} s ({GRID_FRAC:.2f} of "
-                f"their Gershgorin bound with kn {self.kn:.3g}; {other})")
+                f"their Gershgorin bound with joint stiffness {self.kn:.3g}; {other})")
 
     def force_scale(self, scene, comm) -> float:
         """``solve.ratio``'s scale for the grids (collective): the larger of the mean
