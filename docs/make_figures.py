@@ -822,9 +822,40 @@ def waves():
     save(fig, "waves.png")
 
 
+def seismic_slope(path: str = "seismic-slope.h5"):
+    """docs/dynamics.md: the stations of configs/seismic-slope.yaml's output (run it first,
+    from the repository root: it writes seismic-slope.h5 there; or set PDEM_SEISMIC_SLOPE to
+    its path)."""
+    import h5py
+
+    path = os.environ.get("PDEM_SEISMIC_SLOPE", path)
+    with h5py.File(path, "r") as f:
+        h = f["histories"]
+        t0 = float(h["point-0.displacement/time"][0])
+        ts = {k: h[f"{k}/time"][()] - t0 for k in ("point-0.displacement",
+                                                    "point-1.acceleration",
+                                                    "point-2.velocity")}
+        d = h["point-0.displacement/value"][()]
+        a = h["point-1.acceleration/value"][()]
+        v = h["point-2.velocity/value"][()]
+    dip = math.radians(35.0)
+    along = d[:, 0] * math.cos(dip) - d[:, 2] * math.sin(dip)  # down the joint, east and down
+    fig, ax = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
+    ax[0].plot(ts["point-2.velocity"], v[:, 0], lw=0.8)
+    ax[0].set(ylabel="m/s", title="foundation base, x velocity (point-2)")
+    ax[1].plot(ts["point-1.acceleration"], a[:, 0] / G, lw=0.6)
+    ax[1].set(ylabel="g", title="sliding block, x acceleration (point-1)")
+    ax[2].plot(ts["point-0.displacement"], 1e3 * along)
+    ax[2].set(xlabel="t since the earthquake stage began (s)", ylabel="mm",
+              title="sliding block, displacement down the joint (point-0)")
+    print(f"  sliding block: {1e3 * along[-1]:.1f} mm down the joint at the end")
+    save(fig, "seismic-slope.png")
+
+
 CASES = {"incline": incline, "oscillator": oscillator, "bounce": bounce, "tumbling": tumbling,
          "wedge": wedge, "tipping": tipping, "static": static, "arch-energy": arch_energy,
-         "dip-convention": dip_convention, "base-motion": base_motion, "waves": waves}
+         "dip-convention": dip_convention, "base-motion": base_motion, "waves": waves,
+         "seismic-slope": seismic_slope}
 
 
 def main(argv):

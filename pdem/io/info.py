@@ -221,13 +221,16 @@ def _energy_lines(f: h5py.File) -> list[str]:
     zones = ""
     if row.get("zone_strain", 0.0) or row.get("plastic_work", 0.0):  # zoned blocks
         zones = f", in zones {_g(row['zone_strain'])}, plastic {_g(row['plastic_work'])}"
+    # (a file from before quiet boundaries has no such column)
+    quiet = f", absorbed by quiet boundaries {_g(row['quiet_absorbed'])}" \
+        if row.get("quiet_absorbed", 0.0) else ""
     return [
         f"energy (J, t = {_g(t)} s): kinetic {_g(row['kinetic'])}, in joints {_g(row['strain'])}"
         f"{zones};"
         f" work of gravity {_g(row['gravity_work'])}, applied {_g(row['applied_work'])}, "
         f"prescribed {_g(row['boundary_work'])}",
         f"             dissipated in joints {_g(row['joint_dissipation'])}, by damping "
-        f"{_g(row['damping_dissipation'])}; balance error {_g(row['balance_error'])} "
+        f"{_g(row['damping_dissipation'])}{quiet}; balance error {_g(row['balance_error'])} "
         f"({share:.2g}% of {_g(put_in)} put in)",
     ]
 
