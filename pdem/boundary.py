@@ -51,7 +51,10 @@ from .deformable.conditions import (
     zoned_mask,
 )
 from .dynamics import motion
+from .dynamics import quiet as dashpot
+from .dynamics.damping import CombinedDamping, LocalDamping, ViscousDamping
 from .dynamics.rotation import quat_to_matrix
+from .errors import SimulationError
 from .registry import Registry
 from .selection import selected, set_block_fields
 
@@ -78,6 +81,11 @@ def history_velocity(h, t: float) -> np.ndarray:
     return np.array([np.interp(t, tab[:, 0], tab[:, k]) for k in (1, 2, 3)])
 
 
+class ConditionError(Exception):
+    """A condition that cannot be put on the blocks it selects, whatever else it takes
+    (:func:`apply_conditions` names it with its key path)."""
+
+
 class Boundary:
     """The conditions in force on a model (every rank holds all of them, by gid)."""
 
@@ -90,6 +98,23 @@ class Boundary:
         self.f_normal = np.zeros((0, 3))
         self.f_center = np.zeros((0, 3))
         self.f_sigma = np.zeros((0, 3, 3))
+        # rigid blocks' quiet faces (pdem.dynamics.quiet), by face: gid, A, n_b, c_b, and the
+        # impedances per area (rho Cp normal, rho Cs shear; zero for a direction not chosen)
+        self.d_gid = np.zeros(0, np.int64)
+        self.d_area = np.zeros(0)
+        self.d_normal = np.zeros((0, 3))
+        self.d_center = np.zeros((0, 3))
+        self.d_coef = np.zeros((0, 2))
+        self.d_rate = 0.0  # the largest lambda(M^-1 D) of a quiet block (1/s)
+        self._pending = None  # this step's dashpot loads, booked after the motion
+        # rigid blocks' faces taking a wave: as above, and the history's index in ``waves``
+        self.waves: list[tuple] = []  # (VelocityHistory, t0)
+        self.w_gid = np.zeros(0, np.int64)
+        self.w_area = np.zeros(0)
+        self.w_normal = np.zeros((0, 3))
+        self.w_center = np.zeros((0, 3))
+        self.w_coef = np.zeros((0, 2))
+        self.w_hist = np.zeros(0, np.int64)
         # the conditions on zoned blocks' gridpoints and surface faces
         self.grid = GridConditions()
 
@@ -109,6 +134,13 @@ class Boundary:
         for kind in BOUNDARY_KINDS.values():
             if kind.active(self):
                 kind.before_step(self, s)
+
+    def after_motion(self, s) -> None:
+        """What each condition in force books once the blocks have moved (the step's new
+        velocities, before the forces at t + dt)."""
+        for kind in BOUNDARY_KINDS.values():
+            if kind.after_motion is not None and kind.active(self):
+                kind.after_motion(self, s)
 
     # ------------------------------------------------------------------ velocities
     def release(self, gids) -> None:
@@ -186,25 +218,224 @@ class Boundary:
         return len(gid)
 
     def tractions(self, s) -> None:
-        """``bforce``/``bmoment`` of this rank's owned blocks from their pose at t."""
+        """``bforce``/``bmoment`` of this rank's owned blocks from their pose at t: the
+        stresses, then the waves (their histories' velocities at t)."""
         b = s.blocks
         n = s.n_owned
         b.bforce[:] = 0.0
         b.bmoment[:] = 0.0
-        if not len(self.f_gid) or n == 0:
+        if n == 0:
             return
-        order = np.argsort(b.gid[:n])
-        pos = np.searchsorted(b.gid[:n], self.f_gid, sorter=order)
-        pos = np.minimum(pos, n - 1)
-        rows = order[pos]
-        mine = b.gid[rows] == self.f_gid
-        rows = rows[mine]
-        R = _rotations(b.q[rows])
-        nw = np.einsum("fij,fj->fi", R, self.f_normal[mine])
-        arm = np.einsum("fij,fj->fi", R, self.f_center[mine])
-        f = self.f_area[mine, None] * np.einsum("fij,fj->fi", self.f_sigma[mine], nw)
-        np.add.at(b.bforce, rows, f)
-        np.add.at(b.bmoment, rows, np.cross(arm, f))
+        if len(self.f_gid):
+            rows, mine = _owned_rows(b, n, self.f_gid)
+            R = _rotations(b.q[rows])
+            nw = np.einsum("fij,fj->fi", R, self.f_normal[mine])
+            arm = np.einsum("fij,fj->fi", R, self.f_center[mine])
+            f = self.f_area[mine, None] * np.einsum("fij,fj->fi", self.f_sigma[mine], nw)
+            np.add.at(b.bforce, rows, f)
+            np.add.at(b.bmoment, rows, np.cross(arm, f))
+        if len(self.w_gid):
+            rows, mine = _owned_rows(b, n, self.w_gid)
+            R = _rotations(b.q[rows])
+            v_of = np.array([history_velocity(h, s.time - t0) for h, t0 in self.waves])
+            f = dashpot.wave_loads(self.w_area[mine], self.w_coef[mine],
+                                   _rotate(R, self.w_normal[mine]),
+                                   v_of[self.w_hist[mine]].reshape(-1, 3))
+            np.add.at(b.bforce, rows, f)
+            np.add.at(b.bmoment, rows, np.cross(_rotate(R, self.w_center[mine]), f))
+
+    # ------------------------------------------------------------------ quiet faces, waves
+    def rigid_faces(self, s, cond, gids):
+        """The exposed faces of rigid blocks ``gids`` whose centroid (on the scene's poses)
+        is in the condition's ``range``, with their material's ``(rho Cp, rho Cs)`` per
+        face: ``(gid, area, n_b, c_b, coef (k, 2))``."""
+        box = cond.range.box if cond.range is not None else None
+        gid, area, nb, cb = exposed_faces(s.glob, np.asarray(gids, np.int64), s.ctol, box)
+        imp = {int(g): rigid_impedances(s, int(g)) for g in np.unique(gid)}
+        coef = np.array([imp[int(g)] for g in gid], float).reshape(-1, 2)
+        return gid, area, nb, cb, coef
+
+    def add_quiet(self, s, cond, gids) -> int:
+        """Dashpots on the exposed faces of rigid blocks ``gids`` in the condition's range
+        (pdem.dynamics.quiet); the number of faces."""
+        gid, area, nb, cb, coef = self.rigid_faces(s, cond, gids)
+        if not len(gid):
+            return 0
+        if cond.release:
+            flags = s.scene_fields(("fixed", "vfix"))
+            held = [int(g) for g in np.unique(gid) if flags.fixed[g] or flags.vfix[g]]
+            if held:
+                raise ConditionError(
+                    f"release: the rigid block {s.specs[held[0]].name!r} is held (fixed or "
+                    "its velocity prescribed); release hands a zoned boundary's support to "
+                    "its dashpots, a held rigid block is not freed by it (free it with a "
+                    "stage's free: and load it with force:, docs/dynamics.md)")
+        coef = coef * np.array([["normal" in cond.directions, "shear" in cond.directions]])
+        self.d_gid = np.concatenate([self.d_gid, gid])
+        self.d_area = np.concatenate([self.d_area, area])
+        self.d_normal = np.concatenate([self.d_normal, nb])
+        self.d_center = np.concatenate([self.d_center, cb])
+        self.d_coef = np.concatenate([self.d_coef, coef])
+        self.d_rate = self._dashpot_rate(s)
+        return len(gid)
+
+    def _dashpot_rate(self, s) -> float:
+        """The largest ``lambda(M^-1 D)`` of the quiet blocks (body frame: pose-free; the
+        true masses, which mass scaling only raises) (every rank alike)."""
+        blocks, index = np.unique(self.d_gid, return_inverse=True)
+        d = dashpot.block_dashpots(index, len(blocks), self.d_area, self.d_coef,
+                                   self.d_normal, self.d_center)
+        f = s.scene_fields(("mass", "inertia"))
+        return max(dashpot.dashpot_rate(d[k], f.mass[g], f.inertia[g])
+                   for k, g in enumerate(blocks))
+
+    def add_wave(self, s, cond, gids, t0: float) -> int:
+        """A wave put in through the exposed faces of rigid blocks ``gids`` in the
+        condition's range (pdem.dynamics.quiet.wave_loads); the number of faces."""
+        gid, area, nb, cb, coef = self.rigid_faces(s, cond, gids)
+        if not len(gid):
+            return 0
+        self.waves.append((cond.wave, float(t0)))
+        self.w_gid = np.concatenate([self.w_gid, gid])
+        self.w_area = np.concatenate([self.w_area, area])
+        self.w_normal = np.concatenate([self.w_normal, nb])
+        self.w_center = np.concatenate([self.w_center, cb])
+        self.w_coef = np.concatenate([self.w_coef, coef])
+        self.w_hist = np.concatenate([self.w_hist, np.full(len(gid), len(self.waves) - 1)])
+        return len(gid)
+
+    def _quiet_blocks(self, s):
+        """This rank's owned quiet blocks the integrator moves (not fixed, held inactive or
+        wholly prescribed): ``(rows, D (k, 6, 6) world, R (k, 3, 3))``, or None."""
+        b, n = s.blocks, s.n_owned
+        if not len(self.d_gid) or n == 0:
+            return None
+        rows, mine = _owned_rows(b, n, self.d_gid)
+        fixed = b.still if s.scene.solve.inactive is not None else b.fixed
+        moves = (fixed[rows] == 0) & (b.vfix[rows] != motion.VFIX_ALL)
+        if not moves.any():
+            return None
+        faces = np.nonzero(mine)[0][moves]
+        blocks, index = np.unique(rows[moves], return_inverse=True)
+        R = _rotations(b.q[rows[moves]])
+        d = dashpot.block_dashpots(index, len(blocks), self.d_area[faces], self.d_coef[faces],
+                                   _rotate(R, self.d_normal[faces]),
+                                   _rotate(R, self.d_center[faces]))
+        return blocks, d, _rotations(b.q[blocks])
+
+    def _clear_loads(self, s) -> None:
+        """``bforce``/``bmoment`` zeroed when no stress or wave on rigid faces set them
+        this step (:meth:`tractions` does)."""
+        if not (len(self.f_gid) or len(self.w_gid)):
+            s.blocks.bforce[:] = 0.0
+            s.blocks.bmoment[:] = 0.0
+
+    def start_dashpots(self, s) -> None:
+        """Before the run's first step: the dashpots' loads at the start velocities (the
+        staggered start, pdem.dynamics.motion.stagger_start, takes them in)."""
+        self._clear_loads(s)
+        q = self._quiet_blocks(s)
+        if q is None:
+            return
+        rows, d, _ = q
+        b = s.blocks
+        load = -dashpot.matvec(d, np.concatenate([b.v[rows], b.w[rows]], axis=1))
+        b.bforce[rows] += load[:, :3]
+        b.bmoment[rows] += load[:, 3:]
+
+    def dashpots(self, s) -> None:
+        """Before a step from t: the quiet blocks' dashpot loads that make the step centred
+        (pdem.dynamics.quiet.centred_dashpots), added to ``bforce``/``bmoment`` after the
+        stresses and waves; kept for :meth:`book_dashpots`."""
+        self._pending = None
+        self._clear_loads(s)
+        if not len(self.d_gid):
+            return
+        args = s.damping_args()
+        if isinstance(args, LocalDamping | CombinedDamping) \
+                and args.alpha * s.dt * self.d_rate >= 1.0:
+            raise SimulationError(
+                f"step {s.step} (t={s.time:.6g} s): a rigid block's quiet faces take "
+                f"dt lambda(M^-1 D) = {s.dt * self.d_rate:.3g} of its momentum a step; under "
+                f"{type(args).__name__} (alpha {args.alpha:g}) that is unstable from "
+                f"1/alpha = {1.0 / args.alpha:.3g} on: use damping none, viscous or rayleigh "
+                "in a dynamic stage (local damping falsifies the dynamics a quiet boundary "
+                "is for), or a smaller solve.timestep")
+        q = self._quiet_blocks(s)
+        if q is None:
+            return
+        rows, d, R = q
+        b = s.blocks
+        ms = b.mscale[rows]
+        mass = b.mass[rows] * ms
+        inertia = b.inertia[rows] * ms[:, None]
+        iso = (inertia[:, 0] == inertia[:, 1]) & (inertia[:, 1] == inertia[:, 2])
+        if s.scalar_inertia:  # as the integrator: the mean principal moment
+            inertia = np.where(iso[:, None], inertia, inertia.mean(axis=1)[:, None])
+            iso[:] = True
+        world = np.zeros((len(rows), 3, 3))
+        for i in range(3):
+            for j in range(3):
+                world[:, i, j] = np.where(iso, inertia[:, 0] * (i == j), (
+                    R[:, i, 0] * inertia[:, 0] * R[:, j, 0] + R[:, i, 1] * inertia[:, 1]
+                    * R[:, j, 1] + R[:, i, 2] * inertia[:, 2] * R[:, j, 2]))
+        a = 0.5 * args.alpha * s.dt if isinstance(args, ViscousDamping) else 0.0
+        force = b.force[rows] + (b.applied_force[rows] + b.bforce[rows]) \
+            + b.mass[rows, None] * np.asarray(s.gravity)[None]
+        moment = b.moment[rows] + b.bmoment[rows]
+        code = b.vfix[rows].astype(np.int64)
+        held = np.stack([(code & (motion.VFIX_X << k)) != 0 for k in range(3)], 1)
+        u0 = np.concatenate([b.v[rows], b.w[rows]], axis=1)
+        load = dashpot.centred_dashpots(d, mass, world, u0, b.L[rows].copy(), force, moment,
+                                        s.dt, a, held)
+        b.bforce[rows] += load[:, :3]
+        b.bmoment[rows] += load[:, 3:]
+        self._pending = (rows, load, u0, (~held).astype(float))
+
+    def book_dashpots(self, s) -> None:
+        """After the motion: what this step's dashpot loads took out, with the integrator's
+        velocities (pdem.dynamics.quiet.absorbed), moved from the applied work (the
+        integrator books every boundary load there) to ``WORK_QUIET``."""
+        if self._pending is None:
+            return
+        rows, load, u0, free = self._pending
+        self._pending = None
+        b = s.blocks
+        u1 = np.concatenate([b.v[rows], b.w[rows]], axis=1)
+        e = dashpot.absorbed(load, u0, u1, free, s.dt)
+        b.work[rows, motion.WORK_APPLIED] += e
+        b.work[rows, motion.WORK_QUIET] += e
+
+
+def _owned_rows(b, n: int, gids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, mine)``: the owned rows of the entries of ``gids`` this rank owns (``mine``
+    their mask)."""
+    order = np.argsort(b.gid[:n])
+    pos = np.searchsorted(b.gid[:n], gids, sorter=order)
+    pos = np.minimum(pos, n - 1)
+    rows = order[pos]
+    mine = b.gid[rows] == gids
+    return rows[mine], mine
+
+
+def _rotate(R: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``R x`` (k, 3) of stacked rotations (k, 3, 3) and vectors (k, 3), by explicit sums."""
+    return np.stack([R[:, i, 0] * x[:, 0] + R[:, i, 1] * x[:, 1] + R[:, i, 2] * x[:, 2]
+                     for i in range(3)], 1)
+
+
+def rigid_impedances(s, gid: int) -> tuple[float, float]:
+    """``(rho Cp, rho Cs)`` of rigid block ``gid``'s material (its young and poisson; a
+    material without them is refused, naming the key)."""
+    spec = s.specs[gid]
+    m = s.scene.materials[spec.material]
+    for key in ("young", "poisson"):
+        if getattr(m, key) is None:
+            raise ConditionError(
+                f"the rigid block {spec.name!r}: its material {spec.material!r} has no {key} "
+                f"(materials.{spec.material}.{key}): a rigid block's quiet and wave faces take "
+                "rho Cp and rho Cs of its material's density, young and poisson")
+    return dashpot.impedances(m.density, m.young, m.poisson)
 
 
 def _rotations(q: np.ndarray) -> np.ndarray:
@@ -247,18 +478,21 @@ def _inside(p, vs, n, tol) -> np.ndarray:
     return ~np.logical_or.reduceat(bad, start) if len(vs) else np.zeros(0, bool)
 
 
-def exposed_faces(g, gids: np.ndarray, ctol: float):
+def exposed_faces(g, gids: np.ndarray, ctol: float, box=None):
     """(gid, area, normal, centroid) of the exposed faces of blocks ``gids`` of the global
-    store ``g`` at its poses (body-frame normal and centroid); see the module docstring."""
-    gid, rows = exposed_face_rows(g, gids, ctol)
+    store ``g`` at its poses (body-frame normal and centroid); see the module docstring.
+    ``box`` (``min``, ``max``): only the faces whose centroid is in it."""
+    gid, rows = exposed_face_rows(g, gids, ctol, box)
     geo = [_face_geometry(g, f) for f in rows]
     return (gid, np.array([a for a, _, _ in geo], float),
             g.normals_local[rows].reshape(-1, 3),
             np.array([c for _, c, _ in geo], float).reshape(-1, 3))
 
 
-def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.ndarray]:
-    """(gid, face row of ``g``) of the exposed faces of blocks ``gids`` (module docstring)."""
+def exposed_face_rows(g, gids: np.ndarray, ctol: float,
+                      box=None) -> tuple[np.ndarray, np.ndarray]:
+    """(gid, face row of ``g``) of the exposed faces of blocks ``gids`` (module docstring);
+    ``box`` (``min``, ``max``): only those whose centroid (world) is in it."""
     R = _rotations(g.q)
     world = lambda b, p: g.x[b] + R[b] @ p  # noqa: E731
     n_pieces = len(g.piece_block)
@@ -268,6 +502,9 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
     vworld = g.x[vblock] + np.einsum("vij,vj->vi", R[vblock], g.verts_local)
     lo = np.minimum.reduceat(vworld, g.vert_start[:-1], axis=0)
     hi = np.maximum.reduceat(vworld, g.vert_start[:-1], axis=0)
+    if box is not None:  # (a face's centroid lies in its piece's box)
+        bmin, bmax = np.asarray(box.min, float), np.asarray(box.max, float)
+        touches = np.all(lo <= bmax, axis=1) & np.all(hi >= bmin, axis=1)
     out = ([], [])
     pieces: dict[int, tuple] = {}  # a piece's faces in the world: normals, centroids, polygons
 
@@ -283,6 +520,8 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
 
     for b in gids:
         for p in range(g.piece_start[b], g.piece_start[b + 1]):
+            if box is not None and not touches[p]:
+                continue
             for f in range(g.face_start[p], g.face_start[p + 1]):
                 area, cb, vs = _face_geometry(g, f)
                 if area <= 0.0:
@@ -290,6 +529,8 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
                 nb = g.normals_local[f]
                 n = R[b] @ nb
                 c = world(b, cb)
+                if box is not None and not (np.all(c >= bmin) and np.all(c <= bmax)):
+                    continue
                 vw = g.x[b] + vs @ R[b].T
                 flo, fhi = vw.min(axis=0) - ctol, vw.max(axis=0) + ctol
                 near = np.nonzero(alive & np.all(lo <= fhi, axis=1) & np.all(hi >= flo, axis=1))[0]
@@ -325,7 +566,7 @@ def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True
         # a scene validated before its kind was registered has none of its conditions
         for j, cond in enumerate(getattr(source, key, ())):
             at = s.scene.at(*where, key, j)
-            gids = selected(s, cond)
+            gids = selected(s, cond) if kind.rigid_select is None else kind.rigid_select(s, cond)
             hit = 0
             if zoned:
                 gids = gids[~zoned_mask(s, gids)]
@@ -337,7 +578,10 @@ def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True
             if not len(gids) and not hit:
                 raise ConfigError([f"{at}: selects no block"])
             if len(gids):
-                problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
+                try:
+                    problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
+                except ConditionError as exc:
+                    raise ConfigError([f"{at}: {exc}"]) from None
                 if problem and not hit:
                     raise ConfigError([f"{at}: {problem}"])
     if zoned:
@@ -388,7 +632,12 @@ class BoundaryKind:
     own state on the :class:`Boundary` (an attribute it sets in ``add``). ``zoned(boundary,
     s, cond, t0, motion_too, at)``: the condition on zoned blocks (their gridpoints or
     faces, pdem.deformable.conditions; collective), the number of zoned blocks it took;
-    None: a kind that does not act on zoned blocks (a selection of one is refused)."""
+    None: a kind that does not act on zoned blocks (a selection of one is refused).
+    ``add`` may raise :class:`ConditionError` for what is wrong whatever else the condition
+    takes (named with its key path). ``rigid_select(s, cond)``: the rigid blocks (gids,
+    collective) ``add`` gets (None: :func:`pdem.selection.selected`, a range by the blocks'
+    centroids); ``after_motion(boundary, s)``: what it books once the blocks have moved
+    (None: nothing)."""
 
     condition: type[Selection]
     add: Callable[..., str | None]
@@ -397,6 +646,8 @@ class BoundaryKind:
     at_start: Callable[[Boundary, object], None] | None = None
     whole_scene: bool = False
     zoned: Callable[..., int] | None = None
+    rigid_select: Callable[..., np.ndarray] | None = None
+    after_motion: Callable[[Boundary, object], None] | None = None
 
     def __post_init__(self):
         if not (isinstance(self.condition, type) and issubclass(self.condition, Selection)):
@@ -423,10 +674,18 @@ def _zoned_velocity(boundary, s, cond, t0, motion_too, at) -> int:
     return n
 
 
+def by_faces(s, cond) -> np.ndarray:
+    """The rigid blocks a face condition (quiet, wave) looks at: those its names and groups
+    take (every block if neither); its range then takes their faces by centroid, as on
+    zoned blocks (collective)."""
+    return selected(s, cond.model_copy(update={"range": None}))
+
+
 def _add_stress(boundary, s, cond, gids, t0, motion_too):
     if cond.wave is not None:
-        return ("a wave is put in through zoned blocks' faces (a rigid block has no wave "
-                "speed: prescribe the base's velocity, boundary.velocity)")
+        if not boundary.add_wave(s, cond, gids, t0):
+            return "the selected rigid blocks have no exposed face in range"
+        return None
     if not boundary.add_stress(s, cond, gids):
         return "the selected blocks have no exposed face"
     return None
@@ -452,8 +711,9 @@ def _tractions(boundary, s):
 
 
 def _add_quiet(boundary, s, cond, gids, t0, motion_too):
-    return ("quiet boundaries act on zoned blocks' faces (a rigid boundary block is driven "
-            "by its prescribed velocity; docs/dynamics.md)")
+    if not boundary.add_quiet(s, cond, gids):
+        return "the selected rigid blocks have no exposed face in range"
+    return None
 
 
 def _zoned_quiet(boundary, s, cond, t0, motion_too, at) -> int:
@@ -470,6 +730,20 @@ def _zoned_quiet(boundary, s, cond, t0, motion_too, at) -> int:
 
 def _dashpots(boundary, s):
     boundary.grid.dashpots(s)
+    boundary.dashpots(s)
+
+
+def _start_dashpots(boundary, s):
+    boundary.grid.dashpots(s)
+    boundary.start_dashpots(s)
+
+
+def _book_dashpots(boundary, s):
+    boundary.book_dashpots(s)
+
+
+def _stress_select(s, cond):
+    return by_faces(s, cond) if cond.wave is not None else selected(s, cond)
 
 
 BOUNDARY_KINDS: Registry[BoundaryKind] = Registry("boundary condition")
@@ -479,10 +753,14 @@ BOUNDARY_KINDS.register("velocity", BoundaryKind(
     _prescribe, zoned=_zoned_velocity))
 BOUNDARY_KINDS.register("stress", BoundaryKind(
     BoundaryStress, _add_stress,
-    lambda b: len(b.f_gid) > 0 or len(b.grid.t_gid) > 0 or len(b.grid.w_gid) > 0,
-    _tractions, at_start=_tractions, whole_scene=True, zoned=_zoned_stress))
+    lambda b: (len(b.f_gid) > 0 or len(b.w_gid) > 0 or len(b.grid.t_gid) > 0
+               or len(b.grid.w_gid) > 0),
+    _tractions, at_start=_tractions, whole_scene=True, zoned=_zoned_stress,
+    rigid_select=_stress_select))
+# after the stresses: the dashpots' centred solve takes every other load of the step
 BOUNDARY_KINDS.register("quiet", BoundaryKind(
-    BoundaryQuiet, _add_quiet, lambda b: len(b.grid.q_gid) > 0, _dashpots, at_start=_dashpots,
-    whole_scene=True, zoned=_zoned_quiet))
+    BoundaryQuiet, _add_quiet, lambda b: len(b.grid.q_gid) > 0 or len(b.d_gid) > 0, _dashpots,
+    at_start=_start_dashpots, whole_scene=True, zoned=_zoned_quiet, rigid_select=by_faces,
+    after_motion=_book_dashpots))
 # the scene grammar's keys follow the kinds: one registration here, from anywhere, is a kind
 CONDITION_MODELS.follow(BOUNDARY_KINDS, lambda kind: kind.condition)
