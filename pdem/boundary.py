@@ -29,6 +29,7 @@ Stresses (docs/theory.md, "Boundary stress")
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -55,6 +56,7 @@ from .dynamics import quiet as dashpot
 from .dynamics.damping import CombinedDamping, LocalDamping, ViscousDamping
 from .dynamics.rotation import quat_to_matrix
 from .errors import SimulationError
+from .mpi import allgather
 from .registry import Registry
 from .selection import selected, set_block_fields
 
@@ -107,6 +109,10 @@ class Boundary:
         self.d_coef = np.zeros((0, 2))
         self.d_rate = 0.0  # the largest lambda(M^-1 D) of a quiet block (1/s)
         self._pending = None  # this step's dashpot loads, booked after the motion
+        # held rigid blocks a quiet condition released, by gid, and the force and moment that
+        # held them (world; NaN until a restart's checkpoint gives them: restore_released)
+        self.r_gid = np.zeros(0, np.int64)
+        self.r_load = np.zeros((0, 6))
         # rigid blocks' faces taking a wave: as above, and the history's index in ``waves``
         self.waves: list[tuple] = []  # (VelocityHistory, t0)
         self.w_gid = np.zeros(0, np.int64)
@@ -255,21 +261,15 @@ class Boundary:
         coef = np.array([imp[int(g)] for g in gid], float).reshape(-1, 2)
         return gid, area, nb, cb, coef
 
-    def add_quiet(self, s, cond, gids) -> int:
+    def add_quiet(self, s, cond, gids, motion_too: bool = True) -> int:
         """Dashpots on the exposed faces of rigid blocks ``gids`` in the condition's range
-        (pdem.dynamics.quiet); the number of faces."""
+        (pdem.dynamics.quiet), and with ``release`` the held ones among them freed
+        (:meth:`release_held`); the number of faces."""
         gid, area, nb, cb, coef = self.rigid_faces(s, cond, gids)
         if not len(gid):
             return 0
         if cond.release:
-            flags = s.scene_fields(("fixed", "vfix"))
-            held = [int(g) for g in np.unique(gid) if flags.fixed[g] or flags.vfix[g]]
-            if held:
-                raise ConditionError(
-                    f"release: the rigid block {s.specs[held[0]].name!r} is held (fixed or "
-                    "its velocity prescribed); release hands a zoned boundary's support to "
-                    "its dashpots, a held rigid block is not freed by it (free it with a "
-                    "stage's free: and load it with force:, docs/dynamics.md)")
+            self.release_held(s, np.unique(gid), motion_too)
         coef = coef * np.array([["normal" in cond.directions, "shear" in cond.directions]])
         self.d_gid = np.concatenate([self.d_gid, gid])
         self.d_area = np.concatenate([self.d_area, area])
@@ -278,6 +278,76 @@ class Boundary:
         self.d_coef = np.concatenate([self.d_coef, coef])
         self.d_rate = self._dashpot_rate(s)
         return len(gid)
+
+    def release_held(self, s, gids, motion_too: bool) -> None:
+        """Free the held (fixed or prescribed) blocks of ``gids`` and keep, from now on, the
+        force and moment that held them as constant loads (the held components': every one
+        of a fixed or wholly prescribed block, the prescribed translations of another); with
+        ``motion_too`` computed now (collective), else (a restart's replay) given by its
+        checkpoint (:meth:`restore_released`)."""
+        flags = s.scene_fields(("fixed", "vfix"))
+        held = np.array([g for g in gids if flags.fixed[g] or flags.vfix[g]], np.int64)
+        if not len(held):
+            return
+        code = np.where(flags.fixed[held] != 0, motion.VFIX_ALL, flags.vfix[held]).astype(int)
+        mask = np.zeros((len(held), 6))
+        mask[code == motion.VFIX_ALL] = 1.0
+        for k in range(3):
+            mask[(code != motion.VFIX_ALL) & ((code & (motion.VFIX_X << k)) != 0), k] = 1.0
+        load = self._reactions(s, held) * mask if motion_too else np.full((len(held), 6),
+                                                                          np.nan)
+        set_block_fields(s, held, fixed=0, vfix=0)
+        self.release(held)
+        self.r_gid = np.concatenate([self.r_gid, held])
+        self.r_load = np.concatenate([self.r_load, load])
+
+    def _reactions(self, s, gids) -> np.ndarray:
+        """Minus the force (with gravity, applied and boundary loads) and moment on the
+        blocks ``gids`` now (k, 6), every rank alike (collective); at the set-up, before any
+        contact force, their gravity and applied force. The contacts' part is summed from
+        each contact's force in key order (:func:`contact_loads`): a held block's own row
+        lacks the contacts other ranks computed; it is written into the owners' rows."""
+        if s.blocks is None:
+            g = s.glob
+            f = g.applied_force[gids] + g.mass[gids, None] * s.gravity[None]
+            return -np.concatenate([f, np.zeros_like(f)], axis=1)
+        b, n = s.blocks, s.n_owned
+        rows, mine = _owned_rows(b, n, gids) if n else (np.zeros(0, np.int64),
+                                                        np.zeros(len(gids), bool))
+        f = (b.applied_force[rows] + b.bforce[rows]) + b.mass[rows, None] * s.gravity[None]
+        part = [(int(g), f[k].tolist() + b.bmoment[rows[k]].tolist())
+                for k, g in enumerate(gids[mine])]
+        got = dict(r for p in allgather(s.comm, part) for r in p)
+        loads = np.array([got[int(g)] for g in gids], float).reshape(-1, 6)
+        contact = contact_loads(s, gids)
+        # the freed blocks' first step takes these contact sums: their owner now computes
+        # all their contacts (a fixed block's own row summed only those it held)
+        b.force[rows] = contact[mine, :3]
+        b.moment[rows] = contact[mine, 3:]
+        return -(contact + loads)
+
+    def released(self) -> str:
+        """The released blocks' loads (JSON, a checkpoint's attribute): ``[[gid, fx, fy, fz,
+        mx, my, mz], ...]``."""
+        return json.dumps([[int(g), *map(float, ld)] for g, ld in zip(
+            self.r_gid, self.r_load, strict=True)])
+
+    def restore_released(self, text: str) -> None:
+        """The released blocks' loads from a checkpoint's attribute (:meth:`released`)."""
+        for g, *ld in json.loads(text):
+            self.r_load[self.r_gid == g] = ld
+
+    def _released_loads(self, s) -> None:
+        """The released blocks' loads onto this rank's owned rows (``bforce``/``bmoment``)."""
+        b, n = s.blocks, s.n_owned
+        if not len(self.r_gid) or n == 0:
+            return
+        rows, mine = _owned_rows(b, n, self.r_gid)
+        if np.isnan(self.r_load).any():  # (every rank alike)
+            raise SimulationError("a rigid block released by a quiet condition has no load "
+                                  "(a checkpoint without the released loads)")
+        np.add.at(b.bforce, rows, self.r_load[mine, :3])
+        np.add.at(b.bmoment, rows, self.r_load[mine, 3:])
 
     def _dashpot_rate(self, s) -> float:
         """The largest ``lambda(M^-1 D)`` of the quiet blocks (body frame: pose-free; the
@@ -334,6 +404,7 @@ class Boundary:
         """Before the run's first step: the dashpots' loads at the start velocities (the
         staggered start, pdem.dynamics.motion.stagger_start, takes them in)."""
         self._clear_loads(s)
+        self._released_loads(s)
         q = self._quiet_blocks(s)
         if q is None:
             return
@@ -351,6 +422,7 @@ class Boundary:
         self._clear_loads(s)
         if not len(self.d_gid):
             return
+        self._released_loads(s)
         args = s.damping_args()
         if isinstance(args, LocalDamping | CombinedDamping) \
                 and args.alpha * s.dt * self.d_rate >= 1.0:
@@ -436,6 +508,47 @@ def rigid_impedances(s, gid: int) -> tuple[float, float]:
                 f"(materials.{spec.material}.{key}): a rigid block's quiet and wave faces take "
                 "rho Cp and rho Cs of its material's density, young and poisson")
     return dashpot.impedances(m.density, m.young, m.poisson)
+
+
+def contact_loads(s, gids: np.ndarray) -> np.ndarray:
+    """The contact force and moment (about the centroid) on each block of ``gids`` (k, 6),
+    the same bits on any rank count (collective): each contact's force on B, ``fs + fn n``
+    summed over its sub-contacts at their arms from A's centroid (as
+    pdem.contact.forces.contact_forces makes it, ``fn`` by its law in its stored state),
+    gathered from every rank holding it, each contact once, summed in key order."""
+    c, b = s.contacts, s.blocks
+    on = np.nonzero(np.isin(c.ga, gids) | np.isin(c.gb, gids))[0] if c.n else []
+    part = []
+    if len(on):
+        fn = c.normal_forces(s.joints.kernel_args)
+        pa, fs = c.sub["sc_pa"], c.sub["sc_fs"]
+        for k in on:
+            a, bb = int(c.ia[k]), int(c.ib[k])
+            R, n = b.R[a], c.normal[k]
+            acc = [0.0] * 6
+            for j in range(int(c.sc_start[k]), int(c.sc_start[k + 1])):
+                p = pa[j]
+                r = [R[i, 0] * p[0] + R[i, 1] * p[1] + R[i, 2] * p[2] for i in range(3)]
+                f = [fs[j, i] + fn[j] * n[i] for i in range(3)]
+                acc = [acc[0] + f[0], acc[1] + f[1], acc[2] + f[2],
+                       acc[3] + (r[1] * f[2] - r[2] * f[1]),
+                       acc[4] + (r[2] * f[0] - r[0] * f[2]),
+                       acc[5] + (r[0] * f[1] - r[1] * f[0])]
+            d = b.x[a] - b.x[bb]
+            fb = acc[:3]
+            mb = [acc[3] + (d[1] * fb[2] - d[2] * fb[1]), acc[4] + (d[2] * fb[0] - d[0] * fb[2]),
+                  acc[5] + (d[0] * fb[1] - d[1] * fb[0])]
+            key = (int(c.pga[k]), int(c.pgb[k]))
+            if int(c.ga[k]) in gids:
+                part.append((key, int(c.ga[k]), [-x for x in fb] + [-x for x in acc[3:]]))
+            if int(c.gb[k]) in gids:
+                part.append((key, int(c.gb[k]), fb + mb))
+    got = {(key, g): v for p in allgather(s.comm, part) for key, g, v in p}
+    index = {int(g): i for i, g in enumerate(gids)}
+    out = np.zeros((len(gids), 6))
+    for key, g in sorted(got):
+        out[index[g]] += got[(key, g)]
+    return out
 
 
 def _rotations(q: np.ndarray) -> np.ndarray:
@@ -711,7 +824,7 @@ def _tractions(boundary, s):
 
 
 def _add_quiet(boundary, s, cond, gids, t0, motion_too):
-    if not boundary.add_quiet(s, cond, gids):
+    if not boundary.add_quiet(s, cond, gids, motion_too):
         return "the selected rigid blocks have no exposed face in range"
     return None
 

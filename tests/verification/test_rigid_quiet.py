@@ -33,6 +33,7 @@ from mpi4py import MPI
 from pdem.config import ConfigError, parse_scene
 from pdem.dynamics.quiet import impedances
 from pdem.errors import SimulationError
+from pdem.plugins.base import Plugin
 from pdem.plugins.energy import balance, energy_totals
 from pdem.simulation import Simulation
 
@@ -256,18 +257,14 @@ output: {{energy_every: 10}}
 
 
 def test_rigid_quiet_faces_are_checked():
-    """A material without the elastic keys, a held block released, faces out of range, and
-    local damping against a dashpot it would destabilise are refused, naming what."""
+    """A material without the elastic keys, faces out of range, and local damping against a
+    dashpot it would destabilise are refused, naming what."""
     quiet = f"  quiet:\n    - {{range: {BOTTOM}}}"
     no_young = free_cube(quiet, dt=1e-5, steps=1).replace(
         f", young: {YOUNG}, poisson: {POISSON}", "")
     with pytest.raises(ConfigError, match=r"boundary.quiet\[0\].*material 'rock' has no young "
                                           r"\(materials.rock.young\)"):
         simulation(no_young)
-    held = free_cube(f"  quiet:\n    - {{range: {BOTTOM}, release: true}}", dt=1e-5, steps=1)
-    with pytest.raises(ConfigError, match=r"boundary.quiet\[0\].*release: the rigid block "
-                                          r"'stone' is held"):
-        simulation(held.replace("material: rock,\n", "material: rock, fixed: true,\n"))
     away = "{box: {min: [5, 5, 5], max: [6, 6, 6]}}"
     with pytest.raises(ConfigError, match=r"boundary.stress\[0\].*no exposed face in range"):
         simulation(free_cube(f"  stress:\n    - {{range: {away}, wave: {{table: [[0, 0, 0, 1]]}}}}",
@@ -277,3 +274,94 @@ def test_rigid_quiet_faces_are_checked():
                                damping="local"))
     with pytest.raises(SimulationError, match=r"dt lambda\(M\^-1 D\) = 4.33 .*1/alpha = 1.25"):
         sim.run()
+
+
+class BaseTrace(Plugin):
+    """The base's (gid 0) stage, vertical velocity and height after every step."""
+
+    name = "base-trace"
+
+    def __init__(self, state):
+        self.state, self.rows = state, []
+
+    def after_step(self, run):
+        s = self.state
+        self.rows.append((s.stage, s.blocks.v[0, 2], s.blocks.x[0, 2]))
+
+
+def base_scene(how: str) -> str:
+    """A fixed base (2 x 2 x 1) carrying a cube settles; then its bottom face is made quiet,
+    released (``how`` "release") or freed by the stage alone ("free")."""
+    quiet = "{names: [base], range: {box: {min: [-2, -2, -1.1], max: [2, 2, -0.9]}}}"
+    stage = (f"quiet: [{quiet[:-1]}, release: true}}]" if how == "release"
+             else f"free: {{names: [base]}}\n    quiet: [{quiet}]")
+    return f"""
+gravity: [0, 0, -9.81]
+materials: {{rock: {{density: {RHO}, young: {YOUNG}, poisson: {POISSON}}}}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 40.0}}}}
+blocks:
+  - {{name: base, box: {{min: [-1, -1, -1], max: [1, 1, 0]}}, material: rock, fixed: true}}
+  - {{name: cube, box: {{min: [-0.5, -0.5, 0], max: [0.5, 0.5, 1]}}, material: rock}}
+solve: {{damping: local}}
+stages:
+  - {{name: settle, solve: {{ratio: 1.0e-9}}}}
+  - name: dynamic
+    {stage}
+    solve: {{time: 0.15, damping: none}}
+"""
+
+
+@pytest.mark.parametrize("how", ["release", "free"])
+def test_a_fixed_base_made_quiet_keeps_its_support_or_sinks_at_the_dashpots_speed(how):
+    """A fixed base (2 x 2 x 1) carrying a cube settles, then its bottom face is made quiet:
+    with ``release`` the force and moment that held it stay as its load, and the two stay at
+    rest; freed alone (a stage's ``free``) it sinks with the cube at the speed at which the
+    dashpot carries their weight, ``W / (Z_p A)``."""
+    text = base_scene(how)
+    sim = Simulation(parse_scene(text), MPI.COMM_SELF, output=False)
+    trace = BaseTrace(sim.state)
+    sim.runner.plugins.append(trace)
+    sim.run()
+    rows = np.array([r for r in trace.rows if r[0] == 1])
+    v_t = -(4.0 + 1.0) * RHO * 9.81 / (ZP * 4.0)  # base and cube, on a face of 4 m2
+    bc = sim.state.boundary
+    print(f"{how}: base velocity at the end {rows[-1, 1]:.6g} m/s, largest "
+          f"{np.abs(rows[:, 1]).max():.3g}; W / (Z_p A) = {v_t:.6g} m/s; released loads "
+          f"{bc.r_load.round(3).tolist()}")
+    if how == "release":
+        assert list(bc.r_gid) == [0]
+        assert abs(bc.r_load[0, 2] / (5.0 * RHO * 9.81) - 1.0) < 1e-6  # it held both weights
+        assert np.abs(rows[:, 1]).max() < 1e-6 * abs(v_t)
+    else:
+        assert not len(bc.r_gid)
+        assert abs(rows[-1, 1] / v_t - 1.0) < 1e-3
+
+
+def test_a_released_base_restarts_bitwise(tmp_path):
+    """A checkpoint taken after the base's release: the replay of the stage frees it, its
+    load comes back from the checkpoint's ``released_loads``, and the run ends where the
+    straight run ends (one rank: tests/mpi/test_rigid_quiet_mpi.py restarts quiet faces on
+    two)."""
+    import glob
+
+    from pdem.io.checkpoint import read_checkpoint
+
+    text = base_scene("release").replace("solve: {time: 0.15", "solve: {time: 0.05") + (
+        f"output: {{file: {tmp_path}/straight.h5, every_steps: 50}}\n"
+        f"checkpoint: {{every: 0.02, keep: 9, file: {tmp_path}/ck}}\n")
+    sim = Simulation(parse_scene(text), MPI.COMM_SELF)
+    sim.run()
+    sim.close()
+    cks = [read_checkpoint(p) for p in sorted(glob.glob(f"{tmp_path}/ck-*.h5"))]
+    ck = next(c for c in cks if "released_loads" in c["attrs"])
+    scene = parse_scene(ck["attrs"]["scene"])
+    scene = scene.model_copy(update={"output": scene.output.model_copy(
+        update={"file": f"{tmp_path}/again.h5"}), "checkpoint": None})
+    again = Simulation(scene, MPI.COMM_SELF, checkpoint=ck)
+    assert np.array_equal(again.state.boundary.r_load, sim.state.boundary.r_load)
+    again.run()
+    again.close()
+    print(f"restarted at step {ck['attrs']['step']} of {sim.state.step}")
+    assert again.state.step == sim.state.step
+    for k in ("x", "q", "v", "w", "work"):
+        assert np.array_equal(getattr(again.blocks, k), getattr(sim.blocks, k)), k
