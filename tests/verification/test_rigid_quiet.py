@@ -96,7 +96,7 @@ def test_a_free_block_with_a_quiet_face_decays_as_the_dashpot(gamma):
     sim = simulation(free_cube(f"  quiet:\n    - {{range: {BOTTOM}, directions: [normal]}}",
                                dt=dt, steps=steps, velocity=(0, 0, -v0)))
     s = sim.state
-    bc = s.boundary
+    bc = s.boundary.rigid
     assert list(bc.d_gid) == [0] and np.allclose(bc.d_normal, [[0, 0, -1]])
     assert abs(bc.d_rate / (c / RHO) - 1.0) < 1e-12  # the largest lambda of M^-1 D: c / m
     g = c * s.dt / RHO
@@ -132,7 +132,7 @@ def test_a_spinning_block_is_slowed_by_its_faces_shear_dashpots():
     steps = int(round(3.0 / rate / dt))
     sim = simulation(free_cube("  quiet:\n    - {names: [stone], directions: [shear]}", dt=dt, steps=steps,
                                spin=(0, 0, w0)))
-    assert len(sim.state.boundary.d_gid) == 6
+    assert len(sim.state.boundary.rigid.d_gid) == 6
     t, v, w = Trace(sim).run(steps)
     exact = w0 * np.exp(-rate * t)
     err = float(np.max(np.abs(w[:, 2] / exact - 1.0)))
@@ -161,7 +161,7 @@ def test_a_wave_through_a_quiet_face_drives_the_face_to_twice_its_velocity(wave)
     - {{range: {BOTTOM}}}
   stress:
     - {{range: {BOTTOM}, wave: {{table: {table}}}}}""", dt=dt, steps=steps))
-    assert len(sim.state.boundary.w_gid) == 1
+    assert len(sim.state.boundary.rigid.w_gid) == 1
     t, v, w = Trace(sim).run(steps)
     # the face's velocity v + w x r, r = (0, 0, -1/2)
     u = v + np.cross(w, np.array([0.0, 0.0, -0.5]))
@@ -213,7 +213,7 @@ output: {{energy_every: 10}}
 """
     sim = simulation(text)
     s = sim.state
-    assert np.allclose(s.boundary.d_normal, [[0, 0, 1]])
+    assert np.allclose(s.boundary.rigid.d_normal, [[0, 0, 1]])
     wd = omega * math.sqrt(1.0 - zeta * zeta)
     steps = int(6.0 * 2.0 * math.pi / wd / s.dt)
     i = int(np.nonzero(s.blocks.fixed == 0)[0][0])
@@ -324,7 +324,7 @@ def test_a_fixed_base_made_quiet_keeps_its_support_or_sinks_at_the_dashpots_spee
     sim.run()
     rows = np.array([r for r in trace.rows if r[0] == 1])
     v_t = -(4.0 + 1.0) * RHO * 9.81 / (ZP * 4.0)  # base and cube, on a face of 4 m2
-    bc = sim.state.boundary
+    bc = sim.state.boundary.rigid
     print(f"{how}: base velocity at the end {rows[-1, 1]:.6g} m/s, largest "
           f"{np.abs(rows[:, 1]).max():.3g}; W / (Z_p A) = {v_t:.6g} m/s; released loads "
           f"{bc.r_load.round(3).tolist()}")
@@ -358,7 +358,7 @@ def test_a_released_base_restarts_bitwise(tmp_path):
     scene = scene.model_copy(update={"output": scene.output.model_copy(
         update={"file": f"{tmp_path}/again.h5"}), "checkpoint": None})
     again = Simulation(scene, MPI.COMM_SELF, checkpoint=ck)
-    assert np.array_equal(again.state.boundary.r_load, sim.state.boundary.r_load)
+    assert np.array_equal(again.state.boundary.rigid.r_load, sim.state.boundary.rigid.r_load)
     again.run()
     again.close()
     print(f"restarted at step {ck['attrs']['step']} of {sim.state.step}")
