@@ -29,8 +29,8 @@ makes ``U+`` to round-off (translation; the rotation to the change of the inerti
 a step, O(|w| dt)). Stable for a dashpot of any strength, and the timestep is not changed.
 Local and combined damping scale their force with the unbalanced force, the dashpot's
 included, which the solve does not anticipate: stable while ``alpha`` times the largest
-``dt lambda(M^-1 D)`` stays below one (:func:`dashpot_rate` gives ``lambda``; pdem.boundary
-refuses a step beyond it).
+``dt lambda(M^-1 D)`` stays below one (:func:`dashpot_rate` gives ``lambda``;
+pdem.rigid_faces stops a step beyond it).
 
 What the dashpots absorb, ``-(F_q . v_mean + M_q . w_mean) dt`` with the velocities the
 integrator made (:func:`absorbed`), is booked exactly: moved from the applied work (where

@@ -17,6 +17,11 @@ against closed forms. A unit cube (m = rho, I = m/6) of a material with ``young`
 - resting on a joint spring ``kn A`` under gravity with its top face quiet (normal): a damped
   oscillator of fraction ``zeta = c / (2 sqrt(kn A m))`` (0.05 here): its log decrement
   and damped period against the closed form (measured 2e-4, asserted 1 %);
+- a fixed base (2 x 2 x 1) carrying a cube, settled, then made quiet: with ``release`` it
+  keeps the force and moment that held it (both weights) and stays at rest (measured
+  2e-10 m/s, asserted 1e-6 of the sinking speed); freed alone it sinks with the cube at
+  ``W / (Z_p A)`` (measured 1.3e-4, asserted 1e-3); a restart after the release ends
+  bitwise where the straight run ends (its load from the checkpoint);
 - the energy budget books what the dashpots absorb as ``quiet_absorbed``: it balances to
   round-off (asserted 1e-9 of the energy put in; with the joint, its energy taken at the
   kinetic energy's time t - dt/2, the rigid budget's O(dt) offset removed, docs/output.md).
