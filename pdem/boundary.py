@@ -25,6 +25,16 @@ Stresses (docs/theory.md, "Boundary stress")
     rotation ``R`` at t: ``n = R n_b``, ``f = A sigma n`` at the point ``x + R c_b``, summed
     into the block's ``bforce`` and ``bmoment = (R c_b) x f``; the integrator adds them to the
     unbalanced force and moment and books their work as applied work.
+
+Quiet faces and waves (docs/dynamics.md, "Quiet boundaries and wave input")
+    A ``quiet`` condition, or a ``stress`` with a ``wave``, takes the blocks its names and
+    groups give (every block if neither) and, of their exposed faces, those whose centroid
+    is in its ``range`` (zoned blocks: pdem.deformable.conditions). On a rigid block each
+    such face keeps its area, body-frame normal and centroid and its material's impedances
+    ``rho Cp``, ``rho Cs``. Before each step, after the stresses and waves: the dashpots'
+    centred loads (pdem.dynamics.quiet), added to ``bforce``/``bmoment``; after the motion,
+    what they absorbed is moved from the applied work to ``WORK_QUIET``. ``release`` frees
+    the held rigid blocks among them and keeps the force and moment that held them as loads.
 """
 
 from __future__ import annotations
@@ -52,7 +62,9 @@ from .deformable.conditions import (
 )
 from .dynamics import motion
 from .dynamics.rotation import quat_to_matrix
+from .errors import ConditionError
 from .registry import Registry
+from .rigid_faces import RigidFaces, owned_rows, rotations
 from .selection import selected, set_block_fields
 
 COVER_COS = 1.0 - 1e-6  # antiparallel faces: n_a . n_b < -COVER_COS
@@ -90,6 +102,8 @@ class Boundary:
         self.f_normal = np.zeros((0, 3))
         self.f_center = np.zeros((0, 3))
         self.f_sigma = np.zeros((0, 3, 3))
+        # the quiet faces and waves on rigid blocks' faces, and the blocks they released
+        self.rigid = RigidFaces()
         # the conditions on zoned blocks' gridpoints and surface faces
         self.grid = GridConditions()
 
@@ -109,6 +123,13 @@ class Boundary:
         for kind in BOUNDARY_KINDS.values():
             if kind.active(self):
                 kind.before_step(self, s)
+
+    def after_motion(self, s) -> None:
+        """What each condition in force books once the blocks have moved (the step's new
+        velocities, before the forces at t + dt)."""
+        for kind in BOUNDARY_KINDS.values():
+            if kind.after_motion is not None and kind.active(self):
+                kind.after_motion(self, s)
 
     # ------------------------------------------------------------------ velocities
     def release(self, gids) -> None:
@@ -186,36 +207,23 @@ class Boundary:
         return len(gid)
 
     def tractions(self, s) -> None:
-        """``bforce``/``bmoment`` of this rank's owned blocks from their pose at t."""
+        """``bforce``/``bmoment`` of this rank's owned blocks from their pose at t: the
+        stresses, then the waves (their histories' velocities at t)."""
         b = s.blocks
         n = s.n_owned
         b.bforce[:] = 0.0
         b.bmoment[:] = 0.0
-        if not len(self.f_gid) or n == 0:
+        if n == 0:
             return
-        order = np.argsort(b.gid[:n])
-        pos = np.searchsorted(b.gid[:n], self.f_gid, sorter=order)
-        pos = np.minimum(pos, n - 1)
-        rows = order[pos]
-        mine = b.gid[rows] == self.f_gid
-        rows = rows[mine]
-        R = _rotations(b.q[rows])
-        nw = np.einsum("fij,fj->fi", R, self.f_normal[mine])
-        arm = np.einsum("fij,fj->fi", R, self.f_center[mine])
-        f = self.f_area[mine, None] * np.einsum("fij,fj->fi", self.f_sigma[mine], nw)
-        np.add.at(b.bforce, rows, f)
-        np.add.at(b.bmoment, rows, np.cross(arm, f))
-
-
-def _rotations(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (k, 3, 3) of quaternions (k, 4) (w, x, y, z)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], 1)
-
+        if len(self.f_gid):
+            rows, mine = owned_rows(b, n, self.f_gid)
+            R = rotations(b.q[rows])
+            nw = np.einsum("fij,fj->fi", R, self.f_normal[mine])
+            arm = np.einsum("fij,fj->fi", R, self.f_center[mine])
+            f = self.f_area[mine, None] * np.einsum("fij,fj->fi", self.f_sigma[mine], nw)
+            np.add.at(b.bforce, rows, f)
+            np.add.at(b.bmoment, rows, np.cross(arm, f))
+        self.rigid.wave_loads(s, history_velocity)
 
 def _face_geometry(g, f):
     """Area, centroid and vertices (body frame) of face row ``f`` of a store."""
@@ -247,19 +255,22 @@ def _inside(p, vs, n, tol) -> np.ndarray:
     return ~np.logical_or.reduceat(bad, start) if len(vs) else np.zeros(0, bool)
 
 
-def exposed_faces(g, gids: np.ndarray, ctol: float):
+def exposed_faces(g, gids: np.ndarray, ctol: float, box=None):
     """(gid, area, normal, centroid) of the exposed faces of blocks ``gids`` of the global
-    store ``g`` at its poses (body-frame normal and centroid); see the module docstring."""
-    gid, rows = exposed_face_rows(g, gids, ctol)
+    store ``g`` at its poses (body-frame normal and centroid); see the module docstring.
+    ``box`` (``min``, ``max``): only the faces whose centroid is in it."""
+    gid, rows = exposed_face_rows(g, gids, ctol, box)
     geo = [_face_geometry(g, f) for f in rows]
     return (gid, np.array([a for a, _, _ in geo], float),
             g.normals_local[rows].reshape(-1, 3),
             np.array([c for _, c, _ in geo], float).reshape(-1, 3))
 
 
-def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.ndarray]:
-    """(gid, face row of ``g``) of the exposed faces of blocks ``gids`` (module docstring)."""
-    R = _rotations(g.q)
+def exposed_face_rows(g, gids: np.ndarray, ctol: float,
+                      box=None) -> tuple[np.ndarray, np.ndarray]:
+    """(gid, face row of ``g``) of the exposed faces of blocks ``gids`` (module docstring);
+    ``box`` (``min``, ``max``): only those whose centroid (world) is in it."""
+    R = rotations(g.q)
     world = lambda b, p: g.x[b] + R[b] @ p  # noqa: E731
     n_pieces = len(g.piece_block)
     alive = g.out[g.piece_block] == 0
@@ -268,6 +279,9 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
     vworld = g.x[vblock] + np.einsum("vij,vj->vi", R[vblock], g.verts_local)
     lo = np.minimum.reduceat(vworld, g.vert_start[:-1], axis=0)
     hi = np.maximum.reduceat(vworld, g.vert_start[:-1], axis=0)
+    if box is not None:  # (a face's centroid lies in its piece's box)
+        bmin, bmax = np.asarray(box.min, float), np.asarray(box.max, float)
+        touches = np.all(lo <= bmax, axis=1) & np.all(hi >= bmin, axis=1)
     out = ([], [])
     pieces: dict[int, tuple] = {}  # a piece's faces in the world: normals, centroids, polygons
 
@@ -283,6 +297,8 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
 
     for b in gids:
         for p in range(g.piece_start[b], g.piece_start[b + 1]):
+            if box is not None and not touches[p]:
+                continue
             for f in range(g.face_start[p], g.face_start[p + 1]):
                 area, cb, vs = _face_geometry(g, f)
                 if area <= 0.0:
@@ -290,6 +306,8 @@ def exposed_face_rows(g, gids: np.ndarray, ctol: float) -> tuple[np.ndarray, np.
                 nb = g.normals_local[f]
                 n = R[b] @ nb
                 c = world(b, cb)
+                if box is not None and not (np.all(c >= bmin) and np.all(c <= bmax)):
+                    continue
                 vw = g.x[b] + vs @ R[b].T
                 flo, fhi = vw.min(axis=0) - ctol, vw.max(axis=0) + ctol
                 near = np.nonzero(alive & np.all(lo <= fhi, axis=1) & np.all(hi >= flo, axis=1))[0]
@@ -325,7 +343,7 @@ def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True
         # a scene validated before its kind was registered has none of its conditions
         for j, cond in enumerate(getattr(source, key, ())):
             at = s.scene.at(*where, key, j)
-            gids = selected(s, cond)
+            gids = selected(s, cond) if kind.rigid_select is None else kind.rigid_select(s, cond)
             hit = 0
             if zoned:
                 gids = gids[~zoned_mask(s, gids)]
@@ -337,7 +355,10 @@ def apply_conditions(s, source, where: tuple, t0: float, motion_too: bool = True
             if not len(gids) and not hit:
                 raise ConfigError([f"{at}: selects no block"])
             if len(gids):
-                problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
+                try:
+                    problem = kind.add(s.boundary, s, cond, gids, t0, motion_too)
+                except ConditionError as exc:
+                    raise ConfigError([f"{at}: {exc}"]) from None
                 if problem and not hit:
                     raise ConfigError([f"{at}: {problem}"])
     if zoned:
@@ -388,7 +409,12 @@ class BoundaryKind:
     own state on the :class:`Boundary` (an attribute it sets in ``add``). ``zoned(boundary,
     s, cond, t0, motion_too, at)``: the condition on zoned blocks (their gridpoints or
     faces, pdem.deformable.conditions; collective), the number of zoned blocks it took;
-    None: a kind that does not act on zoned blocks (a selection of one is refused)."""
+    None: a kind that does not act on zoned blocks (a selection of one is refused).
+    ``add`` may raise :class:`ConditionError` for what is wrong whatever else the condition
+    takes (named with its key path). ``rigid_select(s, cond)``: the rigid blocks (gids,
+    collective) ``add`` gets (None: :func:`pdem.selection.selected`, a range by the blocks'
+    centroids); ``after_motion(boundary, s)``: what it books once the blocks have moved
+    (None: nothing)."""
 
     condition: type[Selection]
     add: Callable[..., str | None]
@@ -397,6 +423,8 @@ class BoundaryKind:
     at_start: Callable[[Boundary, object], None] | None = None
     whole_scene: bool = False
     zoned: Callable[..., int] | None = None
+    rigid_select: Callable[..., np.ndarray] | None = None
+    after_motion: Callable[[Boundary, object], None] | None = None
 
     def __post_init__(self):
         if not (isinstance(self.condition, type) and issubclass(self.condition, Selection)):
@@ -423,13 +451,27 @@ def _zoned_velocity(boundary, s, cond, t0, motion_too, at) -> int:
     return n
 
 
+def by_faces(s, cond) -> np.ndarray:
+    """The rigid blocks a face condition (quiet, wave) looks at: those its names and groups
+    take (every block if neither); its range then takes their faces by centroid, as on
+    zoned blocks (collective)."""
+    return selected(s, cond.model_copy(update={"range": None}))
+
+
 def _add_stress(boundary, s, cond, gids, t0, motion_too):
     if cond.wave is not None:
-        return ("a wave is put in through zoned blocks' faces (a rigid block has no wave "
-                "speed: prescribe the base's velocity, boundary.velocity)")
+        if not boundary.rigid.add_wave(s, cond, gids, t0, _exposed(s)):
+            return "the selected rigid blocks have no exposed face in range"
+        return None
     if not boundary.add_stress(s, cond, gids):
         return "the selected blocks have no exposed face"
     return None
+
+
+def _exposed(s):
+    """(gid, area, normal, centroid) of the exposed faces of blocks ``gids`` of the scene's
+    store whose centroid is in ``box``, as ``exposed(gids, box)``."""
+    return lambda gids, box: exposed_faces(s.glob, gids, s.ctol, box)
 
 
 def _zoned_stress(boundary, s, cond, t0, motion_too, at) -> int:
@@ -452,8 +494,9 @@ def _tractions(boundary, s):
 
 
 def _add_quiet(boundary, s, cond, gids, t0, motion_too):
-    return ("quiet boundaries act on zoned blocks' faces (a rigid boundary block is driven "
-            "by its prescribed velocity; docs/dynamics.md)")
+    if not boundary.rigid.add_quiet(s, cond, gids, motion_too, _exposed(s), boundary.release):
+        return "the selected rigid blocks have no exposed face in range"
+    return None
 
 
 def _zoned_quiet(boundary, s, cond, t0, motion_too, at) -> int:
@@ -468,8 +511,28 @@ def _zoned_quiet(boundary, s, cond, t0, motion_too, at) -> int:
     return n
 
 
+def _loaded(boundary) -> bool:
+    """Whether the stresses' and waves' loads on rigid blocks were made this step (their
+    kind zeroes ``bforce``/``bmoment`` first)."""
+    return len(boundary.f_gid) > 0 or len(boundary.rigid.w_gid) > 0
+
+
 def _dashpots(boundary, s):
     boundary.grid.dashpots(s)
+    boundary.rigid.dashpots(s, _loaded(boundary))
+
+
+def _start_dashpots(boundary, s):
+    boundary.grid.dashpots(s)
+    boundary.rigid.start_dashpots(s, _loaded(boundary))
+
+
+def _book_dashpots(boundary, s):
+    boundary.rigid.book_dashpots(s)
+
+
+def _stress_select(s, cond):
+    return by_faces(s, cond) if cond.wave is not None else selected(s, cond)
 
 
 BOUNDARY_KINDS: Registry[BoundaryKind] = Registry("boundary condition")
@@ -479,10 +542,15 @@ BOUNDARY_KINDS.register("velocity", BoundaryKind(
     _prescribe, zoned=_zoned_velocity))
 BOUNDARY_KINDS.register("stress", BoundaryKind(
     BoundaryStress, _add_stress,
-    lambda b: len(b.f_gid) > 0 or len(b.grid.t_gid) > 0 or len(b.grid.w_gid) > 0,
-    _tractions, at_start=_tractions, whole_scene=True, zoned=_zoned_stress))
+    lambda b: (len(b.f_gid) > 0 or len(b.rigid.w_gid) > 0 or len(b.grid.t_gid) > 0
+               or len(b.grid.w_gid) > 0),
+    _tractions, at_start=_tractions, whole_scene=True, zoned=_zoned_stress,
+    rigid_select=_stress_select))
+# after the stresses: the dashpots' centred solve takes every other load of the step
 BOUNDARY_KINDS.register("quiet", BoundaryKind(
-    BoundaryQuiet, _add_quiet, lambda b: len(b.grid.q_gid) > 0, _dashpots, at_start=_dashpots,
-    whole_scene=True, zoned=_zoned_quiet))
+    BoundaryQuiet, _add_quiet, lambda b: len(b.grid.q_gid) > 0 or len(b.rigid.d_gid) > 0,
+    _dashpots,
+    at_start=_start_dashpots, whole_scene=True, zoned=_zoned_quiet, rigid_select=by_faces,
+    after_motion=_book_dashpots))
 # the scene grammar's keys follow the kinds: one registration here, from anywhere, is a kind
 CONDITION_MODELS.follow(BOUNDARY_KINDS, lambda kind: kind.condition)

@@ -18,6 +18,11 @@ class NoProgressError(SimulationError):
     that keep it from its target, what they do, and the scene keys that help."""
 
 
+class ConditionError(Exception):
+    """A boundary condition that cannot act on what it selects, whatever else it takes
+    (pdem.boundary.apply_conditions names it with the condition's key path)."""
+
+
 class OutputError(UserError):
     """A file of the run could not be written (disk full, quota, a vanished directory)."""
 

@@ -273,6 +273,8 @@ class Stepper:
                     self.grid_bad = g.step(s.dt, s.alpha)
                     g.sync(b)
                 parts = CLOCK if parts == MOTION else 0
+            if s.boundary is not None:  # what the conditions book of the step's motion
+                s.boundary.after_motion(s)
         with tm.phase("halo"):
             s.halo.forward(b)
             if g is not None:  # the ghost grids' gridpoints, their rows and pieces

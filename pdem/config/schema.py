@@ -774,7 +774,8 @@ class BoundaryQuiet(Selection):
     ``directions``: which of the two. ``release``: the static stage's support handed over to
     the dashpots (as 3DEC and FLAC3D do when a fixed boundary becomes quiet): every held
     degree of freedom of the gridpoints it takes is freed and keeps, from then on, the force
-    that held it (its reaction when the condition is applied) as a constant load."""
+    that held it (its reaction when the condition is applied) as a constant load; a held
+    rigid block whose faces it takes, its force and moment alike (pdem.boundary)."""
 
     directions: Annotated[list[Literal["normal", "shear"]],
                           Field(min_length=1, max_length=2)] = ["normal", "shear"]

@@ -106,6 +106,7 @@ WORK_JOINT = 5  # dissipated in the joints (slip, failure; dilation counts negat
 WORK_JOINT_MADE = 6  # steps in which a contact's joint gave back more than it took (timestep)
 WORK_GEOMETRY = 7  # change of stored joint energy made by contact geometry updates
 WORK_REMOVED = 8  # kinetic and joint energy taken out with blocks that left the model domain
+WORK_QUIET = 9  # absorbed by quiet faces' dashpots (pdem.dynamics.quiet; moved out of APPLIED)
 
 # Layout of ``out_stats`` (local to the blocks passed in; reduce over ranks yourself:
 # max for the MAX_* entries, sum for the rest).  Only free blocks (not fixed, not vfix) count.

@@ -195,6 +195,22 @@ def _read_rows(dset, rows: np.ndarray) -> np.ndarray:
     return np.concatenate(parts)
 
 
+def _widened(stored: tuple, want: tuple) -> bool:
+    """Whether a stored field is a declared one that has gained columns since the file was
+    written (the block ``work`` had 9 before the quiet faces' column)."""
+    return (len(stored) == len(want) == 2 and stored[0] == want[0]
+            and stored[1] < want[1])
+
+
+def _widen(a: np.ndarray, shape: tuple) -> np.ndarray:
+    """Rows of a widened field (:func:`_widened`) with its new columns zero (their start)."""
+    if a.shape[1:] == tuple(shape):
+        return a
+    out = np.zeros((len(a), *shape), a.dtype)
+    out[:, :a.shape[1]] = a
+    return out
+
+
 class CheckpointReader:
     """An open checkpoint: attributes checked at opening, rows read by selection, so that a
     rank reads the rows of the blocks and contacts it will hold (``ModelState.restore``).
@@ -239,7 +255,8 @@ class CheckpointReader:
         self.n_blocks = int(self.attrs["n_blocks"])
         for k in CHECKPOINT:
             want = (self.n_blocks, *BLOCK_BY_NAME[k].shape)
-            if f"blocks/{k}" in f and f[f"blocks/{k}"].shape != want:
+            if f"blocks/{k}" in f and f[f"blocks/{k}"].shape != want \
+                    and not _widened(f[f"blocks/{k}"].shape, want):
                 raise ValueError(f"{self.path}: blocks/{k} has shape {f[f'blocks/{k}'].shape}, "
                                  f"expected {want}")
         for k in _CORE:
@@ -294,7 +311,8 @@ class CheckpointReader:
         """Fields of blocks ``gids`` (sorted); a field added after the file was written
         starts from zero (its declared start value). Non-finite poses are refused."""
         f = self.f
-        out = {k: _read_rows(f[f"blocks/{k}"], gids) if f"blocks/{k}" in f else
+        out = {k: _widen(_read_rows(f[f"blocks/{k}"], gids), BLOCK_BY_NAME[k].shape)
+               if f"blocks/{k}" in f else
                np.zeros((len(gids), *BLOCK_BY_NAME[k].shape), BLOCK_BY_NAME[k].dtype)
                for k in fields}
         for k in _CORE:

@@ -97,11 +97,11 @@ BLOCK: tuple[Field, ...] = (
           "2 deleted", **_D, output="removed"),
     Field("x_stage", (3,), F, "m", "centroid when the current stage began (stage "
           "displacements are measured from it)", **_D, output="stage_origin"),
-    Field("work", (9,), F, "J", "energy budget accumulators of the block since the start: work "
-          "of gravity, of applied forces, of contact forces, damping dissipation, work of a "
+    Field("work", (10,), F, "J", "energy budget accumulators of the block since the start: "
+          "work of gravity, of applied forces, of contact forces, damping dissipation, work of a "
           "prescribed motion, joint dissipation, energy the joints' force update created, "
           "stored energy changed by contact geometry updates, energy taken out with blocks that "
-          "left the model domain (pdem.dynamics.motion.WORK_*)",
+          "left the model domain, energy absorbed by quiet faces (pdem.dynamics.motion.WORK_*)",
           **_D),
     # scratch: per-rank working arrays, derived from the state above
     Field("dtheta", (3,), F, "rad", "this step's rotation increment (contact planes turn)",

@@ -71,6 +71,7 @@ def energy_totals(state) -> dict[str, float]:
     per_block[:, 1] = strain[:n]
     per_block[:, 2:11] = b.work[:n, WORK_COLUMNS]
     per_block[:, 11:] = 0.0
+    per_block[:, 13] = b.work[:n, motion.WORK_QUIET]  # rigid blocks' quiet faces
     if state.grids is not None:
         # with zoned blocks, the joints' energy at the kinetic energy's time t - dt/2: it
         # falls at the rate -F_c . v, so dt/2 (F . v + M . w) of each free block's contact

@@ -24,12 +24,16 @@ class StageState(Plugin):
         attrs = {k: getattr(self.state, k) for k in _KEYS}
         if self.state.stage_times:  # read back by pdem.stages.replay_stages
             attrs["stage_times"] = json.dumps(self.state.stage_times)
+        if len(self.state.boundary.rigid.r_gid):  # a stage's replay frees them, these hold them
+            attrs["released_loads"] = self.state.boundary.rigid.released()
         return attrs
 
     def restore(self, attrs: dict) -> None:
         for k, cast in _KEYS.items():
             if k in attrs:
                 setattr(self.state, k, cast(attrs[k]))
+        if "released_loads" in attrs:
+            self.state.boundary.rigid.restore_released(attrs["released_loads"])
 
 
 PLUGINS.register("stages", PluginEntry(

@@ -28,9 +28,10 @@ FLOORS: list[tuple[str, tuple[str, ...]]] = [
                "pdem.deformable.grid_checkpoint",
                "pdem.deformable.columns")),
     ("set-up", ("pdem.resolve", "pdem.preflight")),
-    ("run", ("pdem.selection", "pdem.boundary", "pdem.domain", "pdem.insitu", "pdem.restart",
-             "pdem.distribute", "pdem.search", "pdem.state", "pdem.cycle", "pdem.compiled_runs",
-             "pdem.stepper", "pdem.strength", "pdem.stages", "pdem.plugins", "pdem.run", "pdem.simulation")),
+    ("run", ("pdem.selection", "pdem.rigid_faces", "pdem.boundary", "pdem.domain", "pdem.insitu",
+             "pdem.restart", "pdem.distribute", "pdem.search", "pdem.state", "pdem.cycle",
+             "pdem.compiled_runs", "pdem.stepper", "pdem.strength", "pdem.stages", "pdem.plugins",
+             "pdem.run", "pdem.simulation")),
     ("edge", ("pdem.cli", "pdem.warmup", "pdem.cases", "pdem.__main__")),
 ]
 # Modules that may import pdem modules inside functions: the command line loads only what

@@ -133,8 +133,13 @@ def test_exact_sum_does_not_depend_on_how_rows_are_split():
 def _as_format_3(path):
     """Rewrite a checkpoint in the layout of format 3: int64 sub-contact state bits, int32
     contact types, ``held`` of 6 columns (zeros: no solve.inactive), a normal force column
-    ``sc_fn`` (formats 1-4; nonsense values: a restart must not read it)."""
+    ``sc_fn`` (formats 1-4; nonsense values: a restart must not read it), and the blocks'
+    ``work`` of 9 columns (before the quiet faces' ``WORK_QUIET``)."""
     with h5py.File(path, "a") as f:
+        work = f["blocks/work"][()]
+        assert work.shape[1] == 10 and not work[:, 9].any()
+        del f["blocks/work"]
+        f.create_dataset("blocks/work", data=work[:, :9])
         for name, dtype in (("subcontacts/sc_state", np.int64), ("contacts/ctype", np.int32)):
             data = f[name][()].astype(dtype)
             del f[name]
@@ -148,8 +153,8 @@ def _as_format_3(path):
 
 def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_restart(tmp_path):
     """``held`` has columns only with solve.inactive (48 bytes a contact otherwise), the state
-    bits are uint8, and a checkpoint of format 3 (int64 bits, int32 types, 6 held columns)
-    restarts bitwise; a state value that uint8 cannot hold is refused."""
+    bits are uint8, and a checkpoint of format 3 (int64 bits, int32 types, 6 held columns,
+    9 work columns) restarts bitwise; a state value that uint8 cannot hold is refused."""
     from pdem.io.checkpoint import FORMAT_VERSION
 
     text = SCENE.replace("CK", os.path.join(tmp_path, "ck"))
@@ -165,6 +170,7 @@ def test_contacts_hold_forces_only_with_solve_inactive_and_old_checkpoints_resta
     _as_format_3(path)
     ck = read_checkpoint(path)
     assert ck["contacts"].sc_state.dtype == np.uint8 and ck["contacts"].held.shape[1] == 6
+    assert ck["blocks"]["work"].shape[1] == 10  # (widened: the new column zero)
     scene = parse_scene(ck["attrs"]["scene"])
     scene = scene.model_copy(update={"output": scene.output.model_copy(
         update={"file": os.path.join(tmp_path, "b.h5")}), "checkpoint": None})

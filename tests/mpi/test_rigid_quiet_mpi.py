@@ -1,0 +1,85 @@
+"""Quiet faces and wave input on rigid blocks (pdem.dynamics.quiet) give bitwise the 1-rank run
+on two ranks, and a restart ends where the straight run ends: a free rigid slab whose bottom
+face is quiet takes a harmonic wave (tilted: P and S) through it and shakes a row of cubes
+that spans the rank split at x = 0, one cube's side faces quiet too (shear only); the output
+(block states and the energy history, its ``quiet_absorbed`` column in) is compared whole.
+
+(A held slab released to its quiet face by a stage is not compared across rank counts: a
+fixed block that a stage frees, by ``free:`` as well, does not step bitwise on several ranks
+after the stage start.)
+
+Run with ``mpiexec -n 2 python -m mpi4py -m pytest --with-mpi tests/mpi/test_rigid_quiet_mpi.py``.
+"""
+
+from __future__ import annotations
+
+import glob
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+from support import TWO_RANKS_ONLY, shared_dir, slabs_match_one_rank
+
+pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
+
+SCENE = """
+gravity: [0, 0, 0]
+materials: {rock: {density: 2500.0, young: 2.0e9, poisson: 0.25}}
+joints: {default: {kn: 1.0e8, ks: 1.0e8, friction: 30.0}}
+blocks:
+  - {name: slab, box: {min: [-3, -1, -0.5], max: [3, 1, 0]}, material: rock}
+  - name: row
+    array: {box: {min: [-2.2, -0.5, 0], max: [-1.2, 0.5, 1]}, count: [4, 1, 1], spacing: [1.1, 1, 1]}
+    material: rock
+boundary:
+  quiet:
+    - {names: [slab], range: {box: {min: [-4, -2, -0.6], max: [4, 2, -0.4]}}}
+    - {names: ["row[2]"], directions: [shear]}
+  stress:
+    - names: [slab]
+      range: {box: {min: [-4, -2, -0.6], max: [4, 2, -0.4]}}
+      wave: {harmonic: {amplitude: [0.05, 0.02, 0.03], frequency: 8.0, phase: 30}}
+solve: {time: 0.2, damping: none}
+output: {energy_every: 25}
+"""
+
+def test_a_slab_shaken_through_its_quiet_face_matches_one_rank(tmp_path):
+    slabs_match_one_rank(tmp_path, SCENE, "rigid-quiet", 100)
+
+
+def test_a_slab_shaken_through_its_quiet_face_restarts_bitwise(tmp_path):
+    """A checkpoint taken mid-run, restarted on every rank of the job: the quiet faces, the
+    wave's clock and the absorbed energy (the blocks' ``work``) come back with the model
+    (a released block's load: tests/verification/test_rigid_quiet.py, on one rank)."""
+    from pdem.config import parse_scene
+    from pdem.io.checkpoint import read_checkpoint
+    from pdem.simulation import Simulation
+
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    text = SCENE.replace("output: {energy_every: 25}\n", "") + (
+        f"output: {{file: {base}/straight.h5, every_steps: 200, energy_every: 25}}\n"
+        f"checkpoint: {{every_steps: 450, keep: 5, file: {base}/ck}}\n")
+    s = Simulation(parse_scene(text), comm)
+    s.run()
+    s.close()
+    ck = read_checkpoint(sorted(glob.glob(f"{base}/ck-*.h5"))[0])
+    assert int(ck["attrs"]["step"]) == 450
+    scene = parse_scene(ck["attrs"]["scene"])
+    out = f"{base}/again.h5"
+    scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
+                                     "checkpoint": None})
+    r = Simulation(scene, comm, checkpoint=ck)
+    r.run()
+    r.close()
+    comm.Barrier()
+    if comm.rank == 0:
+        with h5py.File(f"{base}/straight.h5") as a, h5py.File(out) as b:
+            for k in ("centroid", "orientation", "velocity", "angular_velocity"):
+                assert np.array_equal(a[f"blocks/{k}"][-1], b[f"blocks/{k}"][-1]), k
+            ea, eb = a["histories/energy/value"][()], b["histories/energy/value"][()]
+            cols = a["histories/energy"].attrs["columns"].split(",")
+            q = cols.index("quiet_absorbed")
+            assert ea[-1, q] > 0.0
+            assert np.array_equal(ea[-1], eb[-1]), (ea[-1], eb[-1])
