@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba.extending import overload
 
 from ..jit import access, force_kernel, inline_kernel, kernel
 from .laws import OPEN, SLIPPING, apply_law, joint_dissipation, law_energy, law_stays_open
@@ -79,6 +80,32 @@ def carry_shear(fx, fy, fz, nx, ny, nz):
     return fx, fy, fz
 
 
+def has_dashpots(dash):
+    """Whether the joints' ``dash`` (:data:`pdem.contact.laws.Joints`) holds dashpots: a
+    compile-time constant (its rows, 2-d; without Rayleigh damping an empty 1-d array), so
+    a scene without them compiles the force loops without a branch of their code."""
+    return dash.ndim == 2
+
+
+def dashpot_constants(dash, j):
+    """``(beta kn, beta ks)`` of joint row ``j`` (0, 0 without dashpots)."""
+    return (dash[j, 0], dash[j, 1]) if dash.ndim == 2 else (0.0, 0.0)
+
+
+@overload(has_dashpots, inline="always")
+def _has_dashpots(dash):
+    if dash.ndim == 2:
+        return lambda dash: True
+    return lambda dash: False
+
+
+@overload(dashpot_constants, inline="always")
+def _dashpot_constants(dash, j):
+    if dash.ndim == 2:
+        return lambda dash, j: (dash[j, 0], dash[j, 1])
+    return lambda dash, j: (0.0, 0.0)
+
+
 @inline_kernel
 def dashpot(cn, cs, area, vx, vy, vz, nx, ny, nz, dt):
     """Rayleigh damping's stiffness-proportional term at a closed sub-contact: the viscous
@@ -124,14 +151,17 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
     ``pairs.held`` has no columns (pdem.model.fields.held_width) and is never read or written.
 
     Rayleigh damping's stiffness term (``joints.dash``, rows only where the scene's ``beta``
-    is positive): every sub-contact the law leaves closed adds :func:`dashpot`'s viscous force
-    to the force its blocks feel (never to the joint's stored force: the joint keeps its
-    elastic and plastic history), and what the dashpots took out is booked on the blocks'
-    ``work[:, WORK_DAMPING]`` as joint dissipation is. Without dashpots not one operation of
-    the undamped step changes.
+    is positive, :func:`has_dashpots`): every sub-contact the law leaves closed adds
+    :func:`dashpot`'s viscous force to the force its blocks feel (never to the joint's stored
+    force: the joint keeps its elastic and plastic history), and what the dashpots took out
+    is booked on the blocks' ``work[:, WORK_DAMPING]`` as joint dissipation is. Without
+    dashpots the loop compiles without their code: the undamped step's operations, and
+    speed, are as they were.
     """
     holds = pairs.held.shape[1] != 0
-    damped = joints.dash.shape[0] != 0
+    # bound once: a record's array read per contact is a reference count taken and dropped
+    dash = joints.dash
+    damped = has_dashpots(dash)
     for c in range(pairs.ia.shape[0]):
         # unsigned, as the sub-contact index below: no negative-index wrap on the ~40 block-row
         # reads and writes of a contact (3% of the loop on the 10³ cube stack, same bits)
@@ -156,10 +186,7 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
         acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         dissipated = 0.0
         damped_out = 0.0
-        cn = cs = 0.0
-        if damped:
-            cn = joints.dash[jrow, 0]
-            cs = joints.dash[jrow, 1]
+        cn, cs = dashpot_constants(dash, jrow)
         # unsigned: numba then drops the negative-index wrap of every sub-contact column read
         for s in range(np.uint64(s0), np.uint64(s1)):
             rax, ray, raz, vx, vy, vz = point_motion(rel, subs.pa[s, 0], subs.pa[s, 1],

@@ -18,7 +18,14 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..contact.forces import book_on_blocks, carry_shear, dashpot, turn_normal
+from ..contact.forces import (
+    book_on_blocks,
+    carry_shear,
+    dashpot,
+    dashpot_constants,
+    has_dashpots,
+    turn_normal,
+)
 from ..contact.laws import OPEN, SLIPPING, apply_law, joint_dissipation, law_stays_open
 from ..contact.rigid import (
     WORK_DAMPING,
@@ -150,7 +157,7 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
                                               grid.sc_w, grid.kc)
     k2j = 2.0 * grid.kjoint
     dash = joints.dash
-    damped = dash.shape[0] != 0
+    damped = has_dashpots(dash)
     v, w, force, moment = bodies.v, bodies.w, bodies.force, bodies.moment
     for c in range(ia.shape[0]):
         a = np.uint64(ia[c])
@@ -178,10 +185,7 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
         fb = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         dissipated = 0.0
         damped_out = 0.0
-        cn = cs = 0.0
-        if damped:
-            cn = dash[joint[c], 0]
-            cs = dash[joint[c], 1]
+        cn, cs = dashpot_constants(dash, joint[c])
         # unsigned: no negative-index wrap on the sub-contact and gridpoint reads
         for s in range(np.uint64(s0), np.uint64(s1)):
             p0, p1, p2 = pa[s, 0], pa[s, 1], pa[s, 2]

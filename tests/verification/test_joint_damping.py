@@ -195,3 +195,47 @@ def test_a_dropped_pile_with_rayleigh_damping_balances():
           f"error {err:.3g} J ({err / put_in:+.2e} of what was put in)")
     assert t["damping_dissipation"] > 0.05 * put_in
     assert abs(err) < 1e-2 * put_in
+
+
+ZONED_CUBE = """
+name: zoned-cube-on-its-joint
+gravity: [0, 0, -9.81]
+materials:
+  rock: {{density: 2000.0}}
+  stiff: {{density: 2000.0, young: 1.0e11, poisson: 0.25}}
+joints: {{default: {{kn: 1.0e9, ks: 1.0e9, friction: 60.0}}}}
+blocks:
+  - {{name: floor, box: {{min: [-2, -2, -1], max: [2, 2, 0]}}, material: rock, fixed: true}}
+  - name: cube
+    box: {{min: [-0.5, -0.5, {z0!r}], max: [0.5, 0.5, {z1!r}]}}
+    material: stiff
+    zones: {{size: 0.5}}
+    velocity: [0, 0, -0.005]
+solve: {{time: 0.05, damping: {damping}}}
+"""
+
+
+@pytest.mark.parametrize("centre", [1.0, 3.0])
+def test_a_zoned_block_rings_on_its_joint_at_the_rayleigh_fraction(centre):
+    """The zoned contact kernel's dashpots: a zoned cube (E = 1e11 Pa, 100 times the joint's
+    kn A / 1 m) on the floor's joint, in free vertical vibration. Rayleigh damping is ``C =
+    alpha M + beta K`` with ``K`` the zones' and the joint's stiffness together, so the mode
+    has ``(alpha / w + beta w) / 2`` at its own frequency ``w`` (measured from the peaks,
+    below the rigid block's by the zones' compliance). Without the joint's dashpot it would
+    be nearly the mass term's alone (0.025 and 0.008)."""
+    d = static_overlap()
+    text = ZONED_CUBE.format(z0=-d, z1=1.0 - d, damping=rayleigh(FRACTION, centre * FREQ))
+    sim = make_simulation(text)
+    r = cube_row(sim)
+    a = recorded(sim, lambda s: (s.blocks.v[r, 2],))
+    zeta, peaks = decay_fraction(a[:, 0], a[:, 1])
+    t, v = a[:, 0], a[:, 1]
+    k = np.nonzero((v[1:-1] > v[:-2]) & (v[1:-1] >= v[2:]) & (v[1:-1] > 0.0))[0] + 1
+    wd = 2.0 * math.pi / float(np.mean(np.diff(t[k])))
+    w = wd / math.sqrt(1.0 - zeta * zeta)
+    want = rayleigh_fraction(FRACTION, centre * FREQ, w / (2.0 * math.pi))
+    print(f"zoned cube, centre {centre:g} x {FREQ:.2f} Hz: fraction {zeta:.6f} over {peaks} "
+          f"peaks at {w / (2 * math.pi):.2f} Hz, closed form {want:.6f} ({zeta / want - 1:+.2e})"
+          f"; step {sim.dt:.3e} s")
+    assert peaks >= 5
+    assert abs(zeta / want - 1.0) < 1e-2

@@ -68,8 +68,8 @@ JOINT_LAWS.register("continuously_yielding", continuously_yielding.LAW)
 # What the force kernel reads: for each scene joint (row), the slot of its law in ``laws`` and
 # its row in that law's table; ``dash`` (rows, 2): the joint's dashpot constants per unit area,
 # ``beta kn`` and ``beta ks`` (Rayleigh damping's stiffness term at the contacts,
-# pdem.contact.forces), or no rows where the scene has none (beta = 0: the kernels then do
-# exactly the undamped arithmetic).
+# pdem.contact.forces), or an empty 1-d array where the scene has none (beta = 0: a type of its
+# own, so the force loops compile without the dashpots' code, pdem.contact.forces.has_dashpots).
 Joints = namedtuple("Joints", "slot row laws dash")
 
 
@@ -99,7 +99,7 @@ class JointTable:
         # Rayleigh damping's stiffness-proportional constant (s) and the joints' dashpots
         self.beta = float(beta)
         dash = np.stack([self.beta * self.kn, self.beta * self.ks], axis=1) if self.beta > 0.0 \
-            else np.zeros((0, 2))
+            else np.zeros(0)
         self.kernel_args = Joints(slot, row, tuple(tables), dash)
         self.hist_width = max((len(law.history) for law in used), default=0)
 
