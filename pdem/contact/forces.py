@@ -159,7 +159,7 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
     speed, are as they were.
     """
     holds = pairs.held.shape[1] != 0
-    # bound once: a record's array read per contact is a reference count taken and dropped
+    # bound once above the loop, as the zoned kernel binds its arrays
     dash = joints.dash
     damped = has_dashpots(dash)
     for c in range(pairs.ia.shape[0]):

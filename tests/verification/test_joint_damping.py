@@ -264,3 +264,16 @@ def test_a_dynamic_stage_puts_the_dashpots_on_and_lowers_the_step():
     assert dynamic[0, 2] == pytest.approx(frac * rayleigh_limit(undamped / frac, beta),
                                           rel=1e-12)
     assert dynamic[0, 2] < undamped
+
+
+@pytest.mark.parametrize("beta", [0.0, 1e-5, 4e-4])
+def test_mass_scaling_aims_at_the_step_the_dashpots_allow(beta):
+    """Mass scaling under Rayleigh damping scales the blocks for the undamped step whose
+    damped limit is the step asked for (pdem.resolve.damped_target): ``frac`` times the
+    damped limit of its critical step is ``dt`` again."""
+    from pdem.resolve import damped_target
+
+    dt, frac = 1e-4, 0.1
+    target = damped_target(dt, frac, beta)
+    assert frac * rayleigh_limit(target / frac, beta) == pytest.approx(dt, rel=1e-12)
+    assert target >= dt and (target == dt) == (beta == 0.0)
