@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .config.schema import MassScaling
+from .deformable.motion import rayleigh_limit, undamped_limit
 from .dynamics.damping import DAMPING
 from .dynamics.kinematics import refresh_pose
 from .dynamics.timestep import (
@@ -171,33 +172,57 @@ def scene_timestep(scene, rows, k, names=None, key: str = "solve.mass_scaling.ti
     its start, see pdem.stages). The first ``n`` rows (default all) are this rank's own, the
     blocks no other rank counts (its build share, or the blocks it owns): the step is reduced
     over theirs on ``comm`` (minima and maxima, exact sums for the means: the same bits on any
-    rank count). Every row's ``mscale`` is set."""
+    rank count). Every row's ``mscale`` is set.
+
+    Rayleigh damping's stiffness term (``beta``, :attr:`pdem.config.schema.Damping.rayleigh`)
+    puts dashpots on the joints (pdem.contact.forces.dashpot), which lower the stable step as
+    in the zones (:func:`pdem.deformable.motion.rayleigh_limit`): the estimate is ``frac``
+    times the damped limit of the undamped critical step ``dt_crit``, ``dt_crit (sqrt(1 +
+    xi^2) - xi)``, ``xi = beta / dt_crit``; with mass scaling the blocks are made heavy enough
+    for ``dt`` under the dashpots."""
     ts = scene.solve.timestep
     ms = scene.solve.mass_scaling
     n = len(rows.mass) if n is None else n
+    beta = scene.solve.damping.rayleigh[1]
     if isinstance(ms, MassScaling):
         # partial (dynamic) scaling: the light blocks are made heavy enough for `timestep`
         dt = ms.timestep
-        rows.mscale[:] = mass_scale_factors(rows.mass, k, dt, ts.frac, rows.inertia, rows.radius)
+        rows.mscale[:] = mass_scale_factors(rows.mass, k, damped_target(dt, ts.frac, beta),
+                                            ts.frac, rows.inertia, rows.radius)
         _check_partial(rows, dt, names, key, comm, n)
     elif ms:
         # static solve: every block gets the critical step of the mean block (eq. 89)
         free = rows.fixed[:n] == 0
         dt = ts.dt or ts.frac * 2.0 * math.sqrt(
             exact_mean(comm, rows.mass[:n][free]) / exact_mean(comm, k[:n][free]))
-        rows.mscale[:] = mass_scale_factors(rows.mass, k, dt, ts.frac, rows.inertia, rows.radius)
+        rows.mscale[:] = mass_scale_factors(rows.mass, k, damped_target(dt, ts.frac, beta),
+                                            ts.frac, rows.inertia, rows.radius)
     elif ts.dt is not None:
         dt = ts.dt
     else:
         fixed = _rigid_fixed(scene, rows, zoned)
-        dt = timestep_from_extremes(ts.frac, allreduce_max_array(comm, timestep_extremes(
+        extremes = allreduce_max_array(comm, timestep_extremes(
             rows.mass[:n], k[:n], rows.inertia[:n], rows.radius[:n], fixed[:n],
-            rows.mscale[:n])))
+            rows.mscale[:n]))
+        if beta > 0.0:  # the joints' dashpots: the damped limit of the critical step
+            dt = ts.frac * rayleigh_limit(timestep_from_extremes(1.0, extremes), beta)
+        else:
+            dt = timestep_from_extremes(ts.frac, extremes)
         if zoned is not None:
             return float(dt)  # inf: no free rigid block, the grids' step alone
     if not math.isfinite(dt):
         raise UserError("solve.timestep: no free block, cannot choose a timestep; give dt")
     return float(dt)
+
+
+def damped_target(dt: float, frac: float, beta: float) -> float:
+    """The undamped step mass scaling aims at so that ``dt`` is stable under the joints'
+    Rayleigh dashpots ``beta``: ``frac`` times the undamped limit whose damped limit is
+    ``dt / frac`` (:func:`pdem.deformable.motion.undamped_limit`); ``dt`` itself when
+    ``beta`` is 0."""
+    if beta <= 0.0:
+        return dt
+    return frac * undamped_limit(dt / frac, beta)
 
 
 def _name(names, g: int) -> str:
@@ -314,8 +339,14 @@ def timestep_report(scene, rows, k, dt: float, names, comm=LOCAL,
     if median >= 2.0 * mine:
         line += (" is" if ts.dt is None else ",") + \
             f" {median / mine:.3g} x below the median {median:.3g} s"
-    if ts.dt is None and dt < mine * (1.0 - 1e-9):
-        line += f" (eq. 87 pairs its mass with the stiffest block's stiffness: dt = {dt:.3g} s)"
+    beta = scene.solve.damping.rayleigh[1]
+    undamped = damped_target(dt, ts.frac, beta) if ts.dt is None else dt
+    if ts.dt is None and undamped < mine * (1.0 - 1e-9):
+        line += (" (eq. 87 pairs its mass with the stiffest block's stiffness: dt = "
+                 f"{undamped:.3g} s)")
+    if ts.dt is None and beta > 0.0:
+        line += (f"; Rayleigh damping's dashpots on the joints (beta = {beta:.3g} s) lower it "
+                 f"{undamped / dt:.3g} x, to {dt:.3g} s")
     if median > SUGGEST_RATIO * mine:
         line += f"; consider solve.mass_scaling: {{timestep: {_round_down(median):.2g}}}"
     return [line]

@@ -3,7 +3,9 @@ oscillator.png and bounce.png).
 
 A unit cube (side 1 m, density rho, so m = rho) rests face-on on a fixed floor box; the
 contact area is A = 1 m^2 and the joint normal stiffness kn (Pa/m), so the contact is a
-linear spring of stiffness kn A on the overlap un > 0 and nothing when open. No damping.
+linear spring of stiffness kn A on the overlap un > 0 and nothing when open. No damping, or
+Rayleigh damping (:func:`rayleigh`; the stiffness term a dashpot ``beta kn A`` at the closed
+contact, tests/verification/test_joint_damping.py).
 """
 
 from __future__ import annotations
@@ -18,8 +20,9 @@ KN = 1.0e9
 
 
 def cube_on_floor(z0: float, gravity=(0.0, 0.0, -G), velocity=(0.0, 0.0, 0.0), end="time: 1.0",
-                  algorithm="fast") -> str:
-    """The cube with its bottom face at height ``z0`` (negative: pre-penetrated)."""
+                  algorithm="fast", damping: str = "none") -> str:
+    """The cube with its bottom face at height ``z0`` (negative: pre-penetrated);
+    ``damping``: ``solve.damping`` (YAML flow)."""
     return f"""
 name: oscillator
 gravity: {vec(gravity)}
@@ -32,8 +35,21 @@ blocks:
     box: {{min: {vec((-0.5, -0.5, z0))}, max: {vec((0.5, 0.5, z0 + 1.0))}}}
     material: rock
     velocity: {vec(velocity)}
-solve: {{{end}, damping: none}}
+solve: {{{end}, damping: {damping}}}
 """
+
+
+def rayleigh(fraction: float, frequency: float) -> str:
+    """``solve.damping`` for Rayleigh damping (YAML flow)."""
+    return f"{{mode: rayleigh, fraction: {fraction!r}, frequency: {frequency!r}}}"
+
+
+def rayleigh_fraction(fraction: float, centre: float, frequency: float) -> float:
+    """The fraction of critical damping Rayleigh damping set to ``fraction`` at ``centre``
+    (Hz) gives a mode at ``frequency`` (Hz): ``(alpha / w + beta w) / 2``, ``alpha = fraction
+    wc``, ``beta = fraction / wc``."""
+    r = frequency / centre
+    return 0.5 * fraction * (1.0 / r + r)
 
 
 def free_fall_scene(g, v0) -> str:

@@ -237,12 +237,13 @@ solve: {{time: {time}, damping: none}}
 """
 
 
-def tilted_scene(theta0: float, time: float) -> str:
+def tilted_scene(theta0: float, time: float, damping: str = "none") -> str:
     """The block tilted by ``theta0`` (rad) about its bottom +x edge, which rests on a fixed
     base (4 x 2 m) at the static overlap of its two point springs (area ``contact.point_area
     V^(2/3)`` each, the default point_area 0.01), its -x bottom edge lifted by ``2 b
     sin(theta0)`` (a +y rotation, :func:`tilt_about_y`); released at rest, ``time`` s, no
-    damping. It falls back towards upright, pivoting on the +x edge."""
+    damping (or ``damping``, ``solve.damping`` as YAML flow). It falls back towards upright,
+    pivoting on the +x edge."""
     vol = 8.0 * ROCK_B * ROCK_H * ROCK_D
     delta = RHO * vol * G / (2.0 * KN * 0.01 * vol ** (2.0 / 3.0))
     c, s = math.cos(theta0), math.sin(theta0)
@@ -258,7 +259,7 @@ blocks:
   - name: rocker
     polyhedron: {{vertices: [{", ".join(vec(v) for v in verts)}]}}
     material: rock
-solve: {{time: {time}, damping: none}}
+solve: {{time: {time}, damping: {damping}}}
 """
 
 
@@ -291,12 +292,15 @@ def housner_impact_time(theta0: float) -> float:
     return math.acosh(1.0 / (1.0 - theta0 / alpha)) / p
 
 
-def pivot_impact_time(theta0: float, h: float = 1e-5) -> tuple[float, float]:
+def pivot_impact_time(theta0: float, h: float = 1e-5, drag: float = 0.0) -> tuple[float, float]:
     """``(t, w)``: time to the first impact and the angular velocity then, of the rigid block
     pivoting from rest at ``theta0`` (``theta'' = -p^2 sin(alpha - theta)``, RK4 with step
-    ``h``, the crossing of theta = 0 interpolated linearly)."""
+    ``h``, the crossing of theta = 0 interpolated linearly). ``drag`` (1/s): a viscous force
+    ``-drag m v`` and moment ``-drag I_c w`` on the block (Rayleigh damping's mass term), whose
+    moment about the pivot is ``-drag I_0 w``: ``theta'' = -p^2 sin(alpha - theta) - drag
+    theta'``."""
     alpha, _, p = rocking_constants()
-    (t0, y0), (t1, y1) = _rk4(lambda t, y: (y[1], -p * p * math.sin(alpha - y[0])),
+    (t0, y0), (t1, y1) = _rk4(lambda t, y: (y[1], -p * p * math.sin(alpha - y[0]) - drag * y[1]),
                               (theta0, 0.0), 0.0, h, lambda t, y: y[0] <= 0.0)
     f = y0[0] / (y0[0] - y1[0])
     return t0 + f * (t1 - t0), y0[1] + f * (y1[1] - y0[1])

@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba.extending import overload
 
 from ..jit import access, force_kernel, inline_kernel, kernel
 from .laws import OPEN, SLIPPING, apply_law, joint_dissipation, law_energy, law_stays_open
 from .rigid import (
+    WORK_DAMPING,
     add_point_force,
     apply_pair,
     energy_shares,
@@ -78,6 +80,50 @@ def carry_shear(fx, fy, fz, nx, ny, nz):
     return fx, fy, fz
 
 
+def has_dashpots(dash):
+    """Whether the joints' ``dash`` (:data:`pdem.contact.laws.Joints`) holds dashpots: a
+    compile-time constant (its rows, 2-d; without Rayleigh damping an empty 1-d array), so
+    a scene without them compiles the force loops without a branch of their code."""
+    return dash.ndim == 2
+
+
+def dashpot_constants(dash, j):
+    """``(beta kn, beta ks)`` of joint row ``j`` (0, 0 without dashpots)."""
+    return (dash[j, 0], dash[j, 1]) if dash.ndim == 2 else (0.0, 0.0)
+
+
+@overload(has_dashpots, inline="always")
+def _has_dashpots(dash):
+    if dash.ndim == 2:
+        return lambda dash: True
+    return lambda dash: False
+
+
+@overload(dashpot_constants, inline="always")
+def _dashpot_constants(dash, j):
+    if dash.ndim == 2:
+        return lambda dash, j: (dash[j, 0], dash[j, 1])
+    return lambda dash, j: (0.0, 0.0)
+
+
+@inline_kernel
+def dashpot(cn, cs, area, vx, vy, vz, nx, ny, nz, dt):
+    """Rayleigh damping's stiffness-proportional term at a closed sub-contact: the viscous
+    force on B ``-(cn A v_n n + cs A v_s)`` (``cn = beta kn``, ``cs = beta ks`` per unit
+    area, ``v`` the velocity of B relative to A at t - dt/2, as the joint's increment uses
+    it, split into its normal and shear parts), and the energy it takes out over the step,
+    ``(cn A v_n^2 + cs A |v_s|^2) dt`` (>= 0; the work of the force at that velocity)."""
+    vn = vx * nx + vy * ny + vz * nz
+    sx = vx - vn * nx
+    sy = vy - vn * ny
+    sz = vz - vn * nz
+    an = cn * area
+    as_ = cs * area
+    fn = an * vn
+    return (-(fn * nx + as_ * sx), -(fn * ny + as_ * sy), -(fn * nz + as_ * sz),
+            (fn * vn + as_ * (sx * sx + sy * sy + sz * sz)) * dt)
+
+
 @access(reads="x R v w dtheta force moment fixed work still ia ib joint normal held frozen sc_pa "
               "sc_area sc_un sc_fs sc_us sc_dil sc_state sc_hist",
         writes="force moment work normal held frozen sc_un sc_fs sc_us sc_dil sc_state sc_hist")
@@ -103,8 +149,19 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
     they became still (``pairs.held``, valid while ``pairs.frozen``) instead of updating its
     joint: neither block moves, so the joint would see no motion. Without ``solve.inactive``
     ``pairs.held`` has no columns (pdem.model.fields.held_width) and is never read or written.
+
+    Rayleigh damping's stiffness term (``joints.dash``, rows only where the scene's ``beta``
+    is positive, :func:`has_dashpots`): every sub-contact the law leaves closed adds
+    :func:`dashpot`'s viscous force to the force its blocks feel (never to the joint's stored
+    force: the joint keeps its elastic and plastic history), and what the dashpots took out
+    is booked on the blocks' ``work[:, WORK_DAMPING]`` as joint dissipation is. Without
+    dashpots the loop compiles without their code: the undamped step's operations, and
+    speed, are as they were.
     """
     holds = pairs.held.shape[1] != 0
+    # bound once above the loop, as the zoned kernel binds its arrays
+    dash = joints.dash
+    damped = has_dashpots(dash)
     for c in range(pairs.ia.shape[0]):
         # unsigned, as the sub-contact index below: no negative-index wrap on the ~40 block-row
         # reads and writes of a contact (3% of the loop on the 10³ cube stack, same bits)
@@ -128,6 +185,8 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
         j = joints.row[jrow]
         acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         dissipated = 0.0
+        damped_out = 0.0
+        cn, cs = dashpot_constants(dash, jrow)
         # unsigned: numba then drops the negative-index wrap of every sub-contact column read
         for s in range(np.uint64(s0), np.uint64(s1)):
             rax, ray, raz, vx, vy, vz = point_motion(rel, subs.pa[s, 0], subs.pa[s, 1],
@@ -174,8 +233,17 @@ def contact_forces(dt, bodies, pairs, subs, joints, still):
                                                 dsy, dsz, area, un0, dil0, gx, gy, gz, st0, un,
                                                 dil, fn, fx, fy, fz, st)
             # force on B (eq. 28 with our sign) at the sub-contact
-            acc = add_point_force(acc, rax, ray, raz, fx + fn * nx, fy + fn * ny, fz + fn * nz)
+            tx, ty, tz = fx + fn * nx, fy + fn * ny, fz + fn * nz
+            if damped and not st & OPEN:
+                dx, dy, dz, de = dashpot(cn, cs, area, vx, vy, vz, nx, ny, nz, dt)
+                tx += dx
+                ty += dy
+                tz += dz
+                damped_out += de
+            acc = add_point_force(acc, rax, ray, raz, tx, ty, tz)
         apply_pair(bodies, a, b, rel, acc, dissipated)
+        if damped:
+            book_on_blocks(bodies, a, b, damped_out, WORK_DAMPING)
         if both_still:
             h = pairs.held
             h[c, 0], h[c, 1], h[c, 2], h[c, 3], h[c, 4], h[c, 5] = acc

@@ -17,8 +17,10 @@ from ..jit import inline_kernel
 # and writes (force and moment sums, the energy accumulators).
 Bodies = namedtuple("Bodies", "x R v w dtheta force moment fixed work")
 
-# columns of ``work`` (pdem.dynamics.motion.WORK_*): joint dissipation, and the energy a
+# columns of ``work`` (pdem.dynamics.motion.WORK_*): what damping took out (the contacts'
+# Rayleigh dashpots, pdem.contact.forces.dashpot), joint dissipation, and the energy a
 # contact's force update created (a step in which its joint gave back more than it took in)
+WORK_DAMPING = 3
 WORK_JOINT = 5
 WORK_JOINT_MADE = 6
 WORK_GEOMETRY = 7

@@ -18,9 +18,22 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..contact.forces import carry_shear, turn_normal
+from ..contact.forces import (
+    book_on_blocks,
+    carry_shear,
+    dashpot,
+    dashpot_constants,
+    has_dashpots,
+    turn_normal,
+)
 from ..contact.laws import OPEN, SLIPPING, apply_law, joint_dissipation, law_stays_open
-from ..contact.rigid import add_point_force, apply_pair, book_dissipation, pair_motion
+from ..contact.rigid import (
+    WORK_DAMPING,
+    add_point_force,
+    apply_pair,
+    book_dissipation,
+    pair_motion,
+)
 from ..jit import force_kernel, inline_kernel, kernel
 
 # dindex (rows,): zoned-block index of each block row, -1 for rigid; vel, force (N, 3): the
@@ -132,7 +145,10 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
     (bench/zoned_rock_mass.py). As in the rigid kernel, a sub-contact that is separated and
     stays so skips its law (zero forces, the same state: the force sums and the dissipation
     unchanged, the sums never being -0) but still adds its ``kc``; dilation and state are
-    stored only when changed."""
+    stored only when changed. Rayleigh's dashpots (``joints.dash``) act as in the rigid
+    kernel, on the relative velocity of the two sides' interpolated points, their force
+    spread as the joint's is (the grids' step already allows for ``beta`` with the joint
+    springs in its bound)."""
     ia, ib, normal, sc_start, joint, frozen = (pairs.ia, pairs.ib, pairs.normal, pairs.sc_start,
                                                pairs.joint, pairs.frozen)
     pa, sarea, sun, sfs, sus, sdil, sstate, hist = subs
@@ -140,6 +156,8 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
     dindex, vel, gforce, sc_node, sc_w, kc = (grid.dindex, grid.vel, grid.force, grid.sc_node,
                                               grid.sc_w, grid.kc)
     k2j = 2.0 * grid.kjoint
+    dash = joints.dash
+    damped = has_dashpots(dash)
     v, w, force, moment = bodies.v, bodies.w, bodies.force, bodies.moment
     for c in range(ia.shape[0]):
         a = np.uint64(ia[c])
@@ -166,6 +184,8 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
         fa = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         fb = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         dissipated = 0.0
+        damped_out = 0.0
+        cn, cs = dashpot_constants(dash, joint[c])
         # unsigned: no negative-index wrap on the sub-contact and gridpoint reads
         for s in range(np.uint64(s0), np.uint64(s1)):
             p0, p1, p2 = pa[s, 0], pa[s, 1], pa[s, 2]
@@ -241,6 +261,12 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
                                                 fx, fy, fz, st)
             # the force on B (eq. 28 with our sign), on A its opposite
             fx, fy, fz = fx + fn * nx, fy + fn * ny, fz + fn * nz
+            if damped and not st & OPEN:
+                dx, dy, dz, de = dashpot(cn, cs, area, vx, vy, vz, nx, ny, nz, dt)
+                fx += dx
+                fy += dy
+                fz += dz
+                damped_out += de
             if rigid:
                 fb = add_point_force(fb, rax, ray, raz, fx, fy, fz)
                 continue
@@ -264,6 +290,8 @@ def contact_forces_grid(dt, bodies, pairs, subs, joints, grid):
                     kc[g] += wi * k2
             else:
                 fa = add_point_force(fa, rax, ray, raz, -fx, -fy, -fz)
+        if damped:
+            book_on_blocks(bodies, a, b, damped_out, WORK_DAMPING)
         if rigid:
             apply_pair(bodies, a, b, rel, fb, dissipated)
             continue

@@ -40,7 +40,7 @@ DAMPING.register("viscous", DampingMode(ViscousDamping, None))
 DAMPING.register("adaptive", DampingMode(ViscousDamping, 0.0, adaptive=True))
 # dynamic analysis: its mass-proportional part is the viscous form with alpha = fraction
 # omega (pdem.config.schema.Damping.rayleigh); the stiffness-proportional part acts in the
-# zones (pdem.deformable.motion)
+# zones (pdem.deformable.motion) and as dashpots on the joints (pdem.contact.forces.dashpot)
 DAMPING.register("rayleigh", DampingMode(ViscousDamping, None))
 
 

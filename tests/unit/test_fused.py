@@ -1,9 +1,9 @@
 """The compiled run of steps (pdem.cycle, ``solve.fused``) changes nothing but the speed: for
 scenes that exercise every Python-level event between steps (snapshots, histories sampled in
 model time, energy samples, checkpoints, contact searches and updates, blocks leaving the
-model domain, an excavation at a time, adaptive damping, a ratio end condition), with and
-without zoned blocks, the output files of a serial run are bitwise the same with it on and
-off."""
+model domain, an excavation at a time, adaptive damping, Rayleigh damping's joint dashpots, a
+ratio end condition), with and without zoned blocks, the output files of a serial run are
+bitwise the same with it on and off."""
 
 from __future__ import annotations
 
@@ -54,6 +54,14 @@ def pile_with_histories() -> str:
     return yaml.safe_dump(d)
 
 
+def rayleigh_pile() -> str:
+    """The pile under Rayleigh damping: the joints' dashpots in the compiled force step."""
+    d = yaml.safe_load(pile_scene(count=12, time=0.15))
+    d["solve"]["damping"] = {"mode": "rayleigh", "fraction": 0.05, "frequency": 10.0}
+    d["output"] = {"every": 0.05, "energy_every": 7}
+    return yaml.safe_dump(d)
+
+
 def adaptive_stack() -> str:
     d = yaml.safe_load(cube_stack_scene(2, "fast"))
     d["solve"] = {"ratio": 1e-3, "max_steps": 3000, "damping": {"mode": "adaptive"}}
@@ -90,6 +98,7 @@ SCENES = {
     "ledge-domain": lambda: ledge_scene(time=0.6),
     "excavation-at-time": lambda: l_on_stack_scene(time=0.25, excavate_at=0.1),
     "adaptive-ratio": adaptive_stack,
+    "rayleigh-pile": rayleigh_pile,
     "zoned-row": zoned_row,
     "zoned-settle-ratio": lambda: ZONED_SETTLE,
 }

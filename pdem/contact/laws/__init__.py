@@ -66,14 +66,17 @@ JOINT_LAWS.register("coulomb", coulomb.LAW)
 JOINT_LAWS.register("continuously_yielding", continuously_yielding.LAW)
 
 # What the force kernel reads: for each scene joint (row), the slot of its law in ``laws`` and
-# its row in that law's table.
-Joints = namedtuple("Joints", "slot row laws")
+# its row in that law's table; ``dash`` (rows, 2): the joint's dashpot constants per unit area,
+# ``beta kn`` and ``beta ks`` (Rayleigh damping's stiffness term at the contacts,
+# pdem.contact.forces), or an empty 1-d array where the scene has none (beta = 0: a type of its
+# own, so the force loops compile without the dashpots' code, pdem.contact.forces.has_dashpots).
+Joints = namedtuple("Joints", "slot row laws dash")
 
 
 class JointTable:
     """The scene's joints resolved: per-law tables, stiffnesses, the group-pair map."""
 
-    def __init__(self, names, params, pair, cut_joint=None):
+    def __init__(self, names, params, pair, cut_joint=None, beta: float = 0.0):
         self.names = list(names)
         self.params = list(params)
         self.pair = pair
@@ -91,14 +94,20 @@ class JointTable:
             slot[mine] = k
             row[mine] = np.arange(len(mine), dtype=np.int32)
             tables.append(law.table([self.params[i] for i in mine]))
-        self.kernel_args = Joints(slot, row, tuple(tables))
         self.kn = np.array([p.kn for p in self.params], float)
         self.ks = np.array([p.ks for p in self.params], float)
+        # Rayleigh damping's stiffness-proportional constant (s) and the joints' dashpots
+        self.beta = float(beta)
+        dash = np.stack([self.beta * self.kn, self.beta * self.ks], axis=1) if self.beta > 0.0 \
+            else np.zeros(0)
+        self.kernel_args = Joints(slot, row, tuple(tables), dash)
         self.hist_width = max((len(law.history) for law in used), default=0)
 
 
 def joint_table(scene, group_names: list[str]) -> JointTable:
-    """The scene's joints (rows in ``scene.joints`` order) and the group-pair -> row map."""
+    """The scene's joints (rows in ``scene.joints`` order) and the group-pair -> row map;
+    their dashpots from ``scene.solve.damping`` (Rayleigh's ``beta``, 0 for every other
+    mode): pass a stage's scene (pdem.config.stages.stage_scene) for the stage's."""
     names = list(scene.joints)
     rows = {name: i for i, name in enumerate(names)}
     ng = len(group_names)
@@ -109,7 +118,8 @@ def joint_table(scene, group_names: list[str]) -> JointTable:
         pair[a, b] = pair[b, a] = rows[jp.joint]
     cut_joint = np.array([rows[c.joint] if c.joint is not None else -1 for c in scene.cuts],
                          np.int32)
-    return JointTable(names, [scene.joints[k] for k in names], pair, cut_joint)
+    return JointTable(names, [scene.joints[k] for k in names], pair, cut_joint,
+                      scene.solve.damping.rayleigh[1])
 
 
 def apply_law(laws, slot, j, s, hist, un, dil, fx, fy, fz, dx, dy, dz, area, ux, uy, uz,
