@@ -31,7 +31,7 @@ sys.path.insert(0, ROOT)
 
 from mpi4py import MPI  # noqa: E402
 
-from pdem.cases.waves import CS, POISSON, RHO, YOUNG, column_scene  # noqa: E402
+from pdem.cases.waves import CS, column_scene, decay_scene  # noqa: E402
 from pdem.config import parse_scene  # noqa: E402
 from pdem.simulation import Simulation  # noqa: E402
 
@@ -52,21 +52,7 @@ def timed(text: str, steps: int | None = None, time_: float | None = None):
 
 
 def decay_text(damping: str) -> str:
-    return f"""
-name: decay
-gravity: [0, 0, 0]
-materials:
-  rock: {{density: {RHO}, young: {YOUNG}, poisson: {POISSON}}}
-joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
-blocks:
-  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, 10]}}, material: rock,
-     zones: {{size: 0.5}}, velocity: [0.1, 0, 0]}}
-boundary:
-  velocity:
-    - {{names: [col], components: [y, z]}}
-    - {{range: {{box: {{min: [-1, -1, -0.001], max: [2, 2, 0.001]}}}}}}
-solve: {{time: 10, damping: {damping}}}
-"""
+    return decay_scene(10.0, 0.0, None, damping)
 
 
 def main(record: bool) -> None:

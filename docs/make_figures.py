@@ -755,21 +755,7 @@ def _transmitted(wave: str, frequency: float, ratio: float) -> float:
 def _decay(centre_over_f1: float):
     height, fraction = 10.0, 0.05
     f1 = twv.CS / (4.0 * height)
-    text = f"""
-name: decay
-gravity: [0, 0, 0]
-materials:
-  rock: {{density: {twv.RHO}, young: {twv.YOUNG}, poisson: {twv.POISSON}}}
-joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
-blocks:
-  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, {height}]}}, material: rock,
-     zones: {{size: 0.5}}, velocity: [0.1, 0, 0]}}
-boundary:
-  velocity:
-    - {{names: [col], components: [y, z]}}
-    - {{range: {{box: {{min: [-1, -1, -0.001], max: [2, 2, 0.001]}}}}}}
-solve: {{time: 10, damping: {{mode: rayleigh, fraction: {fraction}, frequency: {centre_over_f1 * f1}}}}}
-"""
+    text = twv.decay_scene(height, fraction, centre_over_f1 * f1)
     sim = make_simulation(text)
     s = sim.state
     body = s.grids.bodies[0]

@@ -210,3 +210,27 @@ output:
   histories: [{{point: [0.5, 0.5, 8.0], quantity: acceleration}}]
 {checkpoint}
 """
+
+
+def decay_scene(height: float, fraction: float, centre: float | None,
+                damping: str | None = None) -> str:
+    """A held-base shear column of ``height`` (zones of 0.5 m) moving at 0.1 m/s at the
+    start: Rayleigh damping ``fraction`` at ``centre`` Hz, or the ``damping`` given (the
+    Rayleigh decay test, bench/dynamics.py, docs/make_figures.py waves)."""
+    if damping is None:
+        damping = f"{{mode: rayleigh, fraction: {fraction}, frequency: {centre}}}"
+    return f"""
+name: decay
+gravity: [0, 0, 0]
+materials:
+  rock: {{density: {RHO}, young: {YOUNG}, poisson: {POISSON}}}
+joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
+blocks:
+  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, {height}]}}, material: rock,
+     zones: {{size: 0.5}}, velocity: [0.1, 0, 0]}}
+boundary:
+  velocity:
+    - {{names: [col], components: [y, z]}}
+    - {{range: {{box: {{min: [-1, -1, -0.001], max: [2, 2, 0.001]}}}}}}
+solve: {{time: 10, damping: {damping}}}
+"""

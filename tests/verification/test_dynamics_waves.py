@@ -24,11 +24,10 @@ import pytest
 from mpi4py import MPI
 
 from pdem.cases.waves import (
-    POISSON,
     RHO,
     WAVES,
-    YOUNG,
     column_scene,
+    decay_scene,
     joint_bars_scene,
     pulse_energy,
     rayleigh_fraction,
@@ -87,26 +86,6 @@ def test_a_pulse_leaves_through_a_quiet_base(wave, base):
 
 
 # ------------------------------------------------------------------ Rayleigh damping
-def decay_scene(height: float, fraction: float, centre: float) -> str:
-    """A held-base shear column of ``height`` moving at 0.1 m/s at the start, Rayleigh
-    damping ``fraction`` at ``centre`` Hz."""
-    return f"""
-name: decay
-gravity: [0, 0, 0]
-materials:
-  rock: {{density: {RHO}, young: {YOUNG}, poisson: {POISSON}}}
-joints: {{default: {{kn: 1.0e10, ks: 1.0e10, friction: 30}}}}
-blocks:
-  - {{name: col, box: {{min: [0, 0, 0], max: [1, 1, {height}]}}, material: rock,
-     zones: {{size: 0.5}}, velocity: [0.1, 0, 0]}}
-boundary:
-  velocity:
-    - {{names: [col], components: [y, z]}}
-    - {{range: {{box: {{min: [-1, -1, -0.001], max: [2, 2, 0.001]}}}}}}
-solve: {{time: 10, damping: {{mode: rayleigh, fraction: {fraction}, frequency: {centre}}}}}
-"""
-
-
 @pytest.mark.parametrize("centre_over_f1", [1.0, 3.0])
 def test_rayleigh_damping_decays_the_fundamental_mode_at_its_fraction(centre_over_f1):
     height, fraction = 10.0, 0.05
