@@ -110,7 +110,7 @@ class RigidFaces:
         blocks ``gids`` now (k, 6), every rank alike (collective); at the set-up, before any
         contact force, their gravity and applied force. The contacts' part is summed from
         each contact's force in key order (:func:`contact_loads`): a held block's own row
-        lacks the contacts other ranks computed; it is written into the owners' rows."""
+        lacks the contacts other ranks computed."""
         if s.blocks is None:
             g = s.glob
             f = g.applied_force[gids] + g.mass[gids, None] * s.gravity[None]
@@ -123,12 +123,9 @@ class RigidFaces:
                 for k, g in enumerate(gids[mine])]
         got = dict(r for p in allgather(s.comm, part) for r in p)
         loads = np.array([got[int(g)] for g in gids], float).reshape(-1, 6)
-        contact = contact_loads(s, gids)
-        # the freed blocks' first step takes these contact sums: their owner now computes
-        # all their contacts (a fixed block's own row summed only those it held)
-        b.force[rows] = contact[mine, :3]
-        b.moment[rows] = contact[mine, 3:]
-        return -(contact + loads)
+        # (the stage start then hands the freed blocks' contacts to their owners and sums
+        # their forces afresh: pdem.stages.apply_stage)
+        return -(contact_loads(s, gids) + loads)
 
     def released(self) -> str:
         """The released blocks' loads (JSON, a checkpoint's attribute): ``[[gid, fx, fy, fz,

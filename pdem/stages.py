@@ -24,6 +24,7 @@ from .deformable.conditions import gridpoints, owned_count, spread_force, zoned_
 from .domain import DELETED, remove_blocks
 from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
+from .parallel.migrate import hand_over_contacts
 from .plugins.checkpoints import stage_checkpoint
 from .resolve import damping_alpha, estimated_stiffness, scene_timestep, timestep_report
 from .selection import selected, set_block_fields, timestep_rows
@@ -102,23 +103,30 @@ def apply_stage(run, k: int) -> None:
     if len(gone):
         remove_blocks(s, run.stepper.bodies(), gone, DELETED,
                       f"excavated (stages[{k}] {st.name!r})")
+    held = s.glob.fixed.copy()
     stage_changes(s, k)
+    freed = np.nonzero((held != 0) & (s.glob.fixed == 0) & (s.glob.out != DELETED))[0]
     s.ratio = math.inf  # the last stage's equilibrium says nothing about this one
     if st.reset_displacements:
         n = s.n_owned
         s.blocks.x_stage[:n] = s.blocks.x[:n]
+    if len(freed):  # their owners compute all their contacts now: they get those they lack
+        s.contacts = hand_over_contacts(s.comm, s.decomp, s.blocks, s.contacts, freed)
+        s.redistribute()  # (rows renumbered: the rebalance below weighs the contacts)
     s.rebalance()  # excavated blocks weigh nothing now (balance: rcb)
     s.redistribute()  # fixed/free changed who is computed where, and the halo plan
     wake_all(s)
-    # a freed block has no contacts yet (none are kept between fixed blocks): find them now,
-    # not once it has sunk into its neighbours (the geometry update would then make energy)
+    # contacts between two freed blocks (none are kept between fixed blocks): found now,
+    # not once they have sunk into each other (the geometry update would then make energy)
     run.stepper.search(np.ones(s.blocks.n, bool))
     run.stepper.refresh(all_contacts=False)
-    if s.grids is not None and len(gone):
-        # the grids' contact forces without the excavated blocks' contacts: the first step's
-        # load (else the walls of a tunnel excavated in zoned rock are held one step more,
-        # and that step's ratio, still the equilibrium's, ended the stage at once)
-        run.stepper.compute_forces(0.0)
+    if len(freed) or (s.grids is not None and len(gone)):
+        # the forces of the stage's first step: a freed block's row held only the contacts
+        # its owner computed while it was fixed (on one rank: all of them); the grids'
+        # without the excavated blocks' contacts (else the walls of a tunnel excavated in
+        # zoned rock are held one step more, and that step's ratio, still the
+        # equilibrium's, ended the stage at once)
+        run.stepper.restate_forces()
 
 
 def _solve_settings(s, staged, k: int, report: bool = True) -> None:

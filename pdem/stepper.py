@@ -221,6 +221,18 @@ class Stepper:
         contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                             g.record(b, c))
 
+    def restate_forces(self):
+        """The contact forces of the state as it stands (collective only in that every rank
+        calls it): the sub-contacts' springs as they are (no displacement increment, no
+        turn of the planes: the last step turned them), summed onto the blocks afresh."""
+        b = self.s.blocks
+        turn = b.dtheta.copy()
+        b.dtheta[:] = 0.0
+        try:
+            self.compute_forces(0.0)
+        finally:
+            b.dtheta[:] = turn
+
     # ------------------------------------------------------------------ the step
     def advance(self):
         """One calculation cycle (docs/architecture.md, docs/parallel.md); True if blocks must

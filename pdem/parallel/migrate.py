@@ -111,6 +111,41 @@ def _merge_contacts(parts: list[ContactStore], free_gids: np.ndarray, drop: list
     return ContactStore(arrays, sub, start)
 
 
+def hand_over_contacts(comm, decomp, blocks: BlockStore, contacts: ContactStore,
+                       freed: np.ndarray) -> ContactStore:
+    """Blocks that were fixed and are free now (``freed``: gids, every rank alike;
+    collective). A fixed block's contacts were computed by the owners of the free blocks it
+    touches only, so its own owner, which computes all of them from now on, holds just those
+    it computed itself. Every other rank sends it those it holds, with their history (common
+    plane, sub-contacts, shear forces, slip state): they go on as they would on one rank,
+    instead of being found again, fresh, by the next search. Returns this rank's contacts
+    with those received, each once, in key order; their rows (``ia``, ``ib``, ``ka``,
+    ``kb``) are renumbered by the next :func:`rebuild`, which must follow.
+
+    The owner of a freed block is the rank whose region holds its centroid: a fixed block
+    never moves, and every rebuild (the one after new cuts too) put it there."""
+    freed = np.sort(np.asarray(freed, np.int64))
+    send = {}
+    if contacts.n and len(freed):
+        for g, row in (("ga", "ia"), ("gb", "ib")):
+            hit = _in_sorted(freed, getattr(contacts, g))
+            if not hit.any():
+                continue
+            # the freed block's row here (owned or ghost) gives its centroid, hence its owner
+            dest = np.full(contacts.n, -1, np.int64)
+            dest[hit] = decomp.owner_of(blocks.x[np.asarray(contacts.arrays[row])[hit]])
+            for r in np.unique(dest[hit]).tolist():
+                if r != comm.rank:
+                    send[r] = send.get(r, np.zeros(contacts.n, bool)) | (dest == r)
+    got = sparse_exchange(comm, {r: contacts.select(m) for r, m in send.items()})
+    if not got:
+        return contacts
+    parts = [contacts] + [got[r] for r in sorted(got)]
+    # the union (a contact held here and received is one contact: identical copies)
+    every = np.unique(np.concatenate([a for p in parts for a in (p.ga, p.gb)]))
+    return _merge_contacts(parts, every, [False] + [True] * len(got))
+
+
 def _number_rows(contacts: ContactStore, blocks: BlockStore) -> None:
     """Set the contacts' local rows (``ia``, ``ib``: blocks; ``ka``, ``kb``: pieces) from
     their gids in ``blocks`` (owned and ghosts)."""

@@ -121,3 +121,63 @@ def test_range_and_group_stages_match_one_rank(tmp_path):
     g = solver.state.scene_fields(("mscale", "fixed"))
     assert (g.mscale > 1.0).any() and g.fixed[:3].tolist() == [1, 1, 1]  # floor, big[0..1]
     compare_on_rank0(comm, path, scene, f"{base}/row-ref.h5")
+
+
+# a fixed slab carrying a row of cubes across the rank split, above a fixed floor; a stage
+# frees the slab: it settles onto the floor with its load
+FREED_SLAB = """
+materials: {rock: {density: 2500.0}}
+joints: {default: {kn: 1.0e8, ks: 1.0e8, friction: 30.0}}
+blocks:
+  - {name: floor, box: {min: [-3.5, -1.5, -1.0], max: [3.5, 1.5, -0.51]}, material: rock,
+     fixed: true}
+  - {name: slab, box: {min: [-3, -1, -0.5], max: [3, 1, 0]}, material: rock, fixed: true}
+  - name: row
+    array: {box: {min: [-2.2, -0.5, 0], max: [-1.2, 0.5, 1]}, count: [4, 1, 1],
+            spacing: [1.1, 1, 1]}
+    material: rock
+solve: {damping: none}
+stages:
+  - {name: settle, solve: {steps: 300}}
+  - {name: freed, free: {names: [slab]}, solve: {steps: 400}}
+"""
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_a_fixed_block_freed_by_a_stage_matches_one_rank(tmp_path):
+    """While the slab is fixed its contacts with the cubes are computed by the cubes'
+    owners only; freed, its own owner computes them all (pdem.parallel.migrate's
+    hand_over_contacts gives it those it lacked, with their history) from forces summed
+    afresh: bitwise the 1-rank run, stage by stage, and across a restart in the freed stage
+    (the slab's owner held only its own contacts' forces, and the next search found the
+    others fresh: the slab's vz differed after 3 steps)."""
+    from pdem.config import parse_scene
+    from pdem.io.checkpoint import read_checkpoint
+    from pdem.simulation import Simulation
+
+    comm = MPI.COMM_WORLD
+    base = shared_dir(comm, tmp_path)
+    path = f"{base}/freed.h5"
+    scene = with_parallel(FREED_SLAB, [comm.size, 1, 1], path, every_steps=50)
+    scene = scene.model_copy(update={"checkpoint": parse_scene(
+        FREED_SLAB + f"checkpoint: {{every_steps: 450, keep: 5, file: {base}/ck}}\n").checkpoint})
+    sim, *_ = run(scene, comm)
+    x = sim.state.scene_fields(("fixed",))
+    assert x.fixed.tolist()[:2] == [1, 0]
+    ck = read_checkpoint(f"{base}/ck-000000450.h5")  # (before the 1-rank run writes its own)
+    compare_on_rank0(comm, path, scene, f"{base}/freed-ref.h5")
+    again = f"{base}/again.h5"
+    rs = parse_scene(ck["attrs"]["scene"])
+    rs = rs.model_copy(update={"output": rs.output.model_copy(update={"file": again}),
+                               "checkpoint": None})
+    r = Simulation(rs, comm, checkpoint=ck)
+    r.run()
+    r.close()
+    comm.Barrier()
+
+    def same_end():
+        with h5py.File(path) as a, h5py.File(again) as b:
+            return [k for k in ("centroid", "orientation", "velocity", "angular_velocity")
+                    if not np.array_equal(a[f"blocks/{k}"][-1], b[f"blocks/{k}"][-1])]
+
+    assert on_rank0(comm, same_end) == []
