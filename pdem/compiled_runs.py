@@ -65,6 +65,8 @@ class CompiledRuns:
         s = st.s
         if not (s.scene.solve.fused and not (s.boundary is not None and s.boundary.active)):
             return False
+        if s.reinforcement is not None and s.reinforcement.n_nodes:  # (stepped in Python)
+            return False
         if s.grids is not None and not (s.scene.solve.inactive is None
                                         and s.grids.one_run(s.comm)):
             return False

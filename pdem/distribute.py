@@ -51,6 +51,8 @@ def distribute(state, owned_gids, rows: dict, contacts: ContactStore, source=Non
         state.cells = CellSpace(b.lo[present], b.hi[present], r.cell_size) \
             if present.any() else None
         state.n_rebuilds += 1
+        if state.reinforcement is not None:  # the elements' hosts: their rows here now
+            state.reinforcement.bind(state)
         return_freed_memory()  # the messages and the old store
 
 

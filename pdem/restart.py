@@ -17,7 +17,7 @@ import numpy as np
 from .deformable import grid_checkpoint
 from .distribute import distribute, distributed_from_scene, take_share
 from .errors import UserError
-from .io.checkpoint import CheckpointReader
+from .io.checkpoint import CheckpointReader, read_elements
 from .model.csr import KEY_SHIFT
 from .model.fields import MIGRATE, held_width
 from .mpi import allgather, allgather_rows
@@ -153,6 +153,10 @@ def _restore_share(state, out, x, block_rows, contacts, path, read: bool = True,
         b.x[rows] = x_saved  # the stored centroids (the same numbers, recomputed)
         b.dx[rows] = 0.0
     distributed_from_scene(state)
+    if state.reinforcement is not None:  # the elements installed by then, as they were
+        saved = checked(state.comm, lambda: read_elements(path), path)
+        if saved is not None:
+            state.reinforcement.restored(state, *saved)
 
 
 def _reader(state, path, by_share: bool = False):

@@ -26,6 +26,7 @@ from .dynamics.damping import DAMPING
 from .dynamics.inactive import wake_all
 from .parallel.migrate import hand_over_contacts
 from .plugins.checkpoints import stage_checkpoint
+from .reinforce import element_step, install_elements
 from .resolve import damping_alpha, estimated_stiffness, scene_timestep, timestep_report
 from .selection import selected, set_block_fields, timestep_rows
 from .strength import factor_of_safety
@@ -115,14 +116,16 @@ def apply_stage(run, k: int) -> None:
         s.redistribute()  # (rows renumbered: the rebalance below weighs the contacts)
     s.rebalance()  # excavated blocks weigh nothing now (balance: rcb)
     s.redistribute()  # fixed/free changed who is computed where, and the halo plan
+    installed = s.reinforcement is not None and install_elements(s, stage_scene(s.scene, k), k)
     wake_all(s)
     # contacts between two freed blocks (none are kept between fixed blocks): found now,
     # not once they have sunk into each other (the geometry update would then make energy)
     run.stepper.search(np.ones(s.blocks.n, bool))
     run.stepper.refresh(all_contacts=False)
-    if len(freed) or (s.grids is not None and len(gone)):
+    if len(freed) or installed or (s.grids is not None and len(gone)):
         # the forces of the stage's first step: a freed block's row held only the contacts
-        # its owner computed while it was fixed (on one rank: all of them); the grids'
+        # its owner computed while it was fixed (on one rank: all of them); new elements'
+        # (a pretension); the grids'
         # without the excavated blocks' contacts (else the walls of a tunnel excavated in
         # zoned rock are held one step more, and that step's ratio, still the
         # equilibrium's, ended the stage at once)
@@ -150,6 +153,7 @@ def _solve_settings(s, staged, k: int, report: bool = True) -> None:
     if report:
         for line in timestep_report(staged, rows, stiffness, s.dt, names, s.comm, n, zoned):
             log.info("stage %d: %s", k + 1, line)
+    element_step(s, staged)  # the installed elements' nodes
     d = staged.solve.damping
     s.damping = DAMPING[d.mode]
     s.damping_name = d.mode

@@ -37,6 +37,7 @@ from .model.runs import RunColumn
 from .mpi import LOCAL, allgather, allgather_rows, broadcast, configure_waits
 from .parallel.decomposition import make_decomposition, zone_work
 from .preflight import check_derived, machine_memory, preflight, rescaled
+from .reinforce import Elements
 from .resolve import REMAP_FRACTION, Resolved, contact_tolerance, resolve
 from .restart import restore
 from .selection import GATHERED
@@ -113,6 +114,8 @@ class ModelState:
         self.stage_step0 = 0
         self.stage_times: dict[int, float] = {}  # model time at which stage k began
         self.boundary = None  # pdem.boundary.Boundary: the conditions in force
+        # cables and rock bolts (pdem.reinforce; None: a scene without reinforcement)
+        self.reinforcement = Elements(scene) if scene.reinforcement else None
         self.energy_start = None  # (kinetic, joint spring energy) at the start, see plugins.energy
         self.gravity = np.array(scene.gravity, float)
         self.damping = DAMPING[scene.solve.damping.mode]

@@ -55,6 +55,7 @@ from .memory import large_blocks_mapped
 from .model.contacts import ContactStore, Subs, sub_columns
 from .model.fields import kernel_record
 from .plugins.energy import energy_totals
+from .reinforce import install_elements
 from .resolve import REMAP_FRACTION, TOUCH_FRACTION
 from .search import search
 
@@ -91,6 +92,8 @@ class Stepper:
             s.check_initial_overlaps()
         if s.scene.insitu is not None:  # joints start loaded by the in-situ stress
             initialise(s)
+        if s.reinforcement is not None:  # the elements no stage installs
+            install_elements(s, s.scene, None)
         self.compute_forces(0.0)
         b = s.blocks
         if s.boundary is not None:
@@ -215,11 +218,13 @@ class Stepper:
         if g is None:
             contact_forces(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
                            b.still)
-            return
-        g.force[:] = 0.0
-        g.kc[:] = 0.0
-        contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(), self.s.joints.kernel_args,
-                            g.record(b, c))
+        else:
+            g.force[:] = 0.0
+            g.kc[:] = 0.0
+            contact_forces_grid(dt, self.bodies(), c.pairs(), c.subs(),
+                                self.s.joints.kernel_args, g.record(b, c))
+        if self.s.reinforcement is not None:  # the elements' reactions after the contacts'
+            self.s.reinforcement.forces(self.s)
 
     def restate_forces(self):
         """The contact forces of the state as it stands (collective only in that every rank
@@ -303,6 +308,8 @@ class Stepper:
                         g.record(b, s.contacts) if g is not None else None,
                         m_true, s.gravity, b.radius[:n],
                         b.calm[:n], speed, sleep_steps, frac, r.ref_force)
+            if s.reinforcement is not None:  # the elements' step, their reactions added
+                s.reinforcement.step(s)
 
     def second_half(self, updated: bool = False, flags: np.ndarray | None = None) -> bool:
         """Contact search and updates, and the step's one reduction; True if blocks must

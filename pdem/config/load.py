@@ -216,4 +216,4 @@ def load_scene(path: str | Path) -> Scene:
 
 def dump_scene(scene: Scene) -> str:
     """The resolved scene (every default filled in) as YAML, stored in outputs/checkpoints."""
-    return yaml.safe_dump(scene.model_dump(mode="json"), sort_keys=False)
+    return yaml.safe_dump(scene.model_dump(mode="json", by_alias=True), sort_keys=False)

@@ -871,6 +871,83 @@ class FactorOfSafety(Strict):
     joints: list[str] | None = None
 
 
+class Grout(Strict):
+    """The grout annulus of a cable or bolt, per metre of its length: its shear stiffness
+    (N/m per m) and strength (N per m; 0: unbonded, the element slides freely in its hole).
+    Across the element the grout holds it to the rock with the same stiffness and no limit."""
+
+    stiffness: PositiveFloat
+    strength: NonNegativeFloat
+
+
+class TunnelPattern(Strict):
+    """Rings of radial bolts along a tunnel's axis, from ``start`` to ``end`` (m), every
+    ``spacing`` m, ``per_ring`` bolts of ``length`` m each starting on the wall at
+    ``radius``; ``arc`` (degrees, measured from the crown towards the right hand looking from
+    start to end) is the part of the ring they cover, spaced evenly, both ends included
+    unless it is the whole ring."""
+
+    start: Vec3
+    end: Vec3
+    radius: PositiveFloat
+    spacing: PositiveFloat
+    per_ring: PositiveInt
+    length: PositiveFloat
+    arc: tuple[float, float] = (0.0, 360.0)
+
+
+class ReinforcementPattern(Strict):
+    tunnel: TunnelPattern
+
+
+class Reinforcement(Strict):
+    """Structural elements of 3DEC's kind: ``cable`` (nodes with lumped mass, axial springs
+    ``EA/L`` yielding at ``yield_tension``/``yield_compression`` (N, 0: no yield), a grout
+    spring and strength per metre between each node and the rock it lies in) and
+    ``rockbolt`` (a cable that also resists shear where it crosses a joint: ``shear_stiffness``
+    N/m, ``shear_strength`` N (0: no limit), and breaks at ``failure_strain`` (0: never)).
+    One straight element ``from``/``to``, or a ``pattern`` of them; ``anchors`` names the
+    ends held to their rock without slip (a mechanical anchor, a face plate)."""
+
+    name: str
+    model: Literal["cable", "rockbolt"] = "cable"
+    from_: Vec3 | None = Field(None, alias="from")
+    to: Vec3 | None = None
+    pattern: ReinforcementPattern | None = None
+    segments: PositiveInt = 8
+    young: PositiveFloat
+    area: PositiveFloat
+    density: PositiveFloat = 7850.0
+    yield_tension: NonNegativeFloat = 0.0
+    yield_compression: NonNegativeFloat = 0.0
+    grout: Grout | None = None
+    pretension: NonNegativeFloat = 0.0
+    anchors: list[Literal["from", "to"]] = []
+    shear_stiffness: PositiveFloat | None = None
+    shear_strength: NonNegativeFloat = 0.0
+    failure_strain: NonNegativeFloat = 0.0
+
+    @model_validator(mode="after")
+    def _one_layout(self):
+        line = self.from_ is not None or self.to is not None
+        if line == (self.pattern is not None):
+            raise ValueError("give either from and to, or a pattern")
+        if line and (self.from_ is None or self.to is None):
+            raise ValueError("give both from and to")
+        if line and math.dist(self.from_, self.to) == 0.0:
+            raise ValueError("from and to are the same point")
+        if self.model == "cable" and (self.shear_stiffness is not None or self.failure_strain
+                                      or self.shear_strength):
+            raise ValueError("shear_stiffness, shear_strength and failure_strain are a "
+                             "rockbolt's (model: rockbolt)")
+        if self.model == "rockbolt" and self.shear_stiffness is None:
+            raise ValueError("a rockbolt needs its shear_stiffness (N/m) at joint crossings")
+        if self.pretension and self.yield_tension and self.pretension >= self.yield_tension:
+            raise ValueError(f"pretension {self.pretension:g} N is not below yield_tension "
+                             f"{self.yield_tension:g} N")
+        return self
+
+
 class Stage(Strict):
     """One stage of a staged run: model changes, then a solve (or a factor-of-safety search).
     Excavations are cut when the model is built and removed when the stage starts."""
@@ -882,6 +959,7 @@ class Stage(Strict):
     free: Selection | None = None
     # here: a list field per boundary-condition kind (CONDITION_MODELS: velocity, stress, ...)
     force: list[StageForce] = []
+    reinforce: list[str] = []
     reset_displacements: bool = False
     solve: StageSolve | None = None
     factor_of_safety: FactorOfSafety | None = None
@@ -1083,6 +1161,7 @@ class Scene(Strict):
     join: list[Annotated[list[str], Field(min_length=2)]] = []
     excavate: list[Excavation] = []
     stages: list[Stage] = []
+    reinforcement: list[Reinforcement] = []
     insitu: InSitu | None = None
     boundary: BoundaryConditions = BoundaryConditions()
     contact: Contact = Contact()
@@ -1180,6 +1259,20 @@ class Scene(Strict):
             for j in (fos.joints or ()) if fos else ():
                 if j not in self.joints:
                     errors.append(f"stages[{i}].factor_of_safety.joints: unknown joint {j!r}")
+        known, installed = {}, {}
+        for i, r in enumerate(self.reinforcement):
+            if r.name in known:
+                errors.append(f"reinforcement[{i}].name: {r.name!r} is reinforcement[{known[r.name]}]'s")
+            known.setdefault(r.name, i)
+        for i, st in enumerate(self.stages):
+            for j, name in enumerate(st.reinforce):
+                if name not in known:
+                    errors.append(f"stages[{i}].reinforce[{j}]: unknown reinforcement {name!r} "
+                                  f"(defined: {', '.join(known) or 'none'})")
+                elif name in installed:
+                    errors.append(f"stages[{i}].reinforce[{j}]: {name!r} is installed by "
+                                  f"stages[{installed[name]}] already")
+                installed.setdefault(name, i)
         for key in CONDITION_MODELS:
             for j, sel in enumerate(getattr(self.boundary, key)):
                 for g in sel.groups or ():

@@ -12,6 +12,7 @@ positions) is not stored: it is rebuilt on restart and results do not depend on 
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import uuid
@@ -126,6 +127,12 @@ def write_checkpoint(path: str | os.PathLike, state, extra_attrs: dict | None = 
             _fill(f, attrs, rows, contacts, nsub, counts, tot, off_c, off_s)
             if grid_rows is not None:
                 grid_checkpoint.write(f, grid_rows, comm.rank)
+            elements = state.reinforcement
+            if elements is not None and elements.installed:  # (every rank holds them alike)
+                g = f.create_group("reinforcement")
+                g.attrs["installed"] = json.dumps(elements.installed)
+                for k, v in elements.saved().items():
+                    g.create_dataset(k, data=v)
         except BaseException:
             # the previous checkpoint is untouched (it has another name); drop the partial temp
             # file. A parallel file is not closed here: closing is collective and the other
@@ -434,6 +441,16 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
         out["contacts"] = r.contacts(np.arange(len(r.nsub)))
     out["path"] = str(path)  # groups read at the restore (zoned blocks' grids)
     return out
+
+
+def read_elements(path: str | os.PathLike) -> tuple[list[str], dict[str, np.ndarray]] | None:
+    """A checkpoint's reinforcement (pdem.reinforce: the installed entries and their state),
+    None if it holds none; read whole by every rank (the elements are few)."""
+    with h5py.File(path, "r") as f:
+        g = f.get("reinforcement")
+        if g is None:
+            return None
+        return json.loads(g.attrs["installed"]), {k: g[k][()] for k in g}
 
 
 def open_checkpoint(path: str | os.PathLike) -> dict:

@@ -19,6 +19,7 @@ from mpi4py import MPI
 from ..memory import mapping_large_blocks, return_freed_memory
 from .block_series import BlockSeries, quat_to_matrix
 from .contact_series import ContactSeries
+from .elements import write_elements_xdmf, write_snapshot_elements
 from .h5core import REOPEN_EVERY, H5Core
 from .histories import HistoryWriter
 from .surfaces import BodyMesh
@@ -121,6 +122,7 @@ class OutputWriter:
         self._core = core = H5Core(path, comm, len(block_names), parallel)
         self.path = core.path
         self.xdmf_path = self.path.with_suffix(".xdmf") if xdmf else None
+        self._element_snaps: list[tuple[int, float, int, int]] = []  # (pdem.io.elements)
         self.comm = comm
         self.parallel = core.parallel
         # collective, before the file opens; first: the zoned blocks' surfaces replace their
@@ -269,6 +271,19 @@ class OutputWriter:
             extra_cells=self._extra_cells,
             zones=None if lay is None else (lay.n_points, lay.n_zones, self._zones.names),
         )
+
+    def write_elements(self, data: dict[str, np.ndarray], entries: list[str]) -> None:
+        """The reinforcement of the last snapshot written (collective; every rank passes the
+        same ``data``, :mod:`pdem.io.elements`) and the ``-reinforcement.xdmf`` sidecar."""
+        self._core.check_open()
+        i = self.n_snap - 1
+        self._element_snaps.append((i, self._times[-1], len(data["points"]),
+                                    len(data["segments"])))
+        if self._core.io:
+            write_snapshot_elements(self._core.f, i, data, entries)
+            self._core.f.flush()
+        if self.xdmf_path is not None and self.comm.rank == 0:
+            write_elements_xdmf(self.path, self._element_snaps)
 
     # ------------------------------------------------------------------ histories, results
     def add_history(self, name: str, ncols: int, attrs: dict[str, Any] | None = None) -> None:

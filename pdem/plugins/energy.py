@@ -22,6 +22,7 @@ from ..deformable.motion import (
     GW_ZONE,
 )
 from ..dynamics import motion
+from ..dynamics.cables import CW_DAMPING, CW_GRAVITY, CW_SLIP, CW_YIELD
 from ..dynamics.diagnosis import explain
 from ..dynamics.energy import kinetic_per_block
 from ..errors import SimulationError, writing
@@ -34,7 +35,7 @@ log = logging.getLogger("pdem")
 COLUMNS = ("kinetic", "strain", "gravity_work", "applied_work", "boundary_work",
            "joint_dissipation", "damping_dissipation", "contact_work", "joint_created",
            "geometry_created", "removed", "zone_strain", "plastic_work", "quiet_absorbed",
-           "balance_error")
+           "reinforcement_strain", "reinforcement_dissipation", "balance_error")
 # the accumulated works of COLUMNS[2:-1], as columns of the block field ``work``
 WORK_COLUMNS = np.array([motion.WORK_GRAVITY, motion.WORK_APPLIED, motion.WORK_BOUNDARY,
                          motion.WORK_JOINT, motion.WORK_DAMPING, motion.WORK_CONTACT,
@@ -91,7 +92,16 @@ def energy_totals(state) -> dict[str, float]:
         per_block[rows, 12] = gw[:, GW_PLASTIC]
         per_block[rows, 13] = gw[:, GW_QUIET]
     sums = exact_sum(state.comm, per_block)
-    return dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
+    totals = dict(zip(COLUMNS[:-1], sums.tolist(), strict=True))
+    elements = state.reinforcement
+    if elements is not None:  # (every rank holds the same elements: added alike)
+        stored, ke, work = elements.energies()
+        totals["kinetic"] += ke
+        totals["gravity_work"] += float(work[CW_GRAVITY])
+        totals["damping_dissipation"] += float(work[CW_DAMPING])
+        totals["reinforcement_strain"] = stored
+        totals["reinforcement_dissipation"] = float(work[CW_YIELD] + work[CW_SLIP])
+    return totals
 
 
 def balance(t: dict[str, float], e0: float) -> tuple[float, float]:
@@ -99,7 +109,8 @@ def balance(t: dict[str, float], e0: float) -> tuple[float, float]:
     there at the start and what was put in. Zero for an exact scheme."""
     put_in = e0 + t["gravity_work"] + t["applied_work"] + t["boundary_work"]
     held = t["kinetic"] + t["strain"] + t["joint_dissipation"] + t["damping_dissipation"] \
-        + t["removed"] + t["zone_strain"] + t["plastic_work"] + t["quiet_absorbed"]
+        + t["removed"] + t["zone_strain"] + t["plastic_work"] + t["quiet_absorbed"] \
+        + t["reinforcement_strain"] + t["reinforcement_dissipation"]
     return held - put_in, put_in
 
 
@@ -125,7 +136,8 @@ class EnergyBudget(Plugin):
             self.writer.add_history("energy", len(COLUMNS), {
                 "columns": ",".join(COLUMNS), "units": "J",
                 "balance": "kinetic + strain + joint_dissipation + damping_dissipation + "
-                           "removed + zone_strain + plastic_work + quiet_absorbed - (kinetic "
+                           "removed + zone_strain + plastic_work + quiet_absorbed + "
+                           "reinforcement_strain + reinforcement_dissipation - (kinetic "
                            "+ strain at start) - gravity_work - applied_work - boundary_work"})
         self.times: list[float] = []
         self.rows: list[np.ndarray] = []

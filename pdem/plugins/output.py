@@ -228,6 +228,8 @@ class Snapshots(Plugin):
                                        {f.output: getattr(b, f.name)[:n] for f in OUTPUT},
                                        contacts=contacts, stage=s.stage,
                                        zones=owned_zoned(s.grids))
+            if s.reinforcement is not None and s.reinforcement.n_nodes:
+                self.writer.write_elements(s.reinforcement.snapshot(), s.reinforcement.entries_of())
             self.written += 1
             self.last = s.step
             for callback in self.after_write:

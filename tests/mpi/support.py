@@ -159,6 +159,9 @@ def read_states(path: str) -> dict[str, np.ndarray]:
             out["surface/points"] = f["surface/points"][()]
         out["time"] = f["time"][()]
         out["step"] = f["step"][()] if "step" in f else None
+        for i in f.get("reinforcement", {}):  # cables and bolts (pdem.io.elements)
+            for k in ("points", "axial", "shear", "slip", "state"):
+                out[f"reinforcement/{i}/{k}"] = f[f"reinforcement/{i}/{k}"][()]
         for name in f.get("histories", {}):
             out[f"histories/{name}/time"] = f[f"histories/{name}/time"][()]
             out[f"histories/{name}/value"] = f[f"histories/{name}/value"][()]
