@@ -336,6 +336,17 @@ class Elements:
         out["stored"] = np.array([self.stored])
         return out
 
+    def held(self) -> dict[str, np.ndarray]:
+        """A copy of the state (a factor-of-safety search starts each trial from it)."""
+        return {k: np.array(v, copy=True) for k, v in self.saved().items()}
+
+    def put_back(self, held: dict[str, np.ndarray]) -> None:
+        """The state of :meth:`held` again (the hosts' rows are bound by the rebuild)."""
+        for k in NODE_STATE + SEGMENT_STATE:
+            getattr(self, k)[:] = held[k]
+        self.work[:] = held["work"]
+        self.stored = float(held["stored"][0])
+
     def restored(self, s, installed: list[str], saved: dict) -> None:
         """Reinstall ``installed`` with the checkpoint's hosts and body-frame points (the
         blocks have moved since) and continue from its state ``saved`` (every rank alike)."""

@@ -81,6 +81,8 @@ class _Snapshot:
         self.store = take_rows(b, np.arange(n), np.ones(n, np.uint8))
         # the owned zoned blocks' grids (gridpoints, zone stresses, plastic state, ...)
         self.grids = s.grids.saved() if s.grids is not None else None
+        # the reinforcement (every rank holds it whole): not weakened, but loaded by a trial
+        self.elements = s.reinforcement.held() if s.reinforcement is not None else None
 
     def restore(self, s):
         for k, v in self.glob.items():
@@ -90,6 +92,8 @@ class _Snapshot:
             s.grids = s.grids.restored(self.grids)
         distribute(s, self.gids, {k: v.copy() for k, v in self.rows.items()},
                    self.contacts.take(np.arange(self.contacts.n)), source=self.store)
+        if self.elements is not None:
+            s.reinforcement.put_back(self.elements)
 
 
 def _displacements(s, snap: _Snapshot) -> np.ndarray:

@@ -96,6 +96,7 @@ def _output_summary(f: h5py.File) -> list[str]:
         lines.append("histories:   none")
     lines += _energy_lines(f)
     lines += _contact_lines(f, names)
+    lines += _reinforcement_lines(f)
     lines += _stage_lines(f, names)
     if n_snap == 0:
         return lines
@@ -232,7 +233,35 @@ def _energy_lines(f: h5py.File) -> list[str]:
         f"             dissipated in joints {_g(row['joint_dissipation'])}, by damping "
         f"{_g(row['damping_dissipation'])}{quiet}; balance error {_g(row['balance_error'])} "
         f"({share:.2g}% of {_g(put_in)} put in)",
-    ]
+    ] + ([f"             reinforcement: elastic {_g(row['reinforcement_strain'])}, dissipated "
+          f"{_g(row['reinforcement_dissipation'])}"]
+         if row.get("reinforcement_strain", 0.0) or row.get("reinforcement_dissipation", 0.0)
+         else [])
+
+
+def _reinforcement_lines(f: h5py.File, top: int = 5) -> list[str]:
+    """The cables and bolts of the last snapshot that holds them (pdem.io.elements): how
+    many, how many segments yielded, slip or broke, and the most loaded elements."""
+    g = f.get("reinforcement")
+    if g is None or not len(g):
+        return []
+    last = g[sorted(g)[-1]]
+    entries = _text(g.attrs.get("entries", "")).split(",")
+    axial, shear = last["axial"][()], last["shear"][()]
+    state, element = last["state"][()], last["element"][()]
+    n_el = int(element.max()) + 1 if len(element) else 0
+    peak = np.zeros(n_el)
+    np.maximum.at(peak, element, np.abs(axial))
+    order = np.argsort(-peak, kind="stable")[:top]
+    first = {int(e): int(np.nonzero(element == e)[0][0]) for e in order}
+    lines = [f"reinforcement: {n_el} elements, {len(axial)} segments: {int(((state & 1) != 0).sum())} "
+             f"yielded, {int(((state & 2) != 0).sum())} with grout slipping, "
+             f"{int(((state & 4) != 0).sum())} broken; largest dowel shear {_g(shear.max())} N"]
+    for e in order:
+        seg = int(np.argmax(np.where(element == e, np.abs(axial), -1.0)))
+        lines.append(f"  {entries[e] if e < len(entries) else '?'}[{int(e)}]: axial "
+                     f"{_g(axial[seg])} N at segment {seg - first[int(e)]}")
+    return lines
 
 
 def _viewer_lines(f: h5py.File) -> list[str]:

@@ -56,6 +56,8 @@ def test_a_cable_pulled_stretches_at_ea_over_l():
     sim.run()
     b, e = sim.state.blocks, sim.state.reinforcement
     stretch = b.x[1, 0] - 0.5
+    print(f"\npulled: stretch {stretch:.6e} m (F L/EA {1.0e5 / (E * A):.6e}), axial "
+          f"{e.axial.min():.6g}..{e.axial.max():.6g} N")
     assert stretch == pytest.approx(1.0e5 * 1.0 / (E * A), rel=1e-3)
     assert np.allclose(e.axial, 1.0e5, rtol=1e-3)
 
@@ -71,11 +73,14 @@ def test_a_cable_past_its_yield_holds_its_yield_force_and_the_block_runs_away():
     sim.run(steps=int(0.01 / s.dt))
     v1, t1 = s.blocks.v[1, 0], s.time
     m = RHO * 1.0
+    print(f"\nyielded: a {(v1 - v0) / (t1 - t0):.6g} m/s2 ((F - Ty)/m {(3.0e5 - 2.0e5) / m:.6g})")
     assert (v1 - v0) / (t1 - t0) == pytest.approx((3.0e5 - 2.0e5) / m, rel=2e-3)
     assert np.allclose(s.reinforcement.axial, 2.0e5, rtol=1e-3)
     t = energy_totals(s)
     err, put_in = balance(t, sum(s.energy_start or (0.0, 0.0)))
     assert t["reinforcement_dissipation"] > 0.3 * put_in
+    print(f"  energy: balance error {err:.3e} J of {put_in:.4g} put in; yield and slip "
+          f"{t['reinforcement_dissipation']:.4g} J")
     assert abs(err) < 1e-3 * put_in
 
 
@@ -106,6 +111,8 @@ def test_a_grouted_cable_pulls_out_at_its_grout_strength_times_its_embedded_leng
     x0 = -1.875 + 0.25 * np.arange(10) + 0.125  # the segments' middles as installed
     embedded = x0 < 0.1  # (the last one's middle is on the joint: the segment across it)
     exit_ = int(np.nonzero(embedded)[0][-1])
+    print(f"\npull-out: load at the joint {e.axial[exit_]:.6g} N (s L_e {s * 1.875:.6g}); profile "
+          f"max rel. error {np.abs(e.axial[embedded] / (s * (x0[embedded] + 1.875)) - 1).max():.2e}")
     assert e.axial[exit_] == pytest.approx(s * 1.875, rel=2e-2)
     assert np.allclose(e.axial[embedded], s * (x0[embedded] + 1.875), rtol=2e-2, atol=0.01 * s)
     assert (e.slip[:8] > 0.01).all()  # every embedded node slid out with the plate
@@ -148,6 +155,8 @@ def test_a_bolt_holds_a_block_on_an_incline_steeper_than_its_friction():
     psi, phi = math.radians(35.0), math.radians(25.0)
     w = RHO * 9.81
     want = w * (math.sin(psi) - math.cos(psi) * math.tan(phi))
+    print(f"\nbolted incline: axial {sim.state.reinforcement.axial.mean():.6g} N (closed form "
+          f"{want:.6g})")
     assert np.allclose(sim.state.reinforcement.axial, want, rtol=5e-3)
 
 
@@ -182,6 +191,7 @@ def test_a_bolt_weaker_than_the_load_lets_the_block_slide():
     late = rows[rows[:, 0] > t0 + 0.2]
     a_measured = np.polyfit(late[:, 0], late[:, 1], 1)[0]
     a = 9.81 * (math.sin(psi) - math.cos(psi) * math.tan(phi)) - 2000.0 / RHO
+    print(f"\nweak bolt: a {a_measured:.6g} m/s2 (closed form {a:.6g})")
     assert a_measured == pytest.approx(a, rel=1e-2)
     # yielded where it is loaded most; along it the nodes' own weight (1.1 N each down the
     # slope) takes the rest
@@ -208,3 +218,31 @@ def test_bad_reinforcement_input_is_refused_naming_the_key():
         assert bad in base, bad
         with pytest.raises(ConfigError, match=why):
             parse_scene(base.replace(bad, good))
+
+
+def test_the_elements_are_in_the_output_in_paraview_s_sidecar_and_in_pdem_info(tmp_path):
+    """Snapshots hold the nodes and segment forces (pdem.io.elements), the polyline sidecar
+    points at them, and ``pdem info`` names the most loaded element."""
+    import h5py
+
+    from pdem.io.elements import elements_path
+    from pdem.io.info import summarise
+
+    out = tmp_path / "pulled.h5"
+    text = pulled(1.0e5, "local", "steps: 400") + f"output: {{file: {out}, every_steps: 200}}\n"
+    sim = Simulation(parse_scene(text), MPI.COMM_SELF)
+    sim.run()
+    sim.close()
+    with h5py.File(out) as f:
+        g = f["reinforcement"]
+        assert sorted(g) == ["000000", "000001", "000002"]
+        last = g["000002"]
+        assert last["points"].shape == (7, 3) and last["segments"].shape == (6, 2)
+        assert np.array_equal(last["axial"][()], sim.state.reinforcement.axial)
+        assert g.attrs["entries"] == "c"
+        cols = f["histories/energy"].attrs["columns"].split(",")
+        assert cols[-3:] == ["reinforcement_strain", "reinforcement_dissipation", "balance_error"]
+    xdmf = elements_path(out).read_text()
+    assert xdmf.count('TopologyType="Polyline"') == 3 and "/reinforcement/000002/axial" in xdmf
+    text = summarise(out)
+    assert "reinforcement: 1 elements, 6 segments" in text and "c[0]: axial" in text
