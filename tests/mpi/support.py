@@ -240,3 +240,18 @@ def launch_job(n: int, argv: list[str], timeout: float = 120.0):
 # so they run at 2 ranks only; tests/mpi/test_decomposition.py covers 3 and 4 ranks.
 TWO_RANKS_ONLY = pytest.mark.skipif(MPI.COMM_WORLD.size != 2,
                                     reason="a 2-rank comparison (3-4 ranks: test_decomposition)")
+
+
+def restart_from(comm, ck: dict, out: str) -> None:
+    """Continue the run of the checkpoint ``ck`` (read_checkpoint's) on ``comm`` to its end,
+    writing ``out``, no checkpoints (collective; the files are complete when it returns)."""
+    from pdem.config import parse_scene
+    from pdem.simulation import Simulation
+
+    scene = parse_scene(ck["attrs"]["scene"])
+    scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
+                                     "checkpoint": None})
+    r = Simulation(scene, comm, checkpoint=ck)
+    r.run()
+    r.close()
+    comm.Barrier()

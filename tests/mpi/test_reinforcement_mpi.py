@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import on_rank0, shared_dir, slabs_match_one_rank
+from support import on_rank0, restart_from, shared_dir, slabs_match_one_rank
 
 pytestmark = [pytest.mark.mpi(min_size=2),
               pytest.mark.skipif(MPI.COMM_WORLD.size > 3, reason="1 and 2/3 ranks"),
@@ -70,14 +70,8 @@ def test_reinforced_row_restarts_bitwise(tmp_path):
     s.close()
     ck = read_checkpoint(sorted(glob.glob(f"{base}/ck-*.h5"))[0])
     assert int(ck["attrs"]["step"]) == 500
-    scene = parse_scene(ck["attrs"]["scene"])
     out = f"{base}/again.h5"
-    scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
-                                     "checkpoint": None})
-    r = Simulation(scene, comm, checkpoint=ck)
-    r.run()
-    r.close()
-    comm.Barrier()
+    restart_from(comm, ck, out)
 
     def same():
         with h5py.File(f"{base}/straight.h5") as a, h5py.File(out) as b:

@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import TWO_RANKS_ONLY, shared_dir, slabs_match_one_rank
+from support import TWO_RANKS_ONLY, restart_from, shared_dir, slabs_match_one_rank
 
 pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
 
@@ -95,14 +95,8 @@ def test_a_slab_shaken_through_its_quiet_face_restarts_bitwise(tmp_path):
     s.close()
     ck = read_checkpoint(sorted(glob.glob(f"{base}/ck-*.h5"))[0])
     assert int(ck["attrs"]["step"]) == 450
-    scene = parse_scene(ck["attrs"]["scene"])
     out = f"{base}/again.h5"
-    scene = scene.model_copy(update={"output": scene.output.model_copy(update={"file": out}),
-                                     "checkpoint": None})
-    r = Simulation(scene, comm, checkpoint=ck)
-    r.run()
-    r.close()
-    comm.Barrier()
+    restart_from(comm, ck, out)
     if comm.rank == 0:
         with h5py.File(f"{base}/straight.h5") as a, h5py.File(out) as b:
             for k in ("centroid", "orientation", "velocity", "angular_velocity"):

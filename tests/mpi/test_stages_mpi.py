@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import TWO_RANKS_ONLY, compare_on_rank0, on_rank0, run, shared_dir, with_parallel
+from support import TWO_RANKS_ONLY, compare_on_rank0, on_rank0, restart_from, run, shared_dir, with_parallel
 
 from pdem.cases.staged import stack_stages_scene
 
@@ -153,7 +153,6 @@ def test_a_fixed_block_freed_by_a_stage_matches_one_rank(tmp_path):
     others fresh: the slab's vz differed after 3 steps)."""
     from pdem.config import parse_scene
     from pdem.io.checkpoint import read_checkpoint
-    from pdem.simulation import Simulation
 
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
@@ -167,13 +166,7 @@ def test_a_fixed_block_freed_by_a_stage_matches_one_rank(tmp_path):
     ck = read_checkpoint(f"{base}/ck-000000450.h5")  # (before the 1-rank run writes its own)
     compare_on_rank0(comm, path, scene, f"{base}/freed-ref.h5")
     again = f"{base}/again.h5"
-    rs = parse_scene(ck["attrs"]["scene"])
-    rs = rs.model_copy(update={"output": rs.output.model_copy(update={"file": again}),
-                               "checkpoint": None})
-    r = Simulation(rs, comm, checkpoint=ck)
-    r.run()
-    r.close()
-    comm.Barrier()
+    restart_from(comm, ck, again)
 
     def same_end():
         with h5py.File(path) as a, h5py.File(again) as b:
