@@ -28,7 +28,8 @@ import numpy as np
 from pdem.geometry.cutting import dip_normal
 from pdem.geometry.errors import GeometryError
 
-__all__ = ["critical_friction", "intersection_line", "normal_reactions", "wedge_factor_of_safety"]
+__all__ = ["bolted_wedge_factor_of_safety", "critical_friction", "intersection_line",
+           "normal_reactions", "wedge_factor_of_safety"]
 
 # |n1 x n2| below this: the planes are parallel and make no wedge
 _PARALLEL = 1e-9
@@ -135,8 +136,9 @@ def wedge_factor_of_safety(dip1: float, dd1: float, phi1: float, dip2: float, dd
     ``phi1 = phi2 = phi`` the factor of safety is ``K tan(phi)`` with a geometric factor K
     (Hoek & Bray's wedge factor over ``tan(psi_i)`` in mode ``"both"``).
 
-    Friction angles in degrees in ``[0, 90)``. ``gravity`` needs only its direction. No
-    cohesion, water pressure, external or bolt forces, and no daylighting test: a wedge whose
+    Friction angles in degrees in ``[0, 90)``. ``gravity`` needs only its direction (a bolt's
+    force: :func:`bolted_wedge_factor_of_safety`). No cohesion or water pressure, and no
+    daylighting test: a wedge whose
     line of intersection does not daylight in the slope face cannot slide whatever this says.
     """
     for phi in (phi1, phi2):
@@ -182,3 +184,30 @@ def critical_friction(dip1: float, dd1: float, dip2: float, dd2: float,
     if driving <= _NO_DRIVE:
         return 0.0
     return math.degrees(math.atan2(driving, r1 + r2))
+
+
+def bolted_wedge_factor_of_safety(dip1: float, dd1: float, phi1: float, dip2: float, dd2: float,
+                                  phi2: float, weight: float, force,
+                                  gravity=(0.0, 0.0, -1.0)) -> tuple[float, str]:
+    """:func:`wedge_factor_of_safety` of a wedge of weight ``weight`` (N) also loaded by a
+    constant force ``force`` (N, a vector: a bolt's tension ``T u``, ``u`` the unit vector
+    from the wedge towards the bolt's anchor in the rock behind).
+
+    Without cohesion every force the planes carry scales with the load, so the wedge under
+    ``P = weight g/|g| + force`` behaves as under a gravity along ``P``: the normal reactions
+    (and so the mode) are those of ``P``, and the factor of safety, the factor by which
+    ``tan(phi1)`` and ``tan(phi2)`` must both be divided for limit equilibrium (a
+    strength-reduction search's), is ``(N1 tan phi1 + N2 tan phi2) / (P.s)`` with ``s`` along
+    the line of intersection in ``P``'s sense (Hoek & Bray 1981, appendix 2, with the bolt's
+    components in the resultant). A bolt that pulls the wedge against its weight enough to
+    lift it off both planes gives mode ``"free"``; one that holds it against the driving
+    component, ``"stable"``."""
+    if not (np.isfinite(weight) and weight > 0.0):
+        raise GeometryError(f"weight must be a finite positive force (N), got {weight!r}")
+    f = np.asarray(force, dtype=float).reshape(3)
+    if not np.all(np.isfinite(f)):
+        raise GeometryError(f"force must be a finite vector (N), got {force!r}")
+    p = weight * _unit_gravity(gravity) + f
+    if float(np.linalg.norm(p)) <= _NO_DRIVE * weight:
+        return math.inf, "stable"  # the bolt carries the weight: nothing left on the planes
+    return wedge_factor_of_safety(dip1, dd1, phi1, dip2, dd2, phi2, gravity=p)

@@ -12,11 +12,13 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pdem.analysis.wedge import (
+    bolted_wedge_factor_of_safety,
     critical_friction,
     intersection_line,
     normal_reactions,
     wedge_factor_of_safety,
 )
+from pdem.geometry.cutting import dip_normal
 from pdem.geometry.errors import GeometryError
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -223,3 +225,48 @@ def test_factor_of_safety_scales_with_tan_phi(dip1, dd1, dip2, dd2, phi_a, phi_b
     assert mode_a == mode_b  # the mode is geometric
     ta, tb = math.tan(math.radians(phi_a)), math.tan(math.radians(phi_b))
     assert fs_a / ta == pytest.approx(fs_b / tb, rel=1e-13)
+
+
+# ---------------------------------------------------------------- a bolt's force
+def test_a_bolted_wedge_without_its_bolt_is_the_plain_wedge():
+    for planes in ((45.0, 105.0, 70.0, 235.0), (30.0, 90.0, 80.0, 20.0), (45.0, 5.0, 55.0, 135.0)):
+        a, b = planes[:2], planes[2:]
+        assert bolted_wedge_factor_of_safety(*a, 30.0, *b, 25.0, 5.0e4, (0.0, 0.0, 0.0)) == \
+            wedge_factor_of_safety(*a, 30.0, *b, 25.0)
+
+
+@pytest.mark.parametrize("theta", [0.0, 20.0, 45.0, -10.0])
+def test_a_bolted_block_on_one_plane_is_hoek_and_bray_s_planar_formula(theta):
+    """A wedge that rides plane 1 alone (plane 2 dips 80/020: it lifts off it) held by a bolt
+    at ``theta`` to plane 1, pointing up its dip into the rock: Hoek & Bray's planar failure
+    with a bolt, ``FS = (W cos psi + T sin theta) tan phi / (W sin psi - T cos theta)``."""
+    psi, phi, w, t = 30.0, 35.0, 1000.0, 300.0
+    r = math.radians
+    n = dip_normal(psi, 90.0)
+    up = np.array([-math.cos(r(psi)), 0.0, math.sin(r(psi))])
+    u = math.cos(r(theta)) * up - math.sin(r(theta)) * n
+    fs, mode = bolted_wedge_factor_of_safety(psi, 90.0, phi, 80.0, 20.0, phi, w, t * u)
+    want = (w * math.cos(r(psi)) + t * math.sin(r(theta))) * math.tan(r(phi)) \
+        / (w * math.sin(r(psi)) - t * math.cos(r(theta)))
+    assert mode == "plane1" and fs == pytest.approx(want, rel=1e-12)
+
+
+def test_a_bolt_raises_the_factor_of_safety_or_lifts_the_wedge():
+    """The wedge of 45/005 and 55/135 with a bolt pulling up the line of intersection: the
+    factor grows with the tension, without bound as the bolt takes the driving component,
+    and a bolt pulling the wedge straight off both planes leaves it free."""
+    d = intersection_line(45.0, 5.0, 55.0, 135.0)[2]
+    w = 1.0e5
+    fs = [bolted_wedge_factor_of_safety(45.0, 5.0, 30.0, 55.0, 135.0, 30.0, w, -t * d)[0]
+          for t in (0.0, 1e4, 2e4, 4e4)]
+    assert all(b > a for a, b in zip(fs, fs[1:], strict=False))
+    drive = w * float(np.array([0.0, 0.0, -1.0]) @ d)
+    # a bolt that takes nearly all the driving component leaves friction a small load to hold
+    # (beyond it, the wedge would be pulled up the line: friction resists that as well)
+    fs, mode = bolted_wedge_factor_of_safety(45.0, 5.0, 30.0, 55.0, 135.0, 30.0, w,
+                                             -0.99 * drive * d)
+    assert mode == "both" and fs > 50.0
+    assert bolted_wedge_factor_of_safety(45.0, 5.0, 30.0, 55.0, 135.0, 30.0, w,
+                                         (0.0, 0.0, 2.0 * w))[1] == "free"
+    with pytest.raises(GeometryError, match="weight"):
+        bolted_wedge_factor_of_safety(45.0, 5.0, 30.0, 55.0, 135.0, 30.0, 0.0, (0, 0, 0))

@@ -246,3 +246,46 @@ def test_the_elements_are_in_the_output_in_paraview_s_sidecar_and_in_pdem_info(t
     assert xdmf.count('TopologyType="Polyline"') == 3 and "/reinforcement/000002/axial" in xdmf
     text = summarise(out)
     assert "reinforcement: 1 elements, 6 segments" in text and "c[0]: axial" in text
+
+
+def test_the_factor_of_safety_of_a_bolted_wedge_is_hoek_and_bray_s_with_the_bolt_force():
+    """The wedge of pdem.cases.wedge (planes 45/005 and 55/135, friction 35 degrees: FS 1.955
+    unbolted) held by a bolt from its centroid 1.2 m into the rock behind (20 degrees below
+    the horizontal, against the line of intersection's trend), pretensioned to 0.95 T and
+    yielding at T = 0.15 W: while the wedge slides the bolt pulls with T. The strength
+    reduction weakens the joints, not the bolt, so its factor is the closed form's with the
+    bolt's force in the resultant (pdem.analysis.wedge.bolted_wedge_factor_of_safety), to the
+    search's tolerance (2 %; measured -0.23 %)."""
+    from pdem.analysis.wedge import bolted_wedge_factor_of_safety, wedge_factor_of_safety
+    from pdem.cases.wedge import RHO as ROCK
+    from pdem.cases.wedge import WEDGE_D, WEDGE_N, D, G, wedge_scene
+    from pdem.geometry.builders import from_planes
+
+    phi = 35.0
+    shape = from_planes(WEDGE_N, WEDGE_D)
+    w = ROCK * shape.volume * G
+    h = np.array([D[0], D[1], 0.0]) / math.hypot(D[0], D[1])
+    tilt = math.radians(20.0)
+    u = -math.cos(tilt) * h - math.sin(tilt) * np.array([0.0, 0.0, 1.0])
+    p0, p1 = shape.centroid, shape.centroid + 1.2 * u
+    t = 0.15 * w
+
+    def vec(p):
+        return "[" + ", ".join(repr(float(x)) for x in p) + "]"
+
+    text = wedge_scene(phi).replace("solve: {time: 0.5, damping: none}",
+                                    "solve: {damping: local, mass_scaling: true}") + f"""
+reinforcement:
+  - {{name: bolt, from: {vec(p0)}, to: {vec(p1)}, segments: 4, young: 2.0e11, area: 1.0e-4,
+     yield_tension: {t!r}, pretension: {0.95 * t!r}, anchors: [from, to]}}
+stages:
+  - {{name: settle, solve: {{ratio: 1.0e-5, max_steps: 50000}}}}
+  - {{name: strength, factor_of_safety: {{tolerance: 0.02, high: 4.0, max_steps: 20000,
+                                        max_displacement: 0.02}}}}
+"""
+    got = simulation(text).run()["factor"]
+    want, mode = bolted_wedge_factor_of_safety(45.0, 5.0, phi, 55.0, 135.0, phi, w, t * u)
+    plain = wedge_factor_of_safety(45.0, 5.0, phi, 55.0, 135.0, phi)[0]
+    print(f"\nbolted wedge: FS {got:.4f}, closed form {want:.4f} ({mode}; {plain:.4f} unbolted)")
+    assert mode == "both" and want > 1.4 * plain
+    assert got == pytest.approx(want, rel=0.02)
