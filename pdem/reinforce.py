@@ -29,6 +29,8 @@ log = logging.getLogger("pdem")
 # checkpoint holds (the others are fixed at installation and recomputed from the scene)
 NODE_STATE = ("x", "v", "force", "last", "slip", "imass", "anchored", "grout")
 SEGMENT_STATE = ("eps_p", "broken", "dp", "shear", "axial")
+# where each node is anchored, fixed at installation (a checkpoint's, for the restart's)
+HOST_COLUMNS = ("host", "local", "zoned", "tet_nodes", "tet_w")
 # the nodes' step: this fraction of their stable bound (a chain of springs and masses, whose
 # bound is sharp, unlike the blocks' estimate from their joints: solve.timestep.frac)
 NODE_STEP_FRACTION = 0.5
@@ -87,7 +89,12 @@ class Elements:
         self.ax, self.av, self.force, self.reaction = z((0, 3)), z((0, 3)), z((0, 3)), z((0, 3))
         self.mass, self.imass, self.kg, self.sg, self.slip = z(0), z(0), z(0), z(0), z(0)
         self.grout = z(0)  # the grout's axial force on each node (N)
-        self.local = z((0, 3))
+        self.local = z((0, 3))  # a rigid host's anchor: the point in its body frame
+        # a zoned host's: the host tetrahedron's gridpoints (the grid's own numbers) and the
+        # anchor's barycentric weights in it
+        self.zoned = z(0, np.uint8)
+        self.tet_nodes, self.tet_w = z((0, 4), np.int64), z((0, 4))
+        self.grid_base = z(0, np.int64)  # the host grid's first gridpoint here, -1 elsewhere
         self.host = z(0, np.int64)
         self.anchored, self.slaved = z(0, np.uint8), z(0, np.uint8)
         self.node_seg = z((0, 2), np.int64)
@@ -104,6 +111,7 @@ class Elements:
         self.work = z(cables.CW_WIDTH)
         self.stored = 0.0
         self.rows = z(0, np.int64)  # the hosts' rows here (owned), -1 elsewhere
+        self.k_node = z(0)
 
     @property
     def n_nodes(self) -> int:
@@ -126,6 +134,7 @@ class Elements:
             self._install_entry(s, self.entries[name])
             self.installed.append(name)
         self.bind(s)
+        self._node_stiffness()
 
     def _install_entry(self, s, e, hosts=None) -> None:
         """Nodes and segments of entry ``e``; ``hosts``: their hosts and body-frame points
@@ -135,7 +144,8 @@ class Elements:
         t = np.linspace(0.0, 1.0, nseg + 1)
         pts = lines[:, 0, None, :] + t[None, :, None] * (lines[:, 1] - lines[:, 0])[:, None, :]
         pts = pts.reshape(-1, 3)
-        host, local = self._hosts(s, pts, e.name) if hosts is None else hosts
+        host, local, zoned, tet_nodes, tet_w = self._hosts(s, pts, e.name) if hosts is None \
+            else hosts
         k = len(lines)
         n0, s0, el0 = self.n_nodes, len(self.seg_a), len(self.element_entry)
         seg_len = np.linalg.norm(lines[:, 1] - lines[:, 0], axis=1) / nseg
@@ -164,6 +174,7 @@ class Elements:
             x=pts, v=np.zeros_like(pts), last=np.zeros_like(pts), ax=pts.copy(),
             av=np.zeros_like(pts), force=np.zeros_like(pts), reaction=np.zeros_like(pts),
             mass=mass, imass=mass.copy(), kg=kg, sg=sg, slip=np.zeros(len(pts)), local=local,
+            zoned=zoned, tet_nodes=tet_nodes, tet_w=tet_w, grid_base=np.full(len(pts), -1),
             grout=np.zeros(len(pts)),
             host=host, anchored=(host >= 0).astype(np.uint8), slaved=slaved.ravel(),
             node_seg=node_seg.reshape(-1, 2),
@@ -186,52 +197,60 @@ class Elements:
 
     _append_segments = _append_nodes
 
-    def _hosts(self, s, pts: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """The block holding each point (the deepest inside; a tie: the lower gid) and the
-        point in its body frame (collective: each rank looks among the blocks it owns)."""
+    def _hosts(self, s, pts: np.ndarray, name: str) -> tuple:
+        """The block holding each point (the deepest inside; a tie: the lower gid) and its
+        anchor there: the point in a rigid block's body frame, or a zoned block's
+        tetrahedron and weights (collective: each rank looks among the blocks it owns).
+        Returns the :data:`HOST_COLUMNS`."""
         b, n = s.blocks, s.n_owned
         tol = HOST_TOLERANCE_FRACTION * s.ctol
-        best = np.full(len(pts), -np.inf)
-        gid = np.full(len(pts), -1, np.int64)
-        local = np.zeros((len(pts), 3))
+        k = len(pts)
+        best = np.full(k, -np.inf)
+        gid = np.full(k, -1, np.int64)
+        local = np.zeros((k, 3))
+        zoned = np.zeros(k, np.uint8)
+        tet_nodes, tet_w = np.zeros((k, 4), np.int64), np.zeros((k, 4))
+        grid_of = {} if s.grids is None else \
+            {int(g): d for d, g in enumerate(s.grids.gids[:s.grids.n_owned])}
         for r in range(n):
             if b.out[r] != 0:
                 continue
             near = np.all((pts >= b.lo[r] - tol) & (pts <= b.hi[r] + tol), axis=1)
             if not near.any():
                 continue
-            R = b.R[r]
-            p = (pts[near] - b.x[r]) @ R  # R^T (p - x), row by row
-            depth = np.full(len(p), -np.inf)
-            for pc in range(b.piece_start[r], b.piece_start[r + 1]):
-                f0, f1 = b.face_start[pc], b.face_start[pc + 1]
-                d = (b.offsets_local[f0:f1][None, :] - p @ b.normals_local[f0:f1].T).min(axis=1)
-                depth = np.maximum(depth, d)
             rows = np.nonzero(near)[0]
             g = int(b.gid[r])
+            d = grid_of.get(g)
+            if d is None:
+                p = (pts[near] - b.x[r]) @ b.R[r]  # R^T (p - x), row by row
+                depth = np.full(len(p), -np.inf)
+                for pc in range(b.piece_start[r], b.piece_start[r + 1]):
+                    f0, f1 = b.face_start[pc], b.face_start[pc + 1]
+                    depth = np.maximum(depth, (b.offsets_local[f0:f1][None, :]
+                                               - p @ b.normals_local[f0:f1].T).min(axis=1))
+                nodes = weights = None
+            else:
+                depth, nodes, weights = _tetrahedra(s.grids, d, pts[near])
+                p = np.zeros((len(rows), 3))
             take = (depth >= -tol) & ((depth > best[rows]) | ((depth == best[rows]) & (g < gid[rows])))
-            best[rows[take]] = depth[take]
-            gid[rows[take]] = g
-            local[rows[take]] = p[take]
-        found = allgather(s.comm, (best, gid, local))
-        best = np.full(len(pts), -np.inf)
-        gid = np.full(len(pts), -1, np.int64)
-        for d, g, p in found:
-            take = (g >= 0) & ((d > best) | ((d == best) & ((gid < 0) | (g < gid))))
-            best[take], gid[take], local[take] = d[take], g[take], p[take]
+            hit = rows[take]
+            best[hit], gid[hit], local[hit] = depth[take], g, p[take]
+            zoned[hit] = d is not None
+            if d is not None:
+                tet_nodes[hit], tet_w[hit] = nodes[take], weights[take]
+        found = allgather(s.comm, (best, gid, local, zoned, tet_nodes, tet_w))
+        best = np.full(k, -np.inf)
+        gid = np.full(k, -1, np.int64)
+        for d_, g, p, zd, tn, tw in found:
+            take = (g >= 0) & ((d_ > best) | ((d_ == best) & ((gid < 0) | (g < gid))))
+            best[take], gid[take], local[take] = d_[take], g[take], p[take]
+            zoned[take], tet_nodes[take], tet_w[take] = zd[take], tn[take], tw[take]
         missing = np.nonzero(gid < 0)[0]
         if len(missing):
             raise ConfigError([f"reinforcement {name!r}: node at ({', '.join(f'{c:.4g}' for c in pts[i])}) "
                                "lies in no block" for i in missing[:5]]
                               + ([f"... and {len(missing) - 5} more"] if len(missing) > 5 else []))
-        if s.grids is not None:
-            zoned = set(int(g) for g in s.grids.gids)
-            hit = sorted({int(g) for g in gid if int(g) in zoned} & zoned)
-            if hit:
-                raise ConfigError([f"reinforcement {name!r}: a node lies in zoned block "
-                                   f"{s.specs[hit[0]].name!r}: reinforcement is anchored in "
-                                   "rigid blocks only (docs/reinforcement.md)"])
-        return gid, local
+        return gid, local, zoned, tet_nodes, tet_w
 
     def bind(self, s) -> None:
         """The hosts' rows among this rank's owned blocks (after every rebuild), and the
@@ -241,9 +260,21 @@ class Elements:
         pos = np.searchsorted(owned, self.host)
         pos = np.minimum(pos, max(n - 1, 0))
         mine = (n > 0) & (owned[pos] == self.host) if n else np.zeros(len(self.host), bool)
-        self.rows = np.where(mine, pos, -1).astype(np.int64)
+        self.rows = np.where(mine & (self.zoned == 0), pos, -1).astype(np.int64)
+        self.grid_base[:] = -1
+        g = s.grids
+        if g is not None and self.zoned.any():
+            base = {int(gid): int(g.node_start[d]) for d, gid in enumerate(g.gids[:g.n_owned])}
+            for i in np.nonzero(self.zoned)[0]:
+                self.grid_base[i] = base.get(int(self.host[i]), -1)
         gone = s.glob.out[np.maximum(self.host, 0)] != 0
         self.anchored[gone] = 0
+
+    def _node_stiffness(self) -> None:
+        """Each node's springs' stiffness (pdem.dynamics.cables.node_stiffness): its step's,
+        and what a zoned host's gridpoints take into their masses."""
+        self.k_node = cables.node_stiffness(self.n_nodes, self.seg_a, self.seg_b, self.L0,
+                                            self.EA, self.ks, self.kg)
 
     # ------------------------------------------------------------------ stepping
     def anchors(self, s) -> None:
@@ -252,6 +283,9 @@ class Elements:
         both = np.zeros((self.n_nodes, 6))
         ax, av = np.zeros((self.n_nodes, 3)), np.zeros((self.n_nodes, 3))
         cables.rigid_anchors(self.rows, self.local, b.x, b.R, b.v, b.w, ax, av)
+        if s.grids is not None:
+            cables.zoned_anchors(self.grid_base, self.tet_nodes, self.tet_w, s.grids.nodes,
+                                 s.grids.vel, ax, av)
         both[:, :3], both[:, 3:] = ax, av
         both = allreduce_sum_array(s.comm, both)
         self.ax[:] = both[:, :3]
@@ -284,6 +318,9 @@ class Elements:
             self.reaction, self.axial, self.shear, self.grout, self.work)
         b = s.blocks
         cables.rigid_reactions(self.rows, self.ax, self.reaction, b.x, b.force, b.moment)
+        if s.grids is not None:  # (and their stiffness into the gridpoints' masses)
+            cables.zoned_reactions(self.grid_base, self.tet_nodes, self.tet_w, self.reaction,
+                                   self.k_node, s.grids.force, s.grids.kc)
 
     # ------------------------------------------------------------------ step and energy
     def limit(self, dt: float, scaled: bool, frac: float = NODE_STEP_FRACTION) -> float:
@@ -291,8 +328,7 @@ class Elements:
         stable step ``frac sqrt(2 m / k)`` (``sqrt(2 m / k)`` bounds the critical step of a
         node with its springs from below: Gershgorin's bound of its row) lowers ``dt``; with
         it (``scaled``) the nodes are made heavy enough for ``dt``."""
-        k = cables.node_stiffness(self.n_nodes, self.seg_a, self.seg_b, self.L0, self.EA,
-                                  self.ks, self.kg)
+        k = self.k_node
         moving = (self.slaved == 0) & (k > 0.0)
         self.imass[:] = self.mass
         if not moving.any():
@@ -332,7 +368,7 @@ class Elements:
         """The state a checkpoint holds (every rank alike)."""
         out = {k: getattr(self, k) for k in NODE_STATE + SEGMENT_STATE}
         out["work"] = self.work
-        out["host"], out["local"] = self.host, self.local
+        out.update({k: getattr(self, k) for k in HOST_COLUMNS})
         out["stored"] = np.array([self.stored])
         return out
 
@@ -355,13 +391,14 @@ class Elements:
             e = self.entries[name]
             n0 = self.n_nodes
             n1 = n0 + len(element_lines(e)) * (e.segments + 1)
-            self._install_entry(s, e, (saved["host"][n0:n1], saved["local"][n0:n1]))
+            self._install_entry(s, e, tuple(saved[k][n0:n1] for k in HOST_COLUMNS))
             self.installed.append(name)
         for k in NODE_STATE + SEGMENT_STATE:
             getattr(self, k)[:] = saved[k]
         self.work[:] = saved["work"]
         self.stored = float(saved["stored"][0])
         self.bind(s)
+        self._node_stiffness()
 
 
 def install_elements(s, scene, k: int | None) -> bool:
@@ -388,3 +425,27 @@ def element_step(s, scene) -> None:
                  "%.4g s): give solve.mass_scaling to keep the blocks' step in a static "
                  "solve", dt, s.dt)
     s.dt = dt
+
+
+def _tetrahedra(grids, d: int, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point, the tetrahedron of owned grid ``d`` that holds it best: (depth, its
+    gridpoints (k, 4) in the grid's numbering, the barycentric weights (k, 4)); ``depth`` is
+    the least weight times the tetrahedron's size (negative: outside every one)."""
+    n0, n1 = grids.node_start[d], grids.node_start[d + 1]
+    z0, z1 = grids.zone_start[d], grids.zone_start[d + 1]
+    x = grids.nodes[n0:n1]
+    tets = grids.tets[z0:z1]
+    a = x[tets[:, 0]]
+    m = np.stack([x[tets[:, 1]] - a, x[tets[:, 2]] - a, x[tets[:, 3]] - a], axis=2)  # (t, 3, 3)
+    inv = np.linalg.inv(m)
+    size = np.cbrt(np.abs(np.linalg.det(m)))
+    depth = np.full(len(pts), -np.inf)
+    nodes = np.zeros((len(pts), 4), np.int64)
+    weights = np.zeros((len(pts), 4))
+    for i, p in enumerate(pts):
+        lam = np.einsum("tij,tj->ti", inv, p - a)
+        w = np.concatenate([1.0 - lam.sum(axis=1)[:, None], lam], axis=1)
+        score = w.min(axis=1) * size
+        j = int(np.argmax(score))
+        depth[i], nodes[i], weights[i] = score[j], tets[j], w[j]
+    return depth, nodes, weights

@@ -248,6 +248,41 @@ def rigid_reactions(rows, ax, reaction, x, force, moment):
 
 
 @kernel
+def zoned_anchors(base, tet_nodes, tet_w, nodes, vel, ax, av):
+    """Anchors in zoned blocks (``base``: the first gridpoint of the host's grid here, -1
+    where not owned here): the host tetrahedron's gridpoints interpolated."""
+    for i in range(base.shape[0]):
+        g0 = base[i]
+        if g0 < 0:
+            continue
+        for k in range(3):
+            px, pv = 0.0, 0.0
+            for j in range(4):
+                g = g0 + tet_nodes[i, j]
+                px += tet_w[i, j] * nodes[g, k]
+                pv += tet_w[i, j] * vel[g, k]
+            ax[i, k] = px + 0.0
+            av[i, k] = pv + 0.0
+
+
+@kernel
+def zoned_reactions(base, tet_nodes, tet_w, reaction, kg, force, kc):
+    """The hosts' reactions onto the gridpoints of owned zoned hosts, by the anchors'
+    weights, node by node in order, with the grout's stiffness into their contact stiffness
+    (the gridpoints' masses for the next step: pdem.deformable.store)."""
+    for i in range(base.shape[0]):
+        g0 = base[i]
+        if g0 < 0:
+            continue
+        for j in range(4):
+            g = g0 + tet_nodes[i, j]
+            w = tet_w[i, j]
+            for k in range(3):
+                force[g, k] += w * reaction[i, k]
+            kc[g] += w * kg[i]
+
+
+@kernel
 def kinetic(v, imass, slaved, anchored) -> float:
     """Kinetic energy of the nodes that move by their own forces (at t - dt/2)."""
     e = 0.0

@@ -2,8 +2,8 @@
 across a restart: a row of cubes on a fixed floor across the rank split at x = 0, tied by a
 grouted, pretensioned cable through all of them, and rock bolts from two cubes into the floor
 installed by a stage while the row is pushed along it (dowels across the joint, grout slip,
-yield). Blocks, the energy budget (with the elements' columns) and every snapshot's
-elements are compared whole.
+yield); the same with the cubes zoned. Blocks, the energy budget (with the elements'
+columns) and every snapshot's elements are compared whole.
 
 Run with ``mpiexec -n 2 python -m mpi4py -m pytest --with-mpi tests/mpi/test_reinforcement_mpi.py``.
 """
@@ -51,6 +51,17 @@ output: {energy_every: 25}
 
 def test_reinforced_row_matches_one_rank(tmp_path):
     slabs_match_one_rank(tmp_path, SCENE, "reinforced", 100)
+
+
+def test_reinforced_zoned_row_matches_one_rank(tmp_path):
+    """The row's cubes zoned (the anchors interpolated in their tetrahedra, the reactions
+    spread on their gridpoints by their owners)."""
+    text = SCENE.replace("materials: {rock: {density: 2500.0}}",
+                         "materials: {rock: {density: 2500.0, young: 5.0e9, poisson: 0.25}}")
+    text = text.replace("    material: rock\nreinforcement:",
+                        "    material: rock\n    zones: {size: 0.5}\nreinforcement:")
+    assert "zones" in text
+    slabs_match_one_rank(tmp_path, text, "reinforced-zoned", 100)
 
 
 def test_reinforced_row_restarts_bitwise(tmp_path):

@@ -289,3 +289,39 @@ stages:
     print(f"\nbolted wedge: FS {got:.4f}, closed form {want:.4f} ({mode}; {plain:.4f} unbolted)")
     assert mode == "both" and want > 1.4 * plain
     assert got == pytest.approx(want, rel=0.02)
+
+
+def test_a_cable_grouted_in_a_zoned_block_pulls_out_at_its_grout_strength():
+    """The pull-out above with the rock a zoned block held at every gridpoint: the anchors
+    are interpolated in its tetrahedra (rigid and zoned hosts are one seam), and the load
+    at the joint levels off at ``s L_e`` as before."""
+    s = 1.0e5
+    text = PULL_OUT.format(rho=RHO, v=0.5, E=E, A=A, s=s, time=0.1).replace(
+        "materials: {rock: {density: 2500.0}}",
+        "materials: {rock: {density: 2500.0, young: 2.0e10, poisson: 0.25}}").replace(
+        "material: rock, fixed: true}", "material: rock, fixed: true, zones: {size: 0.5}}")
+    sim = simulation(text)
+    e = sim.state.reinforcement
+    sim.run()
+    assert e.zoned[:8].all() and not e.zoned[8:].any()
+    assert e.axial[7] == pytest.approx(s * 1.875, rel=2e-2)
+    assert (e.slip[:8] > 0.01).all()
+
+
+def test_a_cable_anchored_in_a_zoned_block_stretches_at_ea_over_l():
+    """The pulled cable with the pulled block zoned (E 2e10: it stretches 1e-3 of the bar's
+    stretch): the anchors, interpolated in its tetrahedra, part by ``F L / (E A)``; the
+    reactions spread on its gridpoints hold it."""
+    text = pulled(1.0e5, "local", "steps: 15000").replace(
+        "materials: {rock: {density: 2500.0}}",
+        "materials: {rock: {density: 2500.0, young: 2.0e10, poisson: 0.25}}").replace(
+        "force: [100000.0, 0, 0]}", "force: [100000.0, 0, 0], zones: {size: 0.5}}")
+    sim = simulation(text)
+    sim.run()
+    e = sim.state.reinforcement
+    assert e.zoned.tolist() == [0, 0, 0, 0, 1, 1, 1]
+    stretch = np.linalg.norm(e.ax[-1] - e.ax[0]) - 1.0
+    print(f"\nzoned anchor: stretch {stretch:.6e} (F L/EA {1.0e5 / (E * A):.6e}), axial "
+          f"{e.axial.min():.6g}..{e.axial.max():.6g}")
+    assert stretch == pytest.approx(1.0e5 / (E * A), rel=2e-3)
+    assert np.allclose(e.axial, 1.0e5, rtol=2e-3)
