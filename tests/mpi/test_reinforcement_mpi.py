@@ -55,6 +55,23 @@ def test_reinforced_row_matches_one_rank(tmp_path):
     slabs_match_one_rank(tmp_path, SCENE, "reinforced", 100)
 
 
+def test_bolted_tunnel_crown_matches_one_rank(tmp_path):
+    """The tunnel of pdem.cases.rock_mass (a 7 x 6 m rock face cut into 1 m cells, a 16-sided
+    tunnel of radius 1.2 m excavated at 0.05 s) with two rings of five grouted rock bolts over
+    its crown, installed at the start with face plates at the wall: the crown bolt lies on the
+    rank split (x = 0.5 on 2 ranks), the others cross it and the cells' joints."""
+    from pdem.cases.rock_mass import tunnel_scene
+
+    text = tunnel_scene(0.05, 0.15) + """reinforcement:
+  - {name: crown, model: rockbolt, pattern: {tunnel: {start: [0.5, 0.5, 2.5], end: [0.5, 1.5, 2.5],
+     radius: 1.25, spacing: 1.0, per_ring: 5, length: 1.5, arc: [-60, 60]}}, segments: 4,
+     young: 2.0e11, area: 4.9e-4, yield_tension: 1.0e5, grout: {stiffness: 1.0e9, strength: 1.0e5},
+     shear_stiffness: 5.0e7, shear_strength: 2.0e4, anchors: [from]}
+output: {energy_every: 50}
+"""
+    slabs_match_one_rank(tmp_path, text, "bolted-tunnel", 150)
+
+
 @TWO_RANKS_ONLY
 def test_reinforced_zoned_row_matches_one_rank(tmp_path):
     """The row's cubes zoned (the anchors interpolated in their tetrahedra, the reactions
