@@ -98,7 +98,6 @@ class Elements:
         self.host = z(0, np.int64)
         self.anchored, self.slaved = z(0, np.uint8), z(0, np.uint8)
         self.node_seg = z((0, 2), np.int64)
-        self.element = z(0, np.int64)  # element (line) of each node
         self.seg_a, self.seg_b = z(0, np.int64), z(0, np.int64)
         self.L0, self.EA, self.y_t, self.y_c = z(0), z(0), z(0), z(0)
         self.eps_p, self.fail, self.ks, self.cap = z(0), z(0), z(0), z(0)
@@ -170,17 +169,16 @@ class Elements:
         dowel = e.model == "rockbolt"
         crosses = host[a - n0] != host[b - n0]
         mass = e.density * e.area * trib
-        self._append_nodes(
+        self._append(
             x=pts, v=np.zeros_like(pts), last=np.zeros_like(pts), ax=pts.copy(),
             av=np.zeros_like(pts), force=np.zeros_like(pts), reaction=np.zeros_like(pts),
             mass=mass, imass=mass.copy(), kg=kg, sg=sg, slip=np.zeros(len(pts)), local=local,
             zoned=zoned, tet_nodes=tet_nodes, tet_w=tet_w, grid_base=np.full(len(pts), -1),
             grout=np.zeros(len(pts)),
             host=host, anchored=(host >= 0).astype(np.uint8), slaved=slaved.ravel(),
-            node_seg=node_seg.reshape(-1, 2),
-            element=el0 + np.repeat(np.arange(k), nseg + 1))
+            node_seg=node_seg.reshape(-1, 2))
         m = k * nseg
-        self._append_segments(
+        self._append(
             seg_a=a, seg_b=b, L0=np.repeat(seg_len, nseg), EA=np.full(m, ea),
             y_t=np.full(m, e.yield_tension), y_c=np.full(m, e.yield_compression),
             eps_p=np.full(m, -e.pretension / ea), eps_p0=np.full(m, -e.pretension / ea),
@@ -191,11 +189,9 @@ class Elements:
             shear=np.zeros(m), seg_element=el0 + np.repeat(np.arange(k), nseg))
         self.element_entry += [e.name] * k
 
-    def _append_nodes(self, **cols) -> None:
+    def _append(self, **cols) -> None:
         for key, v in cols.items():
             setattr(self, key, np.concatenate([getattr(self, key), v]))
-
-    _append_segments = _append_nodes
 
     def _hosts(self, s, pts: np.ndarray, name: str) -> tuple:
         """The block holding each point (the deepest inside; a tie: the lower gid) and its
@@ -259,7 +255,7 @@ class Elements:
         owned = b.gid[:n]
         pos = np.searchsorted(owned, self.host)
         pos = np.minimum(pos, max(n - 1, 0))
-        mine = (n > 0) & (owned[pos] == self.host) if n else np.zeros(len(self.host), bool)
+        mine = owned[pos] == self.host if n else np.zeros(len(self.host), bool)
         self.rows = np.where(mine & (self.zoned == 0), pos, -1).astype(np.int64)
         self.grid_base[:] = -1
         g = s.grids
@@ -280,13 +276,12 @@ class Elements:
     def anchors(self, s) -> None:
         """The anchors' positions and velocities, from their hosts' owners (collective)."""
         b = s.blocks
-        both = np.zeros((self.n_nodes, 6))
-        ax, av = np.zeros((self.n_nodes, 3)), np.zeros((self.n_nodes, 3))
+        both = np.zeros((self.n_nodes, 6))  # (positions and velocities: one reduction)
+        ax, av = both[:, :3], both[:, 3:]
         cables.rigid_anchors(self.rows, self.local, b.x, b.R, b.v, b.w, ax, av)
         if s.grids is not None:
             cables.zoned_anchors(self.grid_base, self.tet_nodes, self.tet_w, s.grids.nodes,
                                  s.grids.vel, ax, av)
-        both[:, :3], both[:, 3:] = ax, av
         both = allreduce_sum_array(s.comm, both)
         self.ax[:] = both[:, :3]
         self.av[:] = both[:, 3:]

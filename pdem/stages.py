@@ -125,10 +125,9 @@ def apply_stage(run, k: int) -> None:
     if len(freed) or installed or (s.grids is not None and len(gone)):
         # the forces of the stage's first step: a freed block's row held only the contacts
         # its owner computed while it was fixed (on one rank: all of them); new elements'
-        # (a pretension); the grids'
-        # without the excavated blocks' contacts (else the walls of a tunnel excavated in
-        # zoned rock are held one step more, and that step's ratio, still the
-        # equilibrium's, ended the stage at once)
+        # (a pretension); the grids' without the excavated blocks' contacts (else the walls
+        # of a tunnel excavated in zoned rock are held one step more, and that step's ratio,
+        # still the equilibrium's, ended the stage at once)
         run.stepper.restate_forces()
 
 

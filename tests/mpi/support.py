@@ -255,3 +255,24 @@ def restart_from(comm, ck: dict, out: str) -> None:
     r.run()
     r.close()
     comm.Barrier()
+
+
+def straight_with_checkpoint(comm, base: str, text: str, at: int) -> dict:
+    """``text`` (a scene with ``output: {energy_every: 25}``) run to its end on ``comm``,
+    writing ``base/straight.h5`` every 200 steps and a checkpoint at step ``at``; that
+    checkpoint, read (collective)."""
+    import glob
+
+    from pdem.config import parse_scene
+    from pdem.io.checkpoint import read_checkpoint
+    from pdem.simulation import Simulation
+
+    text = text.replace("output: {energy_every: 25}\n", "") + (
+        f"output: {{file: {base}/straight.h5, every_steps: 200, energy_every: 25}}\n"
+        f"checkpoint: {{every_steps: {at}, keep: 5, file: {base}/ck}}\n")
+    s = Simulation(parse_scene(text), comm)
+    s.run()
+    s.close()
+    ck = read_checkpoint(sorted(glob.glob(f"{base}/ck-*.h5"))[0])
+    assert int(ck["attrs"]["step"]) == at
+    return ck

@@ -10,13 +10,18 @@ Run with ``mpiexec -n 2 python -m mpi4py -m pytest --with-mpi tests/mpi/test_rei
 
 from __future__ import annotations
 
-import glob
-
 import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import TWO_RANKS_ONLY, on_rank0, restart_from, shared_dir, slabs_match_one_rank
+from support import (
+    TWO_RANKS_ONLY,
+    on_rank0,
+    restart_from,
+    shared_dir,
+    slabs_match_one_rank,
+    straight_with_checkpoint,
+)
 
 # the row on 2 and 3 ranks; its zoned variant and the restart on 2 (the 3-rank tier
 # oversubscribes a 2-core CI machine)
@@ -88,20 +93,9 @@ def test_reinforced_zoned_row_matches_one_rank(tmp_path):
 def test_reinforced_row_restarts_bitwise(tmp_path):
     """A checkpoint mid-way through the second stage (the bolts installed), restarted on
     every rank of the job, ends where the straight run ends, elements included."""
-    from pdem.config import parse_scene
-    from pdem.io.checkpoint import read_checkpoint
-    from pdem.simulation import Simulation
-
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
-    text = SCENE.replace("output: {energy_every: 25}\n", "") + (
-        f"output: {{file: {base}/straight.h5, every_steps: 200, energy_every: 25}}\n"
-        f"checkpoint: {{every_steps: 500, keep: 5, file: {base}/ck}}\n")
-    s = Simulation(parse_scene(text), comm)
-    s.run()
-    s.close()
-    ck = read_checkpoint(sorted(glob.glob(f"{base}/ck-*.h5"))[0])
-    assert int(ck["attrs"]["step"]) == 500
+    ck = straight_with_checkpoint(comm, base, SCENE, 500)
     out = f"{base}/again.h5"
     restart_from(comm, ck, out)
 

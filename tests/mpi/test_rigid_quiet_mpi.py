@@ -12,13 +12,11 @@ Run with ``mpiexec -n 2 python -m mpi4py -m pytest --with-mpi tests/mpi/test_rig
 
 from __future__ import annotations
 
-import glob
-
 import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from support import TWO_RANKS_ONLY, restart_from, shared_dir, slabs_match_one_rank
+from support import TWO_RANKS_ONLY, restart_from, shared_dir, slabs_match_one_rank, straight_with_checkpoint
 
 pytestmark = [pytest.mark.mpi(min_size=2), TWO_RANKS_ONLY, pytest.mark.timeout(300, method="thread")]
 
@@ -81,20 +79,9 @@ def test_a_slab_shaken_through_its_quiet_face_restarts_bitwise(tmp_path):
     """A checkpoint taken mid-run, restarted on every rank of the job: the quiet faces, the
     wave's clock and the absorbed energy (the blocks' ``work``) come back with the model
     (a released block's load: tests/verification/test_rigid_quiet.py, on one rank)."""
-    from pdem.config import parse_scene
-    from pdem.io.checkpoint import read_checkpoint
-    from pdem.simulation import Simulation
-
     comm = MPI.COMM_WORLD
     base = shared_dir(comm, tmp_path)
-    text = SCENE.replace("output: {energy_every: 25}\n", "") + (
-        f"output: {{file: {base}/straight.h5, every_steps: 200, energy_every: 25}}\n"
-        f"checkpoint: {{every_steps: 450, keep: 5, file: {base}/ck}}\n")
-    s = Simulation(parse_scene(text), comm)
-    s.run()
-    s.close()
-    ck = read_checkpoint(sorted(glob.glob(f"{base}/ck-*.h5"))[0])
-    assert int(ck["attrs"]["step"]) == 450
+    ck = straight_with_checkpoint(comm, base, SCENE, 450)
     out = f"{base}/again.h5"
     restart_from(comm, ck, out)
     if comm.rank == 0:
