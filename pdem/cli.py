@@ -1,12 +1,13 @@
-"""Command line: ``pdem run SCENE.yaml``, ``pdem info FILE.h5``, ``pdem export FILE.h5``.
+"""Command line: ``pdem run SCENE.yaml``, ``pdem study FILE.yaml``, ``pdem info FILE.h5``,
+``pdem plot FILE.h5``, ``pdem export FILE.h5``: a shell over the Python API (pdem.api).
 
-The only module that names ``MPI.COMM_WORLD``; everything else receives the communicator.
+With the Python API's defaults, the only place that names ``MPI.COMM_WORLD``; everything else
+receives the communicator.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 
@@ -37,6 +38,21 @@ def _parser() -> argparse.ArgumentParser:
     w.add_argument("--steps", type=int, default=20, help="steps to run each scene (default 20)")
     w.add_argument("--once", action="store_true", help="nothing to do if this cache was warmed "
                    "with these scenes on this many ranks already")
+    st = sub.add_parser("study", help="run the studies of a scene file (studies:) or a study "
+                        "file: cases over sampled or gridded parameters, side by side under "
+                        "mpiexec, resumed where a killed study stopped (docs/studies.md)")
+    st.add_argument("file", help="scene file with studies:, or a study file (scene: ...)")
+    st.add_argument("--only", metavar="NAME", help="run only the study called NAME")
+    pl = sub.add_parser("plot", help="plot a run's energy budget, histories or factor-of-safety "
+                        "search, or a study's outputs and probability of failure, as PNG "
+                        "(needs matplotlib)")
+    pl.add_argument("file", help="output file of a run, or a study file (HDF5)")
+    pl.add_argument("--what", help="energy, history, fos or study (default: study for a study "
+                    "file, fos for a run with a factor-of-safety search, else energy)")
+    pl.add_argument("--history", metavar="NAME", help="the history to plot (--what history; "
+                    "default: every block and station history)")
+    pl.add_argument("--out", "-o", metavar="PNG", help="image file (default: FILE's stem with "
+                    "-WHAT.png)")
     c = sub.add_parser("check", help="validate a scene file and report its blocks")
     c.add_argument("scene")
     i = sub.add_parser("info", help="summarise a pdem output file")
@@ -60,6 +76,8 @@ def main(argv: list[str] | None = None) -> int:
         return _info(args)
     if args.command == "export":
         return _export(args)
+    if args.command == "plot":
+        return _plot(args)
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ.setdefault(var, "1")
     from mpi4py import MPI
@@ -75,6 +93,11 @@ def main(argv: list[str] | None = None) -> int:
             return _check(args, comm, log)
         if args.command == "restart":
             return _restart(args, comm, log)
+        if args.command == "study":
+            from .study.runner import run_study
+
+            run_study(args.file, comm, only=args.only)
+            return 0
         if args.command == "warmup":
             from .warmup import main as warmup
 
@@ -92,27 +115,19 @@ def _with_output(scene, path):
 
 
 def _march(args, comm, log, scene, state=None) -> int:
-    """Build the simulation (on every rank alike), run it, close the files."""
+    """Build the simulation (on every rank alike), run it, close the files (pdem.api)."""
     import logging
 
+    from .api import simulate
     from .signals import install
-    from .simulation import Simulation
 
     if args.quiet:
         log.setLevel(logging.WARNING)
     # SIGTERM, SIGINT or SIGUSR1 (a batch system's warning) only set a flag from here on: the
     # run stops at a step boundary every rank agrees on, with a checkpoint
     stop = install()
-    sim = Simulation(scene, comm, checkpoint=state, stop=stop)
-    if state is not None:
-        log.info("restarted run %s from step %d (t=%.6g s) on %d ranks", sim.state.run_id,
-                 sim.step, sim.time, comm.size)
-    try:
-        summary = sim.run(time=args.time, steps=args.steps)
-        sim.close()
-    except Exception as exc:
-        _fail_during_run(comm, exc, sim)
-        return 1
+    summary, sim = simulate(scene, comm, checkpoint=state, stop=stop, time=args.time,
+                            steps=args.steps)
     stem = os.path.splitext(scene.output.file)[0]
     zoned = f", {stem}-zones.xdmf" if sim.state.grids is not None else ""  # zoned blocks
     log.info("wrote %s (+ %s.xdmf, %s-centroids.xdmf%s)", scene.output.file, stem, stem, zoned)
@@ -154,27 +169,6 @@ def _restart(args, comm, log) -> int:
     return _march(args, comm, log, _with_output(scene, out), state=ck)
 
 
-def _fail_during_run(comm, exc, sim) -> None:
-    """An error while stepping may have happened on one rank only: the others are waiting in a
-    collective, so a multi-rank job is aborted (the output was flushed at the last snapshot).
-    A serial run closes its files and reports the error."""
-    from .errors import SimulationError, UserError
-
-    if comm.size == 1 or isinstance(exc, SimulationError):
-        # serial, or raised by every rank alike: close the files properly (a full disk may
-        # refuse the close too: the error already reported is the one that matters)
-        with contextlib.suppress(OSError, UserError):
-            sim.close()
-        if isinstance(exc, UserError):
-            if comm.rank == 0:
-                print(f"pdem: {exc}", file=sys.stderr)
-            return
-        raise exc
-    from .mpi import abort_with_message
-
-    abort_with_message(comm, exc)
-
-
 def _check(args, comm, log) -> int:
     from .config import load_scene
     from .simulation import Simulation
@@ -199,6 +193,19 @@ def _info(args) -> int:
     except (OSError, ValueError, KeyError) as exc:
         print(f"pdem info: {args.file}: {exc}", file=sys.stderr)
         return 1
+    return 0
+
+
+def _plot(args) -> int:
+    from .errors import UserError
+    from .plot import plot
+
+    try:
+        out = plot(args.file, what=args.what, history=args.history, out=args.out)
+    except (UserError, OSError, ValueError, KeyError) as exc:
+        print(f"pdem plot: {exc}", file=sys.stderr)
+        return 1
+    print(f"wrote {out}")
     return 0
 
 

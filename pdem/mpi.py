@@ -1,6 +1,7 @@
 """The one MPI module: start-up, abort-on-error, rank-aware logging, small reductions.
 
-Library code receives ``comm`` explicitly; only ``pdem.cli`` names ``MPI.COMM_WORLD``.
+Library code receives ``comm`` explicitly; only the entry points name ``MPI.COMM_WORLD``: the
+command line (``pdem.cli``) and the Python API's default (``pdem.api.run``, ``pdem.study``).
 """
 
 from __future__ import annotations

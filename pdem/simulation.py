@@ -10,10 +10,10 @@ This is the public entry point for scripts and tests::
 from __future__ import annotations
 
 from .distribute import release_scene_geometry, release_setup_fields
+from .driver import Run
 from .io.paths import check_writable
 from .memory import reuse_large_blocks
 from .plugins import default_plugins
-from .run import Run
 from .stages import replay_stages, run_stages
 from .state import ModelState
 from .stepper import Stepper

@@ -119,12 +119,17 @@ def _trial(run, factor: float, fos, snap: _Snapshot, base_scene):
         s.grids.weaken(factor)
     s.ratio = math.inf
     stable = False
-    steps = 0
     half = None  # the largest displacement half way through the step budget
     too_far = False
-    while steps < fos.max_steps:
-        run.advance()
-        steps += 1
+    # the steps run in compiled runs between the marks the trial looks at: the first 10 steps
+    # (the ratio is not judged before), every 200th (max_displacement) and the half-way step
+    marks = sorted(m for m in {10, fos.max_steps // 2, fos.max_steps,
+                               *range(200, fos.max_steps, 200)} if 0 < m <= fos.max_steps)
+    steps = 0
+    for mark in marks:
+        if mark <= steps:
+            continue
+        steps += run.march(mark - steps, ratio=fos.ratio if steps >= 10 else None)
         if run.stepper.stop_signal:
             break
         if steps >= 10 and s.ratio <= fos.ratio:
@@ -177,14 +182,18 @@ def factor_of_safety(run, k: int) -> dict:
 
     stopped = 0
     lo, hi = 1.0, fos.high
-    if not trial(1.0):
+    if trial(1.0):
+        factor, bounded = (hi, False) if trial(hi) else (None, True)
+    elif fos.low is None:
         snap.restore(s)
         raise UserError(f"{where}: the model is not in equilibrium at F = 1 (the ratio stays "
                         f"above {fos.ratio:g} for {fos.max_steps} steps): bring it to "
-                        "equilibrium in an earlier stage")
-    if trial(hi):
-        factor, bounded = hi, False
-    else:
+                        "equilibrium in an earlier stage, or give factor_of_safety.low (< 1) "
+                        "to search below 1 (a study's cases that may fail)")
+    else:  # a model that fails at its own strength: the factor is below 1
+        lo, hi = fos.low, 1.0
+        factor, bounded = (None, True) if trial(lo) else (lo, False)
+    if factor is None:
         while hi - lo > fos.tolerance * lo and not run.stepper.stop_signal:
             mid = 0.5 * (lo + hi)
             if trial(mid):
@@ -201,8 +210,10 @@ def factor_of_safety(run, k: int) -> dict:
         log.info("%s: factor of safety %.4g (stable at %.4g, unstable at %.4g; %d trials)",
                  s.scene.stages[k].name, factor, lo, hi, len(trials))
     else:
-        log.info("%s: factor of safety at least %.4g (stable at factor_of_safety.high; %d "
-                 "trials)", s.scene.stages[k].name, factor, len(trials))
+        log.info("%s: factor of safety at %s %.4g (%s at factor_of_safety.%s; %d trials)",
+                 s.scene.stages[k].name, "least" if factor > 1 else "most", factor,
+                 "stable" if factor > 1 else "unstable", "high" if factor > 1 else "low",
+                 len(trials))
     snaps = run.plugin("snapshots")
     if snaps is not None:
         snaps.writer.write_result("factor_of_safety", {

@@ -15,7 +15,7 @@ from .errors import ConfigError
 from .schema import Scene
 
 
-def _line_index(text: str) -> dict[tuple, int]:
+def line_index(text: str) -> dict[tuple, int]:
     """Map each key path (tuple of keys/indices) to the 1-based YAML line it starts on."""
     lines: dict[tuple, int] = {}
     try:
@@ -181,9 +181,9 @@ def _anchor_files(data: dict, base: Path) -> None:
         _anchor_conditions(st, base)
 
 
-def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> Scene:
-    """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages. ``base``:
-    the directory relative file names in the scene start from."""
+def scene_data(text: str, source: str = "scene", base: Path | None = None) -> dict:
+    """Scene YAML ``text`` as a mapping, its relative file names made absolute from ``base``
+    (not validated: :func:`validate_scene`)."""
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -192,13 +192,27 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
         raise ConfigError(["the scene must be a mapping of keys (name, blocks, solve, ...)"], source)
     if base is not None:
         _anchor_files(data, base)
-    lines = _line_index(text)
+    return data
+
+
+def validate_scene(data: dict, source: str = "scene", lines: dict | None = None) -> Scene:
+    """The scene mapping ``data`` validated; ``ConfigError`` with every problem's key path (and
+    its YAML line, from ``lines``: :func:`parse_scene`)."""
+    if not isinstance(data, dict):
+        raise ConfigError(["the scene must be a mapping of keys (name, blocks, solve, ...)"], source)
+    lines = lines or {}
     try:
         scene = Scene.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_messages(exc, lines), source) from None
     scene._lines = lines  # so that errors found while building name the YAML line too
     return scene
+
+
+def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> Scene:
+    """Validate scene YAML ``text``; raise ``ConfigError`` with readable messages. ``base``:
+    the directory relative file names in the scene start from."""
+    return validate_scene(scene_data(text, source, base), source, line_index(text))
 
 
 def load_scene(path: str | Path) -> Scene:

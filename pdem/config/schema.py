@@ -30,6 +30,7 @@ from ..registry import Registry
 from ..strict import Strict
 from . import records
 from .sizes import parse_bytes
+from .study import Study
 
 # Hard bounds where double precision, not physics, ends (docs/limits.md): products of a few
 # such numbers (a volume, an inertia, a kinetic energy) stay finite. A coordinate or length
@@ -859,12 +860,14 @@ class StageSolve(Strict):
 class FactorOfSafety(Strict):
     """Strength reduction: trial solves with tan(friction), cohesion and tension divided by F
     (of every joint, or of ``joints``), F bracketed by bisection between 1 (must be stable)
-    and ``high`` to ``tolerance`` (relative). A trial is stable when the unbalanced-force
-    ratio falls below ``ratio`` within ``max_steps`` and unstable when it does not (or a
-    block moves more than ``max_displacement``, m)."""
+    and ``high`` to ``tolerance`` (relative); with ``low`` a model unstable at F = 1 is
+    searched between ``low`` and 1 instead (F < 1: the strength raised). A trial is stable
+    when the unbalanced-force ratio falls below ``ratio`` within ``max_steps`` and unstable
+    when it does not (or a block moves more than ``max_displacement``, m)."""
 
     tolerance: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.01
     high: Annotated[float, Field(gt=1.0, le=1e3)] = 4.0
+    low: Annotated[float, Field(gt=0.0, lt=1.0)] | None = None
     ratio: PositiveFloat = 1e-4
     max_steps: PositiveInt = 20_000
     max_displacement: PositiveFloat | None = None
@@ -1162,6 +1165,7 @@ class Scene(Strict):
     excavate: list[Excavation] = []
     stages: list[Stage] = []
     reinforcement: list[Reinforcement] = []
+    studies: dict[str, Study] = {}
     insitu: InSitu | None = None
     boundary: BoundaryConditions = BoundaryConditions()
     contact: Contact = Contact()

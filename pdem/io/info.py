@@ -1,4 +1,5 @@
-"""``pdem info FILE.h5``: a human-readable summary of a pdem output file."""
+"""``pdem info FILE.h5``: a human-readable summary of a pdem output or study file, read through
+the results reader (pdem.io.results, ``pdem.open``)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from .results import Results
+from .study_table import open_study
 
 __all__ = ["summarise"]
 
@@ -58,17 +62,21 @@ def summarise(path: str | os.PathLike) -> str:
         if "scene" in f.attrs:
             name = _scene_name(_text(f.attrs["scene"]))
             lines.append(f"scene:       {name if name is not None else '(unnamed)'}")
+        if fmt == "study":
+            return "\n".join(lines + open_study(path).lines())
         if fmt != "output":
             lines.append(f"contents:    {', '.join(sorted(f))}")
             return "\n".join(lines)
-        lines += _output_summary(f)
+    with Results(path) as r:
+        lines += _output_summary(r)
     return "\n".join(lines)
 
 
-def _output_summary(f: h5py.File) -> list[str]:
-    names = f["blocks/name"].asstr()[()]
+def _output_summary(r: Results) -> list[str]:
+    f = r.file
+    names = r.blocks.name
     n = len(names)
-    time, step = f["time"][()], f["step"][()]
+    time, step = r.time, r.step
     n_snap = len(time)
     lines = [f"blocks:      {n}"]
     lines += _viewer_lines(f)
@@ -85,23 +93,20 @@ def _output_summary(f: h5py.File) -> list[str]:
             f"snapshots:   {n_snap}  (steps {step[0]} .. {step[-1]}, "
             f"time {_g(time[0])} .. {_g(time[-1])} s)"
         )
-    hist = f.get("histories")
-    if hist is not None and len(hist):
-        items = []
-        for h in sorted(hist):
-            v = hist[h]["value"]
-            items.append(f"{h} ({v.shape[0]} rows x {v.shape[1]})")
+    if r.histories:
+        items = [f"{k} ({h.values.shape[0]} rows x {h.values.shape[1]})"
+                 for k, h in sorted(r.histories.items())]
         lines.append(f"histories:   {', '.join(items)}")
     else:
         lines.append("histories:   none")
-    lines += _energy_lines(f)
+    lines += _energy_lines(r)
     lines += _contact_lines(f, names)
     lines += _reinforcement_lines(f)
-    lines += _stage_lines(f, names)
+    lines += _stage_lines(r, names)
     if n_snap == 0:
         return lines
-    c0, c1 = f["blocks/centroid"][0], f["blocks/centroid"][n_snap - 1]
-    speed = np.linalg.norm(f["blocks/velocity"][n_snap - 1], axis=1)
+    c0, c1 = r.blocks.centroid[0], r.blocks.centroid[n_snap - 1]
+    speed = np.linalg.norm(r.blocks.velocity[n_snap - 1], axis=1)
     disp = np.linalg.norm(c1 - c0, axis=1)
     if n <= _TABLE_MAX:
         width = max(4, *(len(s) for s in names))
@@ -154,22 +159,21 @@ def _zone_lines(f: h5py.File, names) -> list[str]:
     return lines
 
 
-def _stage_lines(f: h5py.File, names) -> list[str]:
+def _stage_lines(r: Results, names) -> list[str]:
     """Stages seen in the snapshots and a factor-of-safety result (pdem.stages, strength)."""
     lines = []
-    stages = np.unique(f["stage"][()]) if "stage" in f else []
+    stages = np.unique(r.file["stage"][()]) if "stage" in r.file else []
     if len(stages) > 1:  # a staged run
         lines.append(f"stages:      {len(stages)} in the snapshots ({', '.join(map(str, stages))})")
-    if "factor_of_safety" in f.attrs:
-        fs = float(f.attrs["factor_of_safety"])
-        bounded = bool(f.attrs.get("factor_of_safety_bounded", 1))
-        line = f"factor of safety: {'' if bounded else '>= '}{fs:.4g}"
-        g = f.get("factor_of_safety")
-        if g is not None and "mechanism" in g:
-            d = np.linalg.norm(g["mechanism"][()], axis=1)
+    fos = r.factor_of_safety
+    if fos is not None:
+        bound = "" if fos.bounded else ">= " if fos.value > 1 else "<= "
+        line = f"factor of safety: {bound}{fos.value:.4g}"
+        if fos.mechanism is not None:
+            d = np.linalg.norm(fos.mechanism, axis=1)
             moving = np.nonzero(d > 0.1 * d.max())[0] if d.max() > 0 else []
-            line += f" (stage {_text(f.attrs.get('factor_of_safety_stage', ''))}; failure " \
-                    f"mechanism: {len(moving)} blocks, e.g. {', '.join(names[moving[:5]])})"
+            line += f" (stage {fos.stage}; failure mechanism: {len(moving)} blocks, e.g. " \
+                    f"{', '.join(names[moving[:5]])})"
         lines.append(line)
     return lines
 
@@ -205,18 +209,17 @@ def _contact_lines(f: h5py.File, names) -> list[str]:
     return lines
 
 
-def _energy_lines(f: h5py.File) -> list[str]:
+def _energy_lines(r: Results) -> list[str]:
     """The last row of the energy budget (histories/energy), if the file has one."""
-    g = f.get("histories/energy")
-    if g is None or g["value"].shape[0] == 0:
+    e = r.histories.get("energy")
+    if e is None or not len(e.time):
         return []
-    cols = _text(g.attrs.get("columns", "")).split(",")
-    row = dict(zip(cols, g["value"][-1], strict=False))
-    t = g["time"][-1]
+    row = e.last
+    t = e.time[-1]
     if "balance_error" not in row:
         return []
     put_in = row["gravity_work"] + row["applied_work"] + row["boundary_work"]
-    first = dict(zip(cols, g["value"][0], strict=False))
+    first = dict(zip(e.columns, e.values[0], strict=False))
     put_in += first["kinetic"] + first["strain"]
     share = 100.0 * abs(row["balance_error"]) / max(abs(put_in), 1e-300)
     zones = ""

@@ -10,7 +10,7 @@ from ..registry import Registry
 
 
 class Plugin:
-    """Hooks called by :class:`pdem.run.Run`; every hook is collective over the ranks.
+    """Hooks called by :class:`pdem.driver.Run`; every hook is collective over the ranks.
 
     ``restart_state`` returns attributes stored in checkpoints (str/int/float) and
     ``restore`` receives them back, so a restarted run behaves as the straight one.

@@ -24,7 +24,7 @@ class Progress(Plugin):
         self.s0 = self.state.step
 
     def horizon(self, run):
-        return None, None  # by the wall clock: pdem.run bounds a compiled run's duration
+        return None, None  # by the wall clock: pdem.driver bounds a compiled run's duration
 
     def after_step(self, run):
         now = wallclock.perf_counter()

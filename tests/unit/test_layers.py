@@ -32,7 +32,8 @@ FLOORS: list[tuple[str, tuple[str, ...]]] = [
              "pdem.insitu",
              "pdem.restart", "pdem.distribute", "pdem.search", "pdem.state", "pdem.cycle",
              "pdem.compiled_runs", "pdem.stepper", "pdem.strength", "pdem.stages", "pdem.plugins",
-             "pdem.run", "pdem.simulation")),
+             "pdem.driver", "pdem.simulation")),
+    ("api", ("pdem.api", "pdem.study", "pdem.plot")),
     ("edge", ("pdem.cli", "pdem.warmup", "pdem.cases", "pdem.__main__")),
 ]
 # Modules that may import pdem modules inside functions: the command line loads only what

@@ -1,4 +1,5 @@
-"""Run: march a model to its end condition, calling the plugins between steps."""
+"""The driver: march a model to its end condition, calling the plugins between steps (``pdem.run``
+is the Python API's run of a scene: pdem.api)."""
 
 from __future__ import annotations
 
@@ -41,6 +42,27 @@ class Run:
         """One step; blocks migrate after it when they moved far enough (collective)."""
         if self.stepper.advance():
             self._migrate()
+
+    def march(self, steps: int, ratio: float | None = None) -> int:
+        """Up to ``steps`` steps, fewer if the unbalanced-force ratio falls to ``ratio`` or a
+        stop is requested, in compiled runs where the scene allows, no plugin called (a
+        strength-reduction trial: pdem.strength). Returns the steps taken (every rank alike)."""
+        s = self.state
+        s0 = s.step
+        while s.step - s0 < steps and not self.stepper.stop_signal:
+            budget = min(steps - (s.step - s0),
+                         max(1, int(FUSED_SLICE / max(self._step_seconds, 1e-9))))
+            if s.comm.size > 1:  # every rank's run of steps ends after the same step
+                budget = min_over_ranks(s.comm, budget)
+            t0 = wallclock.perf_counter()
+            done = self.stepper.advance_many(budget, None, None, ratio)
+            if self.stepper.migrate_due:
+                self._migrate()
+            if done >= 1:
+                self._step_seconds = (wallclock.perf_counter() - t0) / done
+            if ratio is not None and s.ratio <= ratio:
+                break
+        return s.step - s0
 
     def _migrate(self):
         for p in self.plugins:

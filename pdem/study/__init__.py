@@ -1,0 +1,1 @@
+"""Parametric and probabilistic studies of a scene (docs/studies.md)."""
