@@ -21,7 +21,7 @@ import yaml
 from mpi4py import MPI
 
 from .config import ConfigError, dump_scene, scene_data, validate_scene
-from .config.load import line_index
+from .config.load import line_index, read_scene_text
 from .config.overrides import get_path, with_overrides
 from .errors import SimulationError, UserError
 from .io.results import Results, open_results
@@ -49,14 +49,7 @@ class Scene:
     def from_file(cls, path: str | os.PathLike) -> Scene:
         """Read and validate a scene file; files it names are found beside it."""
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise ConfigError([f"cannot read: {exc.strerror}"], str(path)) from None
-        except UnicodeDecodeError as exc:
-            raise ConfigError([f"not a text file (byte {exc.start} is not UTF-8)"],
-                              str(path)) from None
-        return cls.from_yaml(text, source=str(path), base=path.parent)
+        return cls.from_yaml(read_scene_text(path), source=str(path), base=path.parent)
 
     @classmethod
     def from_yaml(cls, text: str, *, source: str = "scene",

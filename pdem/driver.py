@@ -50,19 +50,28 @@ class Run:
         s = self.state
         s0 = s.step
         while s.step - s0 < steps and not self.stepper.stop_signal:
-            budget = min(steps - (s.step - s0),
-                         max(1, int(FUSED_SLICE / max(self._step_seconds, 1e-9))))
-            if s.comm.size > 1:  # every rank's run of steps ends after the same step
-                budget = min_over_ranks(s.comm, budget)
-            t0 = wallclock.perf_counter()
-            done = self.stepper.advance_many(budget, None, None, ratio)
-            if self.stepper.migrate_due:
-                self._migrate()
-            if done >= 1:
-                self._step_seconds = (wallclock.perf_counter() - t0) / done
+            self._slice(steps - (s.step - s0), None, None, ratio)
             if ratio is not None and s.ratio <= ratio:
                 break
         return s.step - s0
+
+    def _slice(self, steps_left, stop_step, stop_time, ratio_target) -> None:
+        """A run of steps in one compiled call, as many as take FUSED_SLICE wall seconds (at
+        most ``steps_left``), ending early at the stops; migrates after it if due."""
+        s = self.state
+        budget = max(1, int(FUSED_SLICE / max(self._step_seconds, 1e-9)))
+        if steps_left is not None:
+            budget = min(budget, steps_left)
+        if s.comm.size > 1:  # every rank's run of steps ends after the same step
+            budget = min_over_ranks(s.comm, budget)
+        t0 = wallclock.perf_counter()
+        done = self.stepper.advance_many(budget, stop_step, stop_time, ratio_target)
+        if self.stepper.migrate_due:
+            self._migrate()
+        # seconds per step, for the next slice; a single step is measured too, else a slow
+        # first call (compiling fused_steps) would leave the budget at one step for good
+        if done >= 1:
+            self._step_seconds = (wallclock.perf_counter() - t0) / done
 
     def _migrate(self):
         for p in self.plugins:
@@ -87,19 +96,7 @@ class Run:
                 stop_step = ps if stop_step is None else min(stop_step, ps)
             if pt is not None:
                 stop_time = pt if stop_time is None else min(stop_time, pt)
-        budget = max(1, int(FUSED_SLICE / max(self._step_seconds, 1e-9)))
-        if steps_left is not None:
-            budget = min(budget, steps_left)
-        if s.comm.size > 1:  # every rank's run of steps ends after the same step
-            budget = min_over_ranks(s.comm, budget)
-        t0 = wallclock.perf_counter()
-        done = self.stepper.advance_many(budget, stop_step, stop_time, ratio_target)
-        if self.stepper.migrate_due:
-            self._migrate()
-        # seconds per step, for the next slice; a single step is measured too, else a slow
-        # first call (compiling fused_steps) would leave the budget at one step for good
-        if done >= 1:
-            self._step_seconds = (wallclock.perf_counter() - t0) / done
+        self._slice(steps_left, stop_step, stop_time, ratio_target)
 
     def _end(self, time, steps, ratio=None, max_steps=None, no_progress=None):
         s = self.state

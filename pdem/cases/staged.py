@@ -27,25 +27,33 @@ PSI = 20.0
 SLAB = (2.0, 2.0, 0.1)  # length (down the slope), width, height
 
 
-def slab_fos_scene(phi: float, cohesion: float, *, tolerance: float = 0.005,
-                   output: str | None = None) -> str:
-    """Settle the slab (local damping), then search its factor of safety."""
+def slab_on_incline(joint: str) -> str:
+    """The incline's tilted gravity, the fixed base and the slab resting on it at its static
+    overlap ``m g cos(psi) / (kn A)`` (so that it starts at rest), joined by ``joint`` (the
+    default joint's YAML mapping)."""
     psi = math.radians(PSI)
     g = (G * math.sin(psi), 0.0, -G * math.cos(psi))
     lx, ly, h = SLAB
-    delta = RHO * h * G * math.cos(psi) / KN  # static overlap: m g cos(psi) / (kn A)
-    out = f"output: {{file: {output}}}\n" if output else ""
-    return f"""
-name: slab-fos
-gravity: {vec(g)}
+    delta = RHO * h * G * math.cos(psi) / KN
+    return f"""gravity: {vec(g)}
 materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: {phi!r}, cohesion: {cohesion!r}}}}}
+joints: {{default: {joint}}}
 blocks:
   - {{name: base, box: {{min: [-4, -3, -1], max: [4, 3, 0]}}, material: rock, fixed: true}}
   - name: slab
     box: {{min: {vec((-lx / 2, -ly / 2, -delta))}, max: {vec((lx / 2, ly / 2, h - delta))}}}
     material: rock
-solve: {{damping: local}}
+"""
+
+
+def slab_fos_scene(phi: float, cohesion: float, *, tolerance: float = 0.005,
+                   output: str | None = None) -> str:
+    """Settle the slab (local damping), then search its factor of safety."""
+    out = f"output: {{file: {output}}}\n" if output else ""
+    joint = f"{{kn: {KN}, ks: {KN}, friction: {phi!r}, cohesion: {cohesion!r}}}"
+    return f"""
+name: slab-fos
+{slab_on_incline(joint)}solve: {{damping: local}}
 {out}stages:
   - {{name: settle, solve: {{ratio: 1.0e-6, max_steps: 20000}}}}
   - name: strength

@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import math
 
-from pdem.cases import vec
 from pdem.cases.rock_mass import WEDGE_SETS, wedge_slope_scene
-from pdem.cases.staged import KN, PSI, RHO, SLAB, G
+from pdem.cases.staged import KN, PSI, slab_on_incline
 
 PLANAR_MEAN, PLANAR_STD = 22.0, 3.0  # the friction angle's distribution, degrees
 # the search: a stable trial comes to rest in ~50 steps, a failing one is judged by 1000
@@ -31,23 +30,11 @@ def planar_study_scene(samples: int = 200, *, seed: int = 1, mean: float = PLANA
                        std: float = PLANAR_STD, output: str = "planar.h5",
                        study_file: str | None = None, latin: bool = False) -> str:
     """The planar slide with a study ``friction`` of ``samples`` cases."""
-    psi = math.radians(PSI)
-    g = (G * math.sin(psi), 0.0, -G * math.cos(psi))
-    lx, ly, h = SLAB
-    delta = RHO * h * G * math.cos(psi) / KN  # the static overlap, so that it starts at rest
     file = f"\n    file: {study_file}" if study_file else ""
     sampling = "latin_hypercube" if latin else "monte_carlo"
     return f"""
 name: planar-slide
-gravity: {vec(g)}
-materials: {{rock: {{density: {RHO}}}}}
-joints: {{default: {{kn: {KN}, ks: {KN}, friction: {mean!r}}}}}
-blocks:
-  - {{name: base, box: {{min: [-4, -3, -1], max: [4, 3, 0]}}, material: rock, fixed: true}}
-  - name: slab
-    box: {{min: {vec((-lx / 2, -ly / 2, -delta))}, max: {vec((lx / 2, ly / 2, h - delta))}}}
-    material: rock
-solve: {{damping: local}}
+{slab_on_incline(f"{{kn: {KN}, ks: {KN}, friction: {mean!r}}}")}solve: {{damping: local}}
 output: {{file: {output}, contacts: false}}
 stages:
   - {{name: settle, joints: {{default: {{friction: 60.0}}}}, solve: {{ratio: 1.0e-6, max_steps: 5000}}}}

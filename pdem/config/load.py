@@ -215,17 +215,21 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     return validate_scene(scene_data(text, source, base), source, line_index(text))
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate the scene file at ``path``."""
-    path = Path(path)
+def read_scene_text(path: Path) -> str:
+    """The text of the scene file ``path``; a ConfigError naming it if it cannot be read."""
     try:
-        text = path.read_text()
+        return path.read_text()
     except OSError as exc:
         raise ConfigError([f"cannot read: {exc.strerror}"], str(path)) from None
     except UnicodeDecodeError as exc:
         # found by the fuzz: a binary file gave a traceback
         raise ConfigError([f"not a text file (byte {exc.start} is not UTF-8)"], str(path)) from None
-    return parse_scene(text, str(path), path.parent)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate the scene file at ``path``."""
+    path = Path(path)
+    return parse_scene(read_scene_text(path), str(path), path.parent)
 
 
 def dump_scene(scene: Scene) -> str:
