@@ -220,3 +220,41 @@ def test_the_shipped_wedge_study_is_the_case_library_s():
     made = Scene.from_yaml(wedge_study_scene(200, output="wedge-study.h5",
                                              study_file="wedge-study-fos.h5"))
     assert shipped.model == made.model
+
+
+def test_slip_history_and_displacement_outputs_of_a_sliding_block(tmp_path):
+    """The slider of pdem.cases.incline over a grid of frictions: the joint's slip, the
+    block's displacement and its displacement history are one quantity, measured three ways;
+    it slides (``failure: above``) where phi < psi, at the closed form's acceleration."""
+    from pdem.cases.incline import incline_scene, sliding_acceleration
+
+    text = incline_scene(10.0, "fast", "time: 0.3") + """output:
+  file: slide.h5
+  every: 0.1
+  histories: [{block: slider, quantity: displacement}]
+studies:
+  friction:
+    parameters:
+      joints.default.friction: {values: [10.0, 15.0, 25.0]}
+    outputs:
+      slip: {slip: default}
+      moved: {displacement: slider, component: x}
+      record: {history: slider.displacement, column: x}
+    failure: {output: moved, above: 0.01}
+"""
+    t = run_study(_write(tmp_path, "slide.yaml", text), MPI.COMM_SELF, echo=False)
+    o = t.outputs
+    assert t.done.all() and list(t.parameters["joints.default.friction"]) == [10.0, 15.0, 25.0]
+    assert np.array_equal(o["moved"], o["record"])
+    # (the held block: its 40 um of elastic shear, of which the joint's slip is most)
+    assert np.allclose(o["slip"], o["moved"], rtol=2e-3, atol=2e-5)
+    for phi, x in zip(t.parameters["joints.default.friction"], o["moved"], strict=True):
+        a = sliding_acceleration(phi)
+        # (+ up to 1 mm gained while the joint's shear spring builds up to the friction limit,
+        # the elastic start a rigid-plastic closed form lacks: test_incline.py fits after 0.1 s)
+        if a > 0:
+            assert x == pytest.approx(0.5 * a * 0.3 ** 2, rel=0.04)
+        else:
+            assert abs(x) < 1e-4
+    f = t.summary["failure"]
+    assert (f["failures"], f["n"], f["above"]) == (2, 3, 0.01)
