@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 
 from .results import Results
-from .study_table import open_study
+from .study_table import study_lines
 
 __all__ = ["summarise"]
 
@@ -57,13 +57,13 @@ def summarise(path: str | os.PathLike) -> str:
             raise ValueError(f"{path}: not a pdem file (no 'pdem_format' attribute)")
         fmt = _text(fmt)
         lines = [f"file:        {path} (pdem {fmt}, format {_text(f.attrs.get('format_version'))})"]
+        if fmt == "study":  # its table's summary (the study and scene YAML: pdem.open_study)
+            return "\n".join(lines + study_lines(path))
         for key in sorted(k for k in f.attrs if k not in _KNOWN_ATTRS):
             lines.append(f"{key + ':':<13}{_text(f.attrs[key])}")
         if "scene" in f.attrs:
             name = _scene_name(_text(f.attrs["scene"]))
             lines.append(f"scene:       {name if name is not None else '(unnamed)'}")
-        if fmt == "study":
-            return "\n".join(lines + open_study(path).lines())
         if fmt != "output":
             lines.append(f"contents:    {', '.join(sorted(f))}")
             return "\n".join(lines)

@@ -23,8 +23,8 @@ import numpy as np
 from ..analysis.sampling import probability_of
 from ..errors import UserError
 
-__all__ = ["StudyTable", "open_study", "read_records", "records_dir", "summarise",
-           "write_record", "write_table", "claim_records"]
+__all__ = ["StudyTable", "claim_records", "open_study", "read_records", "records_dir",
+           "study_lines", "summarise", "write_record", "write_table"]
 
 DONE, FAILED = 1, 2  # a case's status in the table (0: not run yet)
 
@@ -162,6 +162,21 @@ def write_table(path: Path, name: str, study_text: str, scene_text: str, plan, r
                     col[i] = r["outputs"][k]
             o[k] = col
     os.replace(tmp, path)
+
+
+def study_lines(path) -> list[str]:
+    """``pdem info`` of a study file: the summary, each parameter's distribution, the cases."""
+    t = open_study(path)
+    with h5py.File(path, "r") as f:
+        described = json.loads(f["parameters"].attrs.get("distributions", "{}"))
+    lines = t.lines()
+    lines += [f"  parameter {k}: {d}" for k, d in described.items()]
+    if len(t.wall) and np.isfinite(t.wall).any():
+        lines.append(f"  wall time per case: mean {np.nanmean(t.wall):.3g} s, max "
+                     f"{np.nanmax(t.wall):.3g} s")
+    failed = np.nonzero(t.status == FAILED)[0]
+    lines += [f"  case {i}: {t.error[i]}" for i in failed[:5]]
+    return lines
 
 
 @dataclass

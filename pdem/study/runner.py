@@ -203,7 +203,8 @@ def _run_one(name, study, base: Scene, path: Path, comm, echo: bool):
     if comm.rank == 0:
         records = read_records(folder)
         summary = summarise(study, records, len(plan.cases))
-        study_text = yaml.safe_dump(study.model_dump(mode="json"), sort_keys=False)
+        study_text = yaml.safe_dump(study.model_dump(mode="json", exclude_none=True),
+                                    sort_keys=False)
         write_table(path, name, study_text, base.to_yaml(resolved=True), plan, records,
                     summary)
         if echo:
