@@ -65,8 +65,8 @@ def load_studies(path: str | os.PathLike) -> list[tuple[str, Study, Scene, Path]
         return [(spec.name, study, _without_studies(scene), _study_file(spec, path, spec.name))]
     scene = Scene.from_file(path)
     if not scene.model.studies:
-        raise ConfigError(["no studies: give the scene a `studies:` mapping, or write a study "
-                           "file (name, scene, parameters, outputs: docs/studies.md)"], str(path))
+        raise UserError(f"{path}: no studies: give the scene a `studies:` mapping, or write a "
+                        "study file (name, scene, parameters, outputs: docs/studies.md)")
     base = _without_studies(scene)
     return [(name, st, base, _study_file(st, path, name))
             for name, st in scene.model.studies.items()]
