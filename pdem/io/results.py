@@ -16,6 +16,7 @@ end of a ``with`` block). ``to_pandas()`` (where pandas is installed) gives data
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -83,7 +84,6 @@ class _Lazy:
     """Datasets of one HDF5 group read on first access and kept; ``units`` names each one's."""
 
     units: dict[str, str] = {}
-    _map: dict[str, str] = {}  # attribute -> dataset path in the group
 
     def __init__(self, group: h5py.Group):
         self._group = group
@@ -91,10 +91,9 @@ class _Lazy:
 
     def _read(self, name: str) -> np.ndarray:
         if name not in self._cache:
-            path = self._map.get(name, name)
-            if path not in self._group:
+            if name not in self._group:
                 raise AttributeError(f"{type(self).__name__}: no {name!r} in this file")
-            ds = self._group[path]
+            ds = self._group[name]
             self._cache[name] = ds.asstr()[()] if ds.dtype.kind == "S" else ds[()]
         return self._cache[name]
 
@@ -280,9 +279,9 @@ class Results:
         """The resolved scene (YAML, every default filled in)."""
         return _text(self._f.attrs["scene"])
 
-    @property
+    @functools.cached_property
     def scene(self) -> dict:
-        """The resolved scene as a mapping."""
+        """The resolved scene as a mapping (parsed once)."""
         return yaml.safe_load(self.scene_text)
 
     @property

@@ -114,9 +114,9 @@ def _values(case) -> str:
                      for k, v in case.values.items())
 
 
-def _run_case(base: Scene, case, study, folder: Path, comm) -> dict:
-    """Run and measure one case on ``comm`` (its group); the record (every rank alike)."""
-    scene = _case_scene(base, case, folder)
+def _run_case(scene: Scene, case, study, folder: Path, comm) -> dict:
+    """Run and measure one case (its ``scene``) on ``comm`` (its group); the record (every
+    rank alike)."""
     t0 = wallclock.perf_counter()
     record = {"index": case.index, "values": case.values, "ranks": comm.size}
     try:
@@ -167,12 +167,12 @@ def _run_one(name, study, base: Scene, path: Path, comm, echo: bool):
         raise ConfigError([f"ranks_per_case: {study.ranks_per_case} does not divide the "
                            f"{comm.size} ranks the study runs on"], name)
     plan = plan_cases(study, base.data)
-    for case in plan.cases:  # every case's scene is valid before any runs
-        _case_scene(base, case, records_dir(path))
+    folder = records_dir(path)
+    # every case's scene, validated before any runs
+    scenes = {case.index: _case_scene(base, case, folder) for case in plan.cases}
     plan_text = json.dumps({"scene": base.to_yaml(resolved=True),
                             "cases": [c.overrides for c in plan.cases],
                             "outputs": list(study.outputs)}, sort_keys=True)
-    folder = records_dir(path)
 
     def claim():
         claim_records(folder, plan_fingerprint(plan_text), plan_text)
@@ -189,7 +189,7 @@ def _run_one(name, study, base: Scene, path: Path, comm, echo: bool):
     level = _quiet_cases()
     try:
         for case in todo:
-            record = _run_case(base, case, study, folder, sub)
+            record = _run_case(scenes[case.index], case, study, folder, sub)
             if sub.rank == 0:
                 write_record(folder, record)
                 if echo:
